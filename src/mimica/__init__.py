@@ -1,0 +1,7 @@
+"""mimica: anatomy-aware facial animation (retarget, simulate, wrinkle)."""
+
+from .errors import MimicaError
+from .mesh import Mesh, read_mesh, write_mesh
+
+__version__ = "0.1.0"
+__all__ = ["Mesh", "MimicaError", "read_mesh", "write_mesh", "__version__"]

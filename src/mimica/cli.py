@@ -1,0 +1,172 @@
+"""The `mimica` command line.  User errors print one line and exit 2; nothing half-written."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .errors import MimicaError
+
+
+def _progress(iterable, total=None, desc=""):
+    from tqdm import tqdm
+    return tqdm(iterable, total=total, desc=desc, disable=not sys.stderr.isatty(), leave=False,
+                unit="frame")
+
+
+def _say(msg):
+    print(msg, file=sys.stderr)
+
+
+def _expand_frames(items):
+    from .mesh import MESH_SUFFIXES
+    out = []
+    for it in items:
+        p = Path(it)
+        if p.is_dir():
+            files = sorted(f for f in p.iterdir() if f.suffix.lower() in MESH_SUFFIXES)
+            if not files:
+                raise MimicaError(f"{p}: the folder holds no mesh files ({', '.join(MESH_SUFFIXES)})")
+            out += files
+        else:
+            out.append(p)
+    return out
+
+
+def read_frames(paths, source):
+    """Read expression meshes of the source's topology, (F, n, 3)."""
+    from .mesh import read_mesh
+    frames = np.empty((len(paths), source.n_vertices, 3))
+    for i, p in enumerate(_progress(paths, len(paths), "reading")):
+        m = read_mesh(p, allow_degenerate=True)
+        if m.n_vertices != source.n_vertices:
+            raise MimicaError(f"{p}: has {m.n_vertices} vertices but the source neutral has "
+                              f"{source.n_vertices}; an expression must share the neutral's topology")
+        frames[i] = m.vertices
+    return frames
+
+
+def cmd_transfer(a):
+    from .landmarks import landmarks_for
+    from .mesh import read_mesh, write_mesh
+    from .transfer import ExpressionTransfer, static_vertices
+
+    t0 = time.perf_counter()
+    source = read_mesh(a.source_neutral)
+    target = read_mesh(a.target)
+    paths = _expand_frames(a.source_expr)
+    names = [p.name for p in paths]
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise MimicaError(f"{sorted(dup)[0]}: two source expressions share this file name; "
+                          "outputs would overwrite each other")
+    frames = read_frames(paths, source)
+    same = source.same_topology(target)
+    ls = lt = None
+    if not same or a.source_landmarks or a.target_landmarks:
+        ls = landmarks_for(source, a.source_landmarks, "--source-landmarks", str(a.source_neutral))
+        lt = landmarks_for(target, a.target_landmarks, "--target-landmarks", str(a.target))
+    t1 = time.perf_counter()
+    xfer = ExpressionTransfer(source, target, ls, lt, method=a.method,
+                              static=static_vertices(source.vertices, frames))
+    t2 = time.perf_counter()
+    out = np.empty((len(frames), target.n_vertices, 3))
+    step = 32
+    for i in _progress(range(0, len(frames), step), (len(frames) + step - 1) // step, "transferring"):
+        out[i:i + step] = xfer.apply(frames[i:i + step])
+    t3 = time.perf_counter()
+    outdir = Path(a.out)
+    for name, v in zip(names, out):
+        write_mesh(outdir / name, target.with_vertices(v))
+    cor = xfer.correspondence
+    _say(f"aligned target to source: residual {100 * xfer.alignment_residual:.2f}% of the face size"
+         + ("" if cor is None else f"; correspondence: {100 * cor.matched.mean():.1f}% of target vertices matched"))
+    _say(f"{len(frames)} expression(s) -> {outdir}/ ({a.method}; read {t1 - t0:.2f}s, "
+         f"precompute {t2 - t1:.2f}s, transfer {t3 - t2:.2f}s = {len(frames) / max(t3 - t2, 1e-9):.0f} frames/s)")
+    return 0
+
+
+def cmd_error(a):
+    from .mesh import read_mesh
+    from .render.errormap import error_map_png
+    from .transfer import relative_error, song_vertex_error
+
+    res = read_mesh(a.result, allow_degenerate=True)
+    ref = read_mesh(a.reference, allow_degenerate=True)
+    ref_n = read_mesh(a.reference_neutral, allow_degenerate=True)
+    res_n = read_mesh(a.result_neutral, allow_degenerate=True) if a.result_neutral else ref_n
+    for m, p in ((ref, a.reference), (ref_n, a.reference_neutral), (res_n, a.result_neutral or a.reference_neutral)):
+        if m.n_vertices != res.n_vertices:
+            raise MimicaError(f"{p}: has {m.n_vertices} vertices, the result has {res.n_vertices}; "
+                              "the error needs meshes of one topology")
+    region = None
+    if a.region:
+        lo, hi = (int(x) for x in a.region.split(":"))
+        region = slice(lo, hi)
+    e = song_vertex_error(res.vertices, res_n.vertices, ref.vertices, ref_n.vertices)
+    rel = relative_error(res.vertices, ref.vertices + (res_n.vertices - ref_n.vertices), res_n.vertices, region)
+    ee = e if region is None else e[region]
+    _say(f"Song per-vertex error: median {100 * np.nanmedian(ee):.2f}%, mean {100 * np.nanmean(ee):.2f}%; "
+         f"relative error {rel:.4f}")
+    if a.out:
+        error_map_png(a.out, res, e, title=f"{Path(a.result).name} vs {Path(a.reference).name}")
+        _say(f"error map -> {a.out}")
+    return 0
+
+
+def cmd_demo(a):
+    from .demo import run_demo
+    return run_demo(Path(a.out), quick=a.quick)
+
+
+def build_parser():
+    p = argparse.ArgumentParser(prog="mimica", description="Anatomy-aware facial animation toolkit.")
+    sub = p.add_subparsers(dest="cmd", required=True)
+
+    t = sub.add_parser("transfer", help="move expressions of a source face onto a target face (Song et al.)",
+                       description="Writes, for every SOURCE_EXPR, a file of the same name into --out: the "
+                                   "target wearing that expression, in the target's own topology.")
+    t.add_argument("source_neutral", help="source face, neutral (OBJ/PLY/glTF)")
+    t.add_argument("source_expr", nargs="+", help="source expressions (files or folders), same topology as the source")
+    t.add_argument("--target", required=True, help="target face, neutral")
+    t.add_argument("--source-landmarks", help="68-point landmark JSON of the source (built in for ICT-FaceKit)")
+    t.add_argument("--target-landmarks", help="68-point landmark JSON of the target (built in for ICT-FaceKit)")
+    t.add_argument("--method", choices=["vtc", "dt"], default="vtc",
+                   help="vtc: vertex-tent coordinates (Song); dt: Sumner-Popovic deformation transfer")
+    t.add_argument("--out", required=True, help="output folder")
+    t.set_defaults(func=cmd_transfer)
+
+    e = sub.add_parser("error", help="Song's per-vertex error of a result against a reference, as a PNG map")
+    e.add_argument("result", help="transferred expression")
+    e.add_argument("reference", help="reference expression (same topology)")
+    e.add_argument("--reference-neutral", required=True, help="the reference's neutral")
+    e.add_argument("--result-neutral", help="the result's neutral (default: the reference neutral)")
+    e.add_argument("--region", help="vertex range LO:HI for the summary (e.g. 0:9409, ICT face area)")
+    e.add_argument("--out", help="PNG to write")
+    e.set_defaults(func=cmd_error)
+
+    d = sub.add_parser("demo", help="transfer bundled ICT-FaceKit expressions; write meshes and a contact sheet")
+    d.add_argument("--out", default="out/demo")
+    d.add_argument("--quick", action="store_true", help="fewer faces and expressions")
+    d.set_defaults(func=cmd_demo)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except MimicaError as e:
+        print(f"mimica: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("mimica: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

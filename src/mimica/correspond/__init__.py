@@ -1,0 +1,191 @@
+"""Dense correspondence between two aligned faces of different topologies (Song §V.A).
+
+1. Both faces are projected onto a cylinder around the head's vertical axis
+   (u = angle, v = height; Song §V.A.1, u = arccos(x/r)).
+2. The landmarks and the four corners of each face's (u, v) bounding box are triangulated
+   (the "parameterization mesh", Song Fig. 6); every target vertex gets barycentric
+   coordinates in its landmark triangle, and the same coordinates in the source's landmark
+   triangle give its place in the source's cylinder map (Song eq. 8).
+3. That place is looked up in the source's cylindrical mesh by exact point location (a k-d
+   tree over triangle centroids and a barycentric test, standing in for the paper's
+   rasterized mesh image); where the map folds (nostrils, ears), the layer whose radius is
+   closest to the target vertex's wins.
+4. Topology correction (Song §V.A.4): a target vertex that lands in no source triangle (a
+   hole, or outside the source) is left unmatched; the transfer keeps its rest shape there.
+
+The result is a `Correspondence`: for each target vertex a source triangle and barycentric
+coordinates (DESIGN.md), and the sparse matrix of those weights.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import Delaunay, cKDTree
+
+from ..errors import MimicaError
+from ..mesh import Mesh
+from ..mesh.query import barycentric_2d
+
+# iBUG 68 indices used to build the face frame
+_JAW_CHIN, _EYE_R_OUT, _EYE_L_OUT = 8, 36, 45
+_BROWS = slice(17, 27)
+
+
+@dataclass
+class Cylinder:
+    """A vertical cylinder in a face frame: origin on the axis, axes (right, up, forward)."""
+
+    origin: np.ndarray
+    axes: np.ndarray          # (3, 3) rows: right, up, forward
+    radius: float             # reference radius: u is arc length at this radius
+
+    def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Points (m, 3) -> (uv (m, 2), r (m,)); u = radius * angle from forward."""
+        loc = (np.asarray(x) - self.origin) @ self.axes.T
+        ang = np.arctan2(loc[:, 0], loc[:, 2])
+        r = np.hypot(loc[:, 0], loc[:, 2])
+        return np.stack([self.radius * ang, loc[:, 1]], axis=1), r
+
+
+def face_cylinder(landmarks: np.ndarray) -> Cylinder:
+    """Cylinder from 68 landmark positions: axis vertical through the middle of the head."""
+    lm = np.asarray(landmarks, float)
+    ok = np.isfinite(lm).all(1)
+    need = [_JAW_CHIN, _EYE_R_OUT, _EYE_L_OUT]
+    if not ok[need].all() or not ok[_BROWS].any():
+        raise MimicaError("landmarks: the chin (8), outer eye corners (36, 45) and a brow point "
+                          "(17-26) are needed to place the face on a cylinder")
+    right = lm[_EYE_L_OUT] - lm[_EYE_R_OUT]
+    width = float(np.linalg.norm(right))
+    right /= width
+    up = np.nanmean(lm[_BROWS], axis=0) - lm[_JAW_CHIN]
+    up -= right * (up @ right)
+    up /= np.linalg.norm(up)
+    fwd = np.cross(right, up)
+    center = lm[ok].mean(0)
+    # the axis sits behind the face, near the middle of the skull (about one eye-to-eye
+    # width behind the landmarks' centroid, for adult heads)
+    origin = center - fwd * 1.1 * width
+    return Cylinder(origin, np.stack([right, up, fwd]), 1.1 * width)
+
+
+@dataclass
+class Correspondence:
+    """For each target vertex: a source triangle (-1 = unmatched) and barycentric coordinates."""
+
+    triangle: np.ndarray
+    bary: np.ndarray
+    n_source: int
+
+    @property
+    def matched(self) -> np.ndarray:
+        return self.triangle >= 0
+
+    def matrix(self, source_triangles: np.ndarray) -> sp.csr_matrix:
+        """Sparse (n_target x n_source) interpolation weights (zero rows where unmatched)."""
+        ok = self.matched
+        rows = np.repeat(np.nonzero(ok)[0], 3)
+        cols = source_triangles[self.triangle[ok]].reshape(-1)
+        return sp.csr_matrix((self.bary[ok].reshape(-1), (rows, cols)),
+                             shape=(len(self.triangle), self.n_source))
+
+
+def _param_mesh(uv_lm, uv_all):
+    """Landmarks + the 4 corners of the (u, v) bounding box (Song Fig. 6)."""
+    lo, hi = uv_all.min(0), uv_all.max(0)
+    pad = 0.02 * (hi - lo) + 1e-9
+    lo, hi = lo - pad, hi + pad
+    corners = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+    return np.vstack([uv_lm, corners])
+
+
+def _locate(points, pts_mesh, tris):
+    """For 2D points, a containing triangle of (pts_mesh, tris) and barycentrics (-1 if none)."""
+    tri_out = np.full(len(points), -1, dtype=np.int64)
+    bary_out = np.zeros((len(points), 3))
+    a, b, c = pts_mesh[tris[:, 0]], pts_mesh[tris[:, 1]], pts_mesh[tris[:, 2]]
+    for k in range(len(tris)):  # ~130 triangles: a loop over triangles, vectorized over points
+        todo = tri_out < 0
+        if not todo.any():
+            break
+        idx = np.nonzero(todo)[0]
+        bc = barycentric_2d(points[idx], np.broadcast_to(a[k], (len(idx), 2)),
+                            np.broadcast_to(b[k], (len(idx), 2)), np.broadcast_to(c[k], (len(idx), 2)))
+        inside = (bc >= -1e-9).all(1)
+        tri_out[idx[inside]] = k
+        bary_out[idx[inside]] = bc[inside]
+    return tri_out, bary_out
+
+
+def correspond(source: Mesh, source_lm: np.ndarray, target: Mesh, target_lm: np.ndarray,
+               k: int = 24) -> Correspondence:
+    """Correspondence from target vertices to the source surface; both faces already aligned.
+
+    source_lm / target_lm: (68, 3) landmark positions (NaN = missing) on each face.
+    """
+    both = np.isfinite(source_lm).all(1) & np.isfinite(target_lm).all(1)
+    if both.sum() < 6:
+        raise MimicaError("landmarks: at least 6 landmarks present on both faces are needed "
+                          "for a dense correspondence")
+    cyl = face_cylinder(np.where(both[:, None], source_lm, np.nan))
+    uv_s, r_s = cyl.project(source.vertices)
+    uv_t, r_t = cyl.project(target.vertices)
+    lm_s, _ = cyl.project(source_lm[both])
+    lm_t, _ = cyl.project(target_lm[both])
+
+    # parameterization mesh (Song Fig. 6), triangulated once on the source side
+    # the corners A-D are taken from the box around both faces: the faces are aligned, so
+    # outside the landmarks the map stays the identity even when one face is a cropped scan
+    both_uv = np.vstack([uv_s, uv_t])
+    ps = _param_mesh(lm_s, both_uv)
+    pt = _param_mesh(lm_t, both_uv)
+    tris = Delaunay(ps).simplices
+    # Song eq. 8: same barycentric coordinates in the corresponding landmark triangle
+    ptri, pbary = _locate(uv_t, pt, tris)
+    inside = ptri >= 0
+    q = np.full_like(uv_t, np.nan)
+    q[inside] = np.einsum("ij,ijk->ik", pbary[inside], ps[tris[ptri[inside]]])
+
+    # exact point location of q in the source's cylindrical mesh
+    st = source.triangles
+    tri_uv = uv_s[st]                                              # (T, 3, 2)
+    span = tri_uv[:, :, 0].max(1) - tri_uv[:, :, 0].min(1)
+    usable = span < np.pi * cyl.radius                             # drop triangles across the seam
+    tid = np.nonzero(usable)[0]
+    cent = tri_uv[tid].mean(1)
+    tree = cKDTree(cent)
+    edge = np.median(np.linalg.norm(tri_uv[tid, 1] - tri_uv[tid, 0], axis=1))
+    kk = min(k, len(tid))
+    qi = np.nonzero(inside)[0]
+    _, cand = tree.query(q[qi], k=kk)
+    cand = tid[cand.reshape(len(qi), kk)]
+    qq = np.repeat(q[qi], kk, axis=0)
+    ct = st[cand.reshape(-1)]
+    bc = barycentric_2d(qq, uv_s[ct[:, 0]], uv_s[ct[:, 1]], uv_s[ct[:, 2]]).reshape(len(qi), kk, 3)
+    bc = np.nan_to_num(bc, nan=-1.0)
+    rr = np.einsum("ijk,ijk->ij", bc, r_s[st[cand]])
+    contains = (bc >= -1e-7).all(2)
+    # where several layers contain the point, the radius closest to the target's wins
+    cost = np.where(contains, np.abs(rr - r_t[qi, None]), np.inf)
+    best = np.argmin(cost, axis=1)
+    hit = np.isfinite(cost[np.arange(len(qi)), best])
+    # near misses (a point just outside a boundary): clamp into the nearest candidate when it
+    # is within one typical edge length; further out it is a hole, left unmatched
+    clamped = np.clip(bc, 0, None)
+    clamped /= np.maximum(clamped.sum(2, keepdims=True), 1e-12)
+    pc = np.einsum("ijk,ijkl->ijl", clamped, uv_s[st[cand]])
+    dist = np.linalg.norm(pc - q[qi, None, :], axis=2)
+    near = np.argmin(dist, axis=1)
+    ok_near = ~hit & (dist[np.arange(len(qi)), near] < edge)
+    pick = np.where(hit, best, near)
+    good = hit | ok_near
+    rows = np.arange(len(qi))
+    triangle = np.full(target.n_vertices, -1, dtype=np.int64)
+    bary = np.zeros((target.n_vertices, 3))
+    triangle[qi[good]] = cand[rows, pick][good]
+    bb = np.where(hit[:, None], bc[rows, pick], clamped[rows, pick])
+    bary[qi[good]] = bb[good]
+    return Correspondence(triangle, bary, source.n_vertices)

@@ -1,0 +1,151 @@
+"""The data directory and the facts about the bundled ICT-FaceKit template.
+
+The data directory is `$MIMICA_DATA` if set, else `../shared/data` beside the project
+root (this repository's layout).  Nothing from it is copied into the project.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .errors import MimicaError
+
+PROJECT_ROOT = Path(__file__).resolve().parents[2]
+
+# ICT-FaceKit topology (README.upstream.md, "Face Model Topology").
+ICT_N_VERTICES = 26719
+ICT_FACE_AREA_VERTICES = 9409        # vertices [0:9408]
+ICT_FACE_AREA_FACES = 9230
+ICT_HEAD_VERTICES = 11248            # face + head and neck, vertices [0:11247]
+ICT_HEAD_FACES = 11144
+# Multi-PIE 68-point landmark vertex indices (README.upstream.md, "Facial Landmarks").
+ICT_LANDMARKS_68 = np.array([
+    1225, 1888, 1052, 367, 1719, 1722, 2199, 1447, 966, 3661, 4390, 3927, 3924, 2608, 3272, 4088,
+    3443, 268, 493, 1914, 2044, 1401, 3615, 4240, 4114, 2734, 2509, 978, 4527, 4942, 4857, 1140,
+    2075, 1147, 4269, 3360, 1507, 1542, 1537, 1528, 1518, 1511, 3742, 3751, 3756, 3721, 3725,
+    3732, 5708, 5695, 2081, 0, 4275, 6200, 6213, 6346, 6461, 5518, 5957, 5841, 5702, 5711, 5533,
+    6216, 6207, 6470, 5517, 5966], dtype=np.int64)
+# sha256 of the face-area polygons (first 9230 faces, 0-based int64): identifies the topology
+ICT_FACE_AREA_SHA256 = "9be0b1b432fef37dd62416d07dd400bab4c925047a6c1f14b5b7a582f8cb3504"
+
+
+def data_dir() -> Path:
+    """The configured data directory (`MIMICA_DATA`, default `<project>/../shared/data`)."""
+    env = os.environ.get("MIMICA_DATA")
+    return Path(env).expanduser().resolve() if env else (PROJECT_ROOT.parent / "shared" / "data").resolve()
+
+
+def ict_dir() -> Path:
+    d = data_dir() / "ict-facekit" / "FaceXModel"
+    if not (d / "generic_neutral_mesh.obj").is_file():
+        raise MimicaError(f"{d}: ICT-FaceKit not found; set MIMICA_DATA to the folder that holds "
+                          "ict-facekit/FaceXModel")
+    return d
+
+
+def ict_path(name: str) -> Path:
+    """Path of an ICT-FaceKit OBJ by stem: 'generic_neutral_mesh', 'identity003', 'jawOpen'..."""
+    p = ict_dir() / f"{name}.obj"
+    if not p.is_file():
+        raise MimicaError(f"{p}: no such ICT-FaceKit shape")
+    return p
+
+
+def ict_expression_names() -> list[str]:
+    skip = {"generic_neutral_mesh"}
+    return sorted(p.stem for p in ict_dir().glob("*.obj")
+                  if p.stem not in skip and not p.stem.startswith("identity"))
+
+
+def face_area_hash(face_indices: np.ndarray, face_starts: np.ndarray) -> str | None:
+    if len(face_starts) <= ICT_FACE_AREA_FACES:
+        return None
+    end = face_starts[ICT_FACE_AREA_FACES]
+    h = hashlib.sha256(np.ascontiguousarray(face_indices[:end], dtype=np.int64).tobytes())
+    h.update(np.ascontiguousarray(face_starts[:ICT_FACE_AREA_FACES + 1], dtype=np.int64).tobytes())
+    return h.hexdigest()
+
+
+def is_ict_topology(mesh) -> bool:
+    """True when the mesh's first 9230 polygons are ICT-FaceKit's face area (any identity)."""
+    return (mesh.n_vertices >= ICT_FACE_AREA_VERTICES
+            and face_area_hash(mesh.face_indices, mesh.face_starts) == ICT_FACE_AREA_SHA256)
+
+
+# ------------------------------------------------------------------ linear model
+# Basic expressions as ICT-FaceKit shape weights, from the FACS units in the upstream
+# README's table (AU1+2+5+26 surprise, AU6+12 happiness, AU1+4+15 sadness, AU4+5+7+23
+# anger, AU9+15+16 disgust, AU1+2+4+5+20+26 fear; Ekman & Friesen).
+EXPRESSIONS = {
+    "happiness": {"mouthSmile_L": 1.0, "mouthSmile_R": 1.0, "cheekSquint_L": 0.8, "cheekSquint_R": 0.8},
+    "surprise": {"browInnerUp_L": 1.0, "browInnerUp_R": 1.0, "browOuterUp_L": 1.0, "browOuterUp_R": 1.0,
+                 "eyeWide_L": 0.8, "eyeWide_R": 0.8, "jawOpen": 0.45},
+    "sadness": {"browInnerUp_L": 0.8, "browInnerUp_R": 0.8, "browDown_L": 0.3, "browDown_R": 0.3,
+                "mouthFrown_L": 1.0, "mouthFrown_R": 1.0, "mouthShrugLower": 0.4},
+    "anger": {"browDown_L": 1.0, "browDown_R": 1.0, "eyeSquint_L": 0.6, "eyeSquint_R": 0.6,
+              "mouthPress_L": 0.8, "mouthPress_R": 0.8, "noseSneer_L": 0.4, "noseSneer_R": 0.4},
+    "disgust": {"noseSneer_L": 1.0, "noseSneer_R": 1.0, "mouthUpperUp_L": 0.7, "mouthUpperUp_R": 0.7,
+                "mouthFrown_L": 0.5, "mouthFrown_R": 0.5, "mouthLowerDown_L": 0.3, "mouthLowerDown_R": 0.3},
+    "fear": {"browInnerUp_L": 1.0, "browInnerUp_R": 1.0, "browDown_L": 0.3, "browDown_R": 0.3,
+             "eyeWide_L": 1.0, "eyeWide_R": 1.0, "mouthStretch_L": 0.8, "mouthStretch_R": 0.8, "jawOpen": 0.25},
+}
+
+
+def read_vertices(path) -> np.ndarray:
+    """Only the 'v' lines of an OBJ, fast (for the ICT shapes, which share one topology)."""
+    text = Path(path).read_text()
+    rows = [ln[2:] for ln in text.splitlines() if ln.startswith("v ")]
+    return np.array(" ".join(rows).split(), dtype=np.float64).reshape(-1, 3)
+
+
+class ICTModel:
+    """ICT-FaceKit's linear model: face = N + sum w_i (identity_i - N) + sum e_j (E_j - N).
+
+    Shapes are read on first use and kept.  `n` restricts every shape to its first n
+    vertices (e.g. ICT_HEAD_VERTICES for face + head and neck).
+    """
+
+    def __init__(self, n: int | None = None):
+        from .mesh import read_mesh
+        full = read_mesh(ict_path("generic_neutral_mesh"))
+        if n is None or n == full.n_vertices:
+            self.mesh = full
+        else:
+            nf = {ICT_HEAD_VERTICES: ICT_HEAD_FACES, ICT_FACE_AREA_VERTICES: ICT_FACE_AREA_FACES}.get(n)
+            if nf is None:
+                raise MimicaError(f"ICT model: no known part with {n} vertices")
+            self.mesh, _ = full.submesh(np.arange(nf))
+        self.n = self.mesh.n_vertices
+        self._shapes: dict[str, np.ndarray] = {}
+
+    @property
+    def neutral(self) -> np.ndarray:
+        return self.mesh.vertices
+
+    def shape(self, name: str) -> np.ndarray:
+        if name not in self._shapes:
+            self._shapes[name] = read_vertices(ict_path(name))[:self.n]
+        return self._shapes[name]
+
+    def delta(self, weights: dict) -> np.ndarray:
+        d = np.zeros_like(self.neutral)
+        for k, w in weights.items():
+            d += w * (self.shape(k) - self.neutral)
+        return d
+
+    def identity(self, which) -> np.ndarray:
+        """'identity007', a dict of identity weights, or an array of coefficients for identity000.."""
+        if isinstance(which, str):
+            return self.shape(which)
+        if isinstance(which, dict):
+            return self.neutral + self.delta(which)
+        return self.neutral + self.delta({f"identity{i:03d}": c for i, c in enumerate(which) if c})
+
+    def expression(self, name_or_weights) -> dict:
+        if isinstance(name_or_weights, str):
+            return EXPRESSIONS.get(name_or_weights, {name_or_weights: 1.0})
+        return dict(name_or_weights)

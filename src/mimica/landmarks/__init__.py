@@ -1,0 +1,133 @@
+"""Landmarks: the 68-point iBUG / Multi-PIE markup on any face, one JSON format.
+
+File format (positions in the mesh's own coordinates; null for a point not given)::
+
+    {"scheme": "ibug68", "points": [[x, y, z] or null, ... 68 entries]}
+
+Points are snapped to the mesh surface and kept as (triangle, barycentric) so they
+follow the mesh when it moves.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..data import ICT_LANDMARKS_68, is_ict_topology
+from ..errors import MimicaError
+from ..mesh import Mesh, atomic_path
+from ..mesh.query import TriangleLocator
+
+SCHEME = "ibug68"
+N_POINTS = 68
+# iBUG 68 groups (0-based): jaw 0-16, brows 17-26, nose 27-35, eyes 36-47, mouth 48-67.
+NAMES = ([f"jaw.{i}" for i in range(17)] + [f"brow.right.{i}" for i in range(5)]
+         + [f"brow.left.{i}" for i in range(5)] + [f"nose.bridge.{i}" for i in range(4)]
+         + [f"nose.base.{i}" for i in range(5)] + [f"eye.right.{i}" for i in range(6)]
+         + [f"eye.left.{i}" for i in range(6)] + [f"mouth.outer.{i}" for i in range(12)]
+         + [f"mouth.inner.{i}" for i in range(8)])
+
+
+@dataclass
+class Landmarks:
+    """68 landmarks on a mesh: triangle index and barycentric coordinates, -1 where missing."""
+
+    triangle: np.ndarray      # (68,) int, -1 = missing
+    bary: np.ndarray          # (68, 3)
+    scheme: str = SCHEME
+
+    @property
+    def present(self) -> np.ndarray:
+        return self.triangle >= 0
+
+    def positions(self, mesh: Mesh, vertices=None) -> np.ndarray:
+        """(68, 3) positions on `mesh` (or on `vertices` of the same topology); NaN where missing."""
+        v = mesh.vertices if vertices is None else vertices
+        out = np.full((N_POINTS, 3), np.nan)
+        ok = self.present
+        t = mesh.triangles[self.triangle[ok]]
+        out[ok] = np.einsum("ij,ijk->ik", self.bary[ok], v[t])
+        return out
+
+    @classmethod
+    def from_vertex_indices(cls, mesh: Mesh, indices) -> "Landmarks":
+        """Landmarks sitting exactly on given vertices (-1 for missing)."""
+        indices = np.asarray(indices, dtype=np.int64)
+        tri_of_vertex = np.full(mesh.n_vertices, -1, dtype=np.int64)
+        corner = np.full(mesh.n_vertices, -1, dtype=np.int64)
+        t = mesh.triangles
+        for k in range(3):
+            tri_of_vertex[t[:, k]] = np.arange(len(t))
+            corner[t[:, k]] = k
+        tri = np.where(indices >= 0, tri_of_vertex[np.maximum(indices, 0)], -1)
+        bary = np.zeros((len(indices), 3))
+        ok = tri >= 0
+        bary[np.nonzero(ok)[0], corner[indices[ok]]] = 1.0
+        return cls(tri, bary)
+
+    @classmethod
+    def snap(cls, mesh: Mesh, points) -> "Landmarks":
+        """Snap (68, 3) points (NaN rows = missing) to the closest surface points."""
+        p = np.asarray(points, dtype=np.float64)
+        tri = np.full(len(p), -1, dtype=np.int64)
+        bary = np.zeros((len(p), 3))
+        ok = np.isfinite(p).all(axis=1)
+        if ok.any():
+            t, b, _, _ = TriangleLocator(mesh.vertices, mesh.triangles).closest(p[ok])
+            tri[ok], bary[ok] = t, b
+        return cls(tri, bary)
+
+
+def ict_landmarks(mesh: Mesh) -> Landmarks:
+    """The built-in ICT-FaceKit landmark vertices (upstream README)."""
+    return Landmarks.from_vertex_indices(mesh, ICT_LANDMARKS_68)
+
+
+def read_landmarks(path, mesh: Mesh | None = None):
+    """Read a landmark JSON file; returns (68,3) positions (NaN = missing), or Landmarks if mesh."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except OSError as e:
+        raise MimicaError(f"{path}: cannot read the landmark file ({e.strerror})") from None
+    except json.JSONDecodeError as e:
+        raise MimicaError(f"{path}: not valid JSON (line {e.lineno}: {e.msg})") from None
+    if not isinstance(doc, dict) or doc.get("scheme") != SCHEME:
+        raise MimicaError(f"{path}: expected {{\"scheme\": \"{SCHEME}\", \"points\": [...]}}")
+    pts = doc.get("points")
+    if not isinstance(pts, list) or len(pts) != N_POINTS:
+        raise MimicaError(f"{path}: 'points' must list {N_POINTS} entries, got "
+                          f"{len(pts) if isinstance(pts, list) else type(pts).__name__}")
+    out = np.full((N_POINTS, 3), np.nan)
+    for i, q in enumerate(pts):
+        if q is None:
+            continue
+        if (not isinstance(q, list) or len(q) != 3
+                or not all(isinstance(c, (int, float)) and np.isfinite(c) for c in q)):
+            raise MimicaError(f"{path}: point {i} must be [x, y, z] with finite numbers, or null")
+        out[i] = q
+    if np.isfinite(out).all(axis=1).sum() < 4:
+        raise MimicaError(f"{path}: at least 4 points are needed, {int(np.isfinite(out).all(1).sum())} given")
+    return Landmarks.snap(mesh, out) if mesh is not None else out
+
+
+def write_landmarks(path, positions) -> Path:
+    """Write (68, 3) positions (NaN rows -> null) atomically."""
+    pts = [None if not np.isfinite(p).all() else [float(c) for c in p] for p in np.asarray(positions)]
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps({"scheme": SCHEME, "points": pts}, indent=1) + "\n")
+    return path
+
+
+def landmarks_for(mesh: Mesh, path=None, option="--landmarks", what="mesh") -> Landmarks:
+    """Landmarks from a file, else built in for ICT-FaceKit topology, else a clear error."""
+    if path is not None:
+        return read_landmarks(path, mesh)
+    if is_ict_topology(mesh):
+        return ict_landmarks(mesh)
+    raise MimicaError(f"{what}: not an ICT-FaceKit topology, so its landmarks are not built in; "
+                      f"pass {option} FILE (JSON: {{\"scheme\": \"ibug68\", \"points\": [[x,y,z], ...]}})")

@@ -1,0 +1,193 @@
+"""The `Mesh` data type: vertices and polygon faces (triangles, quads, mixed).
+
+Polygons are stored flat: ``face_indices`` holds every face's corners one after the
+other and ``face_starts`` (length F+1) where each face begins, as in CSR matrices.
+Triangulation, edges and one-rings are derived on demand and cached.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+
+
+def _flatten_faces(faces):
+    """(F,k) array or a sequence of index sequences -> (flat indices, starts)."""
+    if isinstance(faces, np.ndarray) and faces.ndim == 2:
+        f = np.asarray(faces, dtype=np.int64)
+        starts = np.arange(0, f.size + 1, max(f.shape[1], 1), dtype=np.int64)
+        if f.shape[0] == 0:
+            starts = np.zeros(1, dtype=np.int64)
+        return f.reshape(-1), starts
+    sizes = np.fromiter((len(p) for p in faces), dtype=np.int64, count=len(faces))
+    starts = np.zeros(len(sizes) + 1, dtype=np.int64)
+    np.cumsum(sizes, out=starts[1:])
+    flat = np.fromiter((i for p in faces for i in p), dtype=np.int64, count=int(starts[-1]))
+    return flat, starts
+
+
+@dataclass(eq=False)
+class Mesh:
+    """A polygon mesh.
+
+    vertices: (n, 3) float64.  face_indices / face_starts: polygons, flat (see module).
+    uv: optional (t, 2) texture coordinates, with face_uv_indices parallel to
+    face_indices (the OBJ model: a corner has its own uv index).
+    """
+
+    vertices: np.ndarray
+    face_indices: np.ndarray
+    face_starts: np.ndarray
+    uv: np.ndarray | None = None
+    face_uv_indices: np.ndarray | None = None
+    name: str = ""
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    @classmethod
+    def from_faces(cls, vertices, faces, uv=None, face_uv=None, name=""):
+        flat, starts = _flatten_faces(faces)
+        fuv = None
+        if face_uv is not None:
+            fuv, ustarts = _flatten_faces(face_uv)
+            if not np.array_equal(ustarts, starts):
+                raise ValueError("face_uv must have the same polygon sizes as faces")
+        return cls(np.asarray(vertices, dtype=np.float64), flat, starts,
+                   None if uv is None else np.asarray(uv, dtype=np.float64), fuv, name)
+
+    # ------------------------------------------------------------------ basic
+    @property
+    def n_vertices(self) -> int:
+        return int(self.vertices.shape[0])
+
+    @property
+    def n_faces(self) -> int:
+        return int(self.face_starts.shape[0] - 1)
+
+    @cached_property
+    def face_sizes(self) -> np.ndarray:
+        return np.diff(self.face_starts)
+
+    @property
+    def faces(self):
+        """(F, k) array when every face has k corners, else a list of arrays."""
+        s = self.face_sizes
+        if s.size and np.all(s == s[0]):
+            return self.face_indices.reshape(-1, int(s[0]))
+        if s.size == 0:
+            return np.zeros((0, 3), dtype=np.int64)
+        return np.split(self.face_indices, self.face_starts[1:-1])
+
+    def with_vertices(self, vertices, name=None) -> "Mesh":
+        """Same topology (and uv), new positions; derived topology caches are shared."""
+        v = np.asarray(vertices, dtype=np.float64)
+        if v.shape != self.vertices.shape:
+            raise ValueError(f"expected vertices of shape {self.vertices.shape}, got {v.shape}")
+        m = Mesh(v, self.face_indices, self.face_starts, self.uv, self.face_uv_indices,
+                 self.name if name is None else name)
+        for k in ("triangles", "tri_face", "edges", "adjacency", "face_sizes"):
+            if k in self.__dict__:
+                m.__dict__[k] = self.__dict__[k]
+        return m
+
+    def same_topology(self, other: "Mesh") -> bool:
+        return (self.n_vertices == other.n_vertices
+                and np.array_equal(self.face_starts, other.face_starts)
+                and np.array_equal(self.face_indices, other.face_indices))
+
+    # ---------------------------------------------------------------- derived
+    def _fan(self):
+        s = self.face_sizes
+        ntri = np.maximum(s - 2, 0)
+        face_of_tri = np.repeat(np.arange(self.n_faces), ntri)
+        # corner k of the fan in its face: 1..size-2
+        first = np.repeat(self.face_starts[:-1], ntri)
+        k = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri) + 1
+        fi = self.face_indices
+        tris = np.stack([fi[first], fi[first + k], fi[first + k + 1]], axis=1)
+        return tris, face_of_tri
+
+    @cached_property
+    def triangles(self) -> np.ndarray:
+        """(T, 3) fan triangulation of the polygons."""
+        t, f = self._fan()
+        self.__dict__["tri_face"] = f
+        return t
+
+    @cached_property
+    def tri_face(self) -> np.ndarray:
+        """For each triangle of `triangles`, the polygon it came from."""
+        _ = self.triangles
+        return self.__dict__["tri_face"]
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """(E, 2) unique undirected polygon edges (diagonals of the fan excluded), i < j."""
+        fi, st = self.face_indices, self.face_starts
+        nxt = np.arange(fi.size) + 1
+        ends = st[1:] - 1
+        nxt[ends] = st[:-1]
+        e = np.stack([fi, fi[nxt]], axis=1)
+        e.sort(axis=1)
+        e = e[e[:, 0] != e[:, 1]]
+        return np.unique(e, axis=0)
+
+    @cached_property
+    def adjacency(self) -> sp.csr_matrix:
+        """(n, n) symmetric 0/1 vertex adjacency along polygon edges (CSR, sorted)."""
+        e = self.edges
+        n = self.n_vertices
+        a = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+                          shape=(n, n)).tocsr()
+        a.sum_duplicates()
+        a.sort_indices()
+        return a
+
+    def face_normals(self, vertices=None) -> np.ndarray:
+        """Area-weighted (unnormalized, length = 2*area) triangle normals, (T, 3)."""
+        v = self.vertices if vertices is None else vertices
+        t = self.triangles
+        return np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+
+    def vertex_normals(self, vertices=None) -> np.ndarray:
+        """Unit area-weighted vertex normals (n, 3); isolated vertices get (0, 0, 0)."""
+        v = self.vertices if vertices is None else vertices
+        return vertex_normals(v, self.triangles)
+
+    def submesh(self, face_ids) -> tuple["Mesh", np.ndarray]:
+        """The mesh made of the given polygons, and for each new vertex its old index."""
+        face_ids = np.asarray(face_ids, dtype=np.int64)
+        sizes = self.face_sizes[face_ids]
+        starts = np.zeros(len(face_ids) + 1, dtype=np.int64)
+        np.cumsum(sizes, out=starts[1:])
+        idx = np.concatenate([np.arange(self.face_starts[f], self.face_starts[f + 1]) for f in face_ids]) \
+            if len(face_ids) else np.zeros(0, dtype=np.int64)
+        old = np.unique(self.face_indices[idx])
+        remap = np.full(self.n_vertices, -1, dtype=np.int64)
+        remap[old] = np.arange(len(old))
+        uv = fuv = None
+        if self.uv is not None and self.face_uv_indices is not None:
+            uold = np.unique(self.face_uv_indices[idx])
+            uremap = np.full(len(self.uv), -1, dtype=np.int64)
+            uremap[uold] = np.arange(len(uold))
+            uv, fuv = self.uv[uold], uremap[self.face_uv_indices[idx]]
+        m = Mesh(self.vertices[old], remap[self.face_indices[idx]], starts, uv, fuv, self.name)
+        return m, old
+
+    def bounding_box_diagonal(self) -> float:
+        v = self.vertices
+        return float(np.linalg.norm(v.max(0) - v.min(0))) if len(v) else 0.0
+
+
+def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Unit area-weighted vertex normals (n, 3); isolated vertices get (0, 0, 0)."""
+    v = vertices
+    fn = np.cross(v[triangles[:, 1]] - v[triangles[:, 0]], v[triangles[:, 2]] - v[triangles[:, 0]])
+    vn = np.zeros_like(v)
+    for k in range(3):
+        for c in range(3):
+            vn[:, c] += np.bincount(triangles[:, k], weights=fn[:, c], minlength=len(v))
+    ln = np.linalg.norm(vn, axis=-1, keepdims=True)
+    return np.divide(vn, ln, out=np.zeros_like(vn), where=ln > 0)

@@ -1,0 +1,312 @@
+"""Mesh files: OBJ (own fast reader/writer, polygons kept), PLY (plyfile), glTF/GLB (pygltflib).
+
+Every failure a user can cause raises `MimicaError` naming the file and the problem.
+Writes are atomic: the file appears complete or not at all.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MimicaError
+from .core import Mesh
+
+MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf")
+
+
+# ----------------------------------------------------------------- atomic write
+@contextmanager
+def atomic_path(path):
+    """Yield a temporary path beside `path`; move it into place only on success."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+# ------------------------------------------------------------------- validation
+def validate(mesh: Mesh, source="mesh", allow_degenerate=False) -> Mesh:
+    """Raise MimicaError (naming `source`) if the mesh cannot be used."""
+    v = mesh.vertices
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise MimicaError(f"{source}: vertices must be 3D points, got shape {v.shape}")
+    if len(v) == 0:
+        raise MimicaError(f"{source}: the mesh has no vertices")
+    if mesh.n_faces == 0:
+        raise MimicaError(f"{source}: the mesh has no faces")
+    bad = ~np.isfinite(v).all(axis=1)
+    if bad.any():
+        raise MimicaError(f"{source}: {int(bad.sum())} vertices have non-finite coordinates "
+                          f"(first: vertex {int(np.argmax(bad)) + 1})")
+    fi = mesh.face_indices
+    if fi.size and (fi.min() < 0 or fi.max() >= len(v)):
+        k = int(np.argmax((fi < 0) | (fi >= len(v))))
+        face = int(np.searchsorted(mesh.face_starts, k, side="right"))
+        raise MimicaError(f"{source}: face {face} refers to vertex {int(fi[k]) + 1}, "
+                          f"but the mesh has {len(v)} vertices")
+    if (mesh.face_sizes < 3).any():
+        face = int(np.argmax(mesh.face_sizes < 3)) + 1
+        raise MimicaError(f"{source}: face {face} has fewer than 3 corners")
+    if not allow_degenerate:
+        t = mesh.triangles
+        rep = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])
+        area2 = np.linalg.norm(mesh.face_normals(), axis=1)
+        scale = mesh.bounding_box_diagonal()
+        deg = rep | (area2 <= (1e-12 * scale) ** 2)
+        if deg.any():
+            face = int(mesh.tri_face[np.argmax(deg)]) + 1
+            raise MimicaError(f"{source}: {int(deg.sum())} degenerate faces (zero area or a repeated "
+                              f"corner; first: face {face}); clean the mesh first")
+    return mesh
+
+
+# ------------------------------------------------------------------------- OBJ
+def _read_obj(path: Path) -> Mesh:
+    try:
+        text = path.read_text(errors="replace")
+    except OSError as e:
+        raise MimicaError(f"{path}: cannot read the file ({e.strerror})") from None
+    lines = text.splitlines()
+    vl = [ln[2:] for ln in lines if ln.startswith("v ")]
+    tl = [ln[3:] for ln in lines if ln.startswith("vt ")]
+    fl = [ln[2:].split() for ln in lines if ln.startswith("f ")]
+    if not vl:
+        raise MimicaError(f"{path}: no vertices found (is this an OBJ file?)")
+    try:
+        v = _parse_rows(vl, 3)
+        uv = _parse_rows(tl, 2) if tl else None
+        sizes = np.fromiter((len(f) for f in fl), dtype=np.int64, count=len(fl))
+        vidx, tidx = _parse_corners(fl, int(sizes.sum()))
+        has_uv = tidx is not None
+    except ValueError as e:
+        bad = _first_bad_line(lines)
+        raise MimicaError(f"{path}: {bad or f'not a valid OBJ file ({e})'}") from None
+    starts = np.zeros(len(sizes) + 1, dtype=np.int64)
+    np.cumsum(sizes, out=starts[1:])
+    n = len(v)
+    mesh = Mesh(v, np.where(vidx < 0, vidx + n, vidx - 1), starts)   # 1-based, negative = relative
+    if has_uv and uv is not None:
+        fu = np.where(tidx < 0, tidx + len(uv), tidx - 1)
+        if fu.size and fu.min() >= 0 and fu.max() < len(uv):
+            mesh.uv, mesh.face_uv_indices = uv, fu
+    return mesh
+
+
+def _parse_corners(fl, n_corners):
+    """Face corners 'v', 'v/t', 'v//n' or 'v/t/n' -> (vertex indices, uv indices or None)."""
+    if not fl:
+        return np.zeros(0, np.int64), None
+    first = fl[0][0]
+    fields = first.replace("//", "/").count("/") + 1
+    has_t = "/" in first and "//" not in first
+    joined = " ".join(" ".join(f) for f in fl)
+    if joined.count("/") == first.count("/") * n_corners:     # one corner format throughout
+        arr = np.array(joined.replace("//", " ").replace("/", " ").split(), dtype=np.int64)
+        if arr.size == fields * n_corners:
+            arr = arr.reshape(-1, fields)
+            return arr[:, 0], (arr[:, 1] if has_t else None)
+    corners = [c.split("/") for f in fl for c in f]
+    vidx = np.array([c[0] for c in corners], dtype=np.int64)
+    uv_ok = all(len(c) > 1 and c[1] for c in corners)
+    return vidx, (np.array([c[1] for c in corners], dtype=np.int64) if uv_ok else None)
+
+
+def _parse_rows(rows, k):
+    """Lines of numbers -> (m, k) floats (extra columns such as vertex colours are dropped)."""
+    flat = np.array(" ".join(rows).split(), dtype=np.float64)
+    if flat.size == len(rows) * k:
+        return flat.reshape(-1, k)
+    return np.array([[float(x) for x in r.split()[:k]] for r in rows], dtype=np.float64).reshape(-1, k)
+
+
+def _first_bad_line(lines):
+    for no, ln in enumerate(lines, 1):
+        parts = ln.split()
+        if not parts or parts[0] not in ("v", "vt", "f"):
+            continue
+        try:
+            if parts[0] == "f":
+                [int(c.split("/")[0]) for c in parts[1:]]
+            else:
+                want = 3 if parts[0] == "v" else 1
+                if len(parts) - 1 < want:
+                    raise ValueError
+                [float(x) for x in parts[1:]]
+        except ValueError:
+            return f"line {no} is not valid OBJ: {ln.strip()[:60]!r}"
+    return None
+
+
+def _write_obj(mesh: Mesh, path: Path) -> None:
+    out = [f"# written by mimica: {mesh.n_vertices} vertices, {mesh.n_faces} faces\n"]
+    out.append("".join(f"v {x:.8g} {y:.8g} {z:.8g}\n" for x, y, z in mesh.vertices.tolist()))
+    fi = (mesh.face_indices + 1).astype(str)
+    if mesh.uv is not None and mesh.face_uv_indices is not None:
+        out.append("".join(f"vt {u:.8g} {w:.8g}\n" for u, w in mesh.uv.tolist()))
+        fi = np.char.add(np.char.add(fi, "/"), (mesh.face_uv_indices + 1).astype(str))
+    st = mesh.face_starts
+    corners = fi.tolist()
+    out.append("".join("f " + " ".join(corners[st[k]:st[k + 1]]) + "\n" for k in range(mesh.n_faces)))
+    path.write_text("".join(out))
+
+
+# ------------------------------------------------------------------------- PLY
+def _read_ply(path: Path) -> Mesh:
+    from plyfile import PlyData
+    try:
+        ply = PlyData.read(str(path))
+        vx = ply["vertex"]
+        v = np.stack([vx["x"], vx["y"], vx["z"]], axis=1).astype(np.float64)
+        fe = ply["face"] if "face" in ply else None
+        if fe is None:
+            faces = np.zeros((0, 3), np.int64)
+        else:
+            name = "vertex_indices" if "vertex_indices" in fe.data.dtype.names else "vertex_index"
+            faces = [np.asarray(f, dtype=np.int64) for f in fe[name]]
+    except MimicaError:
+        raise
+    except Exception as e:  # plyfile raises several types for malformed input
+        raise MimicaError(f"{path}: not a readable PLY file ({e})") from None
+    return Mesh.from_faces(v, faces)
+
+
+def _write_ply(mesh: Mesh, path: Path) -> None:
+    from plyfile import PlyData, PlyElement
+    v = np.empty(mesh.n_vertices, dtype=[("x", "f8"), ("y", "f8"), ("z", "f8")])
+    v["x"], v["y"], v["z"] = mesh.vertices.T
+    f = np.empty(mesh.n_faces, dtype=[("vertex_indices", "O")])
+    f["vertex_indices"] = [np.asarray(p, dtype=np.int32) for p in
+                           np.split(mesh.face_indices, mesh.face_starts[1:-1])]
+    PlyData([PlyElement.describe(v, "vertex"), PlyElement.describe(f, "face")], text=False).write(str(path))
+
+
+# ------------------------------------------------------------------------ glTF
+def _read_gltf(path: Path) -> Mesh:
+    from pygltflib import GLTF2
+    try:
+        g = GLTF2().load(str(path))
+        prim = g.meshes[0].primitives[0]
+        pos = _gltf_accessor(g, prim.attributes.POSITION)
+        idx = _gltf_accessor(g, prim.indices).reshape(-1, 3) if prim.indices is not None else \
+            np.arange(len(pos)).reshape(-1, 3)
+        uv = _gltf_accessor(g, prim.attributes.TEXCOORD_0) if prim.attributes.TEXCOORD_0 is not None else None
+    except MimicaError:
+        raise
+    except Exception as e:
+        raise MimicaError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
+    mesh = Mesh.from_faces(pos.astype(np.float64), idx.astype(np.int64))
+    if uv is not None:
+        mesh.uv = uv.astype(np.float64) * [1, -1] + [0, 1]
+        mesh.face_uv_indices = mesh.face_indices.copy()
+    return mesh
+
+
+_COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
+_NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+
+
+def _gltf_accessor(g, index) -> np.ndarray:
+    acc = g.accessors[index]
+    view = g.bufferViews[acc.bufferView]
+    data = g.binary_blob() if g.buffers[view.buffer].uri is None else g.get_data_from_buffer_uri(
+        g.buffers[view.buffer].uri)
+    dt = np.dtype(_COMPONENT[acc.componentType])
+    nc = _NCOMP[acc.type]
+    start = (view.byteOffset or 0) + (acc.byteOffset or 0)
+    stride = view.byteStride or dt.itemsize * nc
+    raw = np.frombuffer(data, dtype=np.uint8, count=stride * (acc.count - 1) + dt.itemsize * nc, offset=start)
+    rows = np.lib.stride_tricks.as_strided(raw, shape=(acc.count, dt.itemsize * nc), strides=(stride, 1))
+    return np.ascontiguousarray(rows).view(dt).reshape(acc.count, nc).squeeze(-1) if nc == 1 else \
+        np.ascontiguousarray(rows).view(dt).reshape(acc.count, nc)
+
+
+def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True) -> None:
+    """Write a triangulated mesh, optionally with named morph targets {name: (n,3) positions}."""
+    import pygltflib as gl
+    v = mesh.vertices.astype(np.float32)
+    t = mesh.triangles.astype(np.uint32)
+    blobs, views, accs = [], [], []
+
+    def add(arr, target, acc_type, comp, minmax=False):
+        arr = np.ascontiguousarray(arr)
+        off = sum(len(b) for b in blobs)
+        blobs.append(arr.tobytes() + b"\0" * ((-arr.nbytes) % 4))
+        views.append(gl.BufferView(buffer=0, byteOffset=off, byteLength=arr.nbytes, target=target))
+        a = gl.Accessor(bufferView=len(views) - 1, componentType=comp, count=len(arr), type=acc_type)
+        if minmax:
+            a.min, a.max = arr.min(0).tolist(), arr.max(0).tolist()
+        accs.append(a)
+        return len(accs) - 1
+
+    ipos = add(v, gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT, True)
+    iidx = add(t.reshape(-1), gl.ELEMENT_ARRAY_BUFFER, gl.SCALAR, gl.UNSIGNED_INT)
+    prim = gl.Primitive(attributes=gl.Attributes(POSITION=ipos), indices=iidx)
+    names = []
+    if morph_targets:
+        prim.targets = []
+        for name, pos in morph_targets.items():
+            prim.targets.append({"POSITION": add((np.asarray(pos) - mesh.vertices).astype(np.float32),
+                                                 gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT, True)})
+            names.append(name)
+    gmesh = gl.Mesh(primitives=[prim])
+    if names:
+        gmesh.extras = {"targetNames": names}
+        gmesh.weights = [0.0] * len(names)
+    blob = b"".join(blobs)
+    g = gl.GLTF2(scene=0, scenes=[gl.Scene(nodes=[0])], nodes=[gl.Node(mesh=0)], meshes=[gmesh],
+                 accessors=accs, bufferViews=views, buffers=[gl.Buffer(byteLength=len(blob))])
+    g.set_binary_blob(blob)
+    if binary:
+        g.save_binary(str(path))
+    else:
+        g.buffers[0].uri = "data:application/octet-stream;base64," + __import__("base64").b64encode(blob).decode()
+        g._glb_data = None
+        g.save_json(str(path))
+
+
+# ------------------------------------------------------------------------ API
+def _suffix(path: Path) -> str:
+    s = path.suffix.lower()
+    if s not in MESH_SUFFIXES:
+        raise MimicaError(f"{path}: unknown mesh format {s or '(no extension)'!r}; "
+                          f"use one of {', '.join(MESH_SUFFIXES)}")
+    return s
+
+
+def read_mesh(path, validate_mesh=True, allow_degenerate=False) -> Mesh:
+    """Read an OBJ/PLY/glTF/GLB mesh; polygons stay polygons (glTF holds triangles only)."""
+    path = Path(path)
+    s = _suffix(path)
+    if not path.is_file():
+        raise MimicaError(f"{path}: no such file")
+    reader = {".obj": _read_obj, ".ply": _read_ply, ".glb": _read_gltf, ".gltf": _read_gltf}[s]
+    mesh = reader(path)
+    mesh.name = path.stem
+    if validate_mesh:
+        validate(mesh, str(path), allow_degenerate=allow_degenerate)
+    return mesh
+
+
+def write_mesh(path, mesh: Mesh) -> Path:
+    """Write atomically; the format follows the extension."""
+    path = Path(path)
+    s = _suffix(path)
+    with atomic_path(path) as tmp:
+        if s == ".obj":
+            _write_obj(mesh, tmp)
+        elif s == ".ply":
+            _write_ply(mesh, tmp)
+        else:
+            write_glb(tmp, mesh, binary=(s == ".glb"))
+    return path

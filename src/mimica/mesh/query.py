@@ -1,0 +1,106 @@
+"""Geometric queries on triangle meshes: closest points, barycentric coordinates."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+
+def closest_point_on_triangles(p, a, b, c):
+    """Closest points to p on triangles (a, b, c), all (m, 3); returns (points, bary (m, 3)).
+
+    Region-based algorithm (Ericson, Real-Time Collision Detection, §5.1.5), vectorized.
+    """
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = np.einsum("ij,ij->i", ab, ap), np.einsum("ij,ij->i", ac, ap)
+    bp = p - b
+    d3, d4 = np.einsum("ij,ij->i", ab, bp), np.einsum("ij,ij->i", ac, bp)
+    cp = p - c
+    d5, d6 = np.einsum("ij,ij->i", ab, cp), np.einsum("ij,ij->i", ac, cp)
+    va = d3 * d6 - d5 * d4
+    vb = d5 * d2 - d1 * d6
+    vc = d1 * d4 - d3 * d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        denom = va + vb + vc
+        v = np.where(denom != 0, vb / denom, 1 / 3)
+        w = np.where(denom != 0, vc / denom, 1 / 3)
+        bary = np.stack([1 - v - w, v, w], axis=1)
+        # edge regions
+        t_ab = np.where(d1 - d3 != 0, d1 / (d1 - d3), 0)
+        t_ac = np.where(d2 - d6 != 0, d2 / (d2 - d6), 0)
+        t_bc = np.where((d4 - d3) + (d5 - d6) != 0, (d4 - d3) / ((d4 - d3) + (d5 - d6)), 0)
+    conds = [
+        (d1 <= 0) & (d2 <= 0),                                   # vertex a
+        (d3 >= 0) & (d4 <= d3),                                  # vertex b
+        (d6 >= 0) & (d5 <= d6),                                  # vertex c
+        (vc <= 0) & (d1 >= 0) & (d3 <= 0),                       # edge ab
+        (vb <= 0) & (d2 >= 0) & (d6 <= 0),                       # edge ac
+        (va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0),         # edge bc
+    ]
+    z = np.zeros_like(d1)
+    o = np.ones_like(d1)
+    choices = [
+        np.stack([o, z, z], 1), np.stack([z, o, z], 1), np.stack([z, z, o], 1),
+        np.stack([1 - t_ab, t_ab, z], 1), np.stack([1 - t_ac, z, t_ac], 1),
+        np.stack([z, 1 - t_bc, t_bc], 1),
+    ]
+    for cond, ch in zip(reversed(conds), reversed(choices)):
+        bary = np.where(cond[:, None], ch, bary)
+    q = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
+    return q, bary
+
+
+class TriangleLocator:
+    """Closest point on a triangle mesh, for many query points (candidates by a k-d tree)."""
+
+    def __init__(self, vertices, triangles):
+        self.v = np.asarray(vertices, dtype=np.float64)
+        self.t = np.asarray(triangles, dtype=np.int64)
+        tri = self.v[self.t]
+        self.centroids = tri.mean(axis=1)
+        self.radius = np.linalg.norm(tri - self.centroids[:, None], axis=2).max(axis=1)
+        self.tree = cKDTree(self.centroids)
+        self.rmax = float(self.radius.max()) if len(self.radius) else 0.0
+
+    def closest(self, points, k=16):
+        """(triangle index, barycentric (m,3), closest point (m,3), distance (m,)) per point."""
+        p = np.asarray(points, dtype=np.float64)
+        k = min(k, len(self.t))
+        _, cand = self.tree.query(p, k=k)
+        cand = cand.reshape(len(p), k)
+        m = len(p)
+        pr = np.repeat(p, k, axis=0)
+        tt = self.t[cand.reshape(-1)]
+        q, bary = closest_point_on_triangles(pr, self.v[tt[:, 0]], self.v[tt[:, 1]], self.v[tt[:, 2]])
+        d = np.linalg.norm(q - pr, axis=1).reshape(m, k)
+        best = np.argmin(d, axis=1)
+        rows = np.arange(m)
+        dist = d[rows, best]
+        # exactness: a triangle not among the candidates may still be closer when its centroid
+        # lies within dist + its radius; recheck those points against every triangle near them
+        dk = np.linalg.norm(self.centroids[cand[:, -1]] - p, axis=1)
+        unsure = np.nonzero(dk < dist + self.rmax)[0] if k < len(self.t) else np.zeros(0, int)
+        tri = cand[rows, best]
+        flat = rows * k + best
+        b, qq = bary[flat], q[flat]
+        for i in unsure:
+            near = np.array(self.tree.query_ball_point(p[i], dist[i] + self.rmax), dtype=np.int64)
+            if len(near) <= k:
+                continue
+            tn = self.t[near]
+            q2, b2 = closest_point_on_triangles(np.repeat(p[i:i + 1], len(near), 0),
+                                                self.v[tn[:, 0]], self.v[tn[:, 1]], self.v[tn[:, 2]])
+            d2 = np.linalg.norm(q2 - p[i], axis=1)
+            j = int(np.argmin(d2))
+            tri[i], b[i], qq[i], dist[i] = near[j], b2[j], q2[j], d2[j]
+        return tri, b, qq, dist
+
+
+def barycentric_2d(p, a, b, c):
+    """Barycentric coordinates of 2D points p in triangles (a, b, c), all (m, 2)."""
+    v0, v1, v2 = b - a, c - a, p - a
+    den = v0[:, 0] * v1[:, 1] - v1[:, 0] * v0[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = (v2[:, 0] * v1[:, 1] - v1[:, 0] * v2[:, 1]) / den
+        w = (v0[:, 0] * v2[:, 1] - v2[:, 0] * v0[:, 1]) / den
+    return np.stack([1 - v - w, v, w], axis=1)

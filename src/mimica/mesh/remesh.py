@@ -1,0 +1,107 @@
+"""Resample a face surface with a new, unrelated triangulation (for tests and the demo).
+
+Samples a jittered grid in the face's cylinder map, triangulates it (Delaunay), lifts every
+sample onto the outermost layer of the original surface, and cuts holes where the original
+has none of its own (nostrils on request).  Each new vertex keeps the original triangle and
+barycentric coordinates it was lifted from, so any shape of the original topology (an
+expression, an identity) can be carried over exactly: ``bary-interpolate(shape)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import Delaunay, cKDTree
+
+from ..mesh.core import Mesh
+from ..mesh.query import barycentric_2d
+
+
+@dataclass
+class Resampled:
+    mesh: Mesh
+    triangle: np.ndarray      # (n,) triangle of the original's `triangles` under each vertex
+    bary: np.ndarray          # (n, 3)
+    original_triangles: np.ndarray
+
+    def carry(self, vertices: np.ndarray) -> np.ndarray:
+        """Positions (n_orig, 3) of any shape of the original topology -> the new vertices."""
+        t = self.original_triangles[self.triangle]
+        return np.einsum("ij,ijk->ik", self.bary, vertices[t])
+
+
+def resample_face(mesh: Mesh, landmarks: np.ndarray, n_vertices: int = 12000, seed: int = 0,
+                  nostril_holes: bool = True, rings: int = 6) -> Resampled:
+    from ..correspond import face_cylinder
+    rng = np.random.default_rng(seed)
+    cyl = face_cylinder(landmarks)
+    uv, r = cyl.project(mesh.vertices)
+    tri = mesh.triangles
+    tuv = uv[tri]
+    span = tuv[:, :, 0].max(1) - tuv[:, :, 0].min(1)
+    usable = np.nonzero(span < np.pi * cyl.radius)[0]
+    a = tuv[usable]
+    area2d = 0.5 * np.abs((a[:, 1, 0] - a[:, 0, 0]) * (a[:, 2, 1] - a[:, 0, 1])
+                          - (a[:, 2, 0] - a[:, 0, 0]) * (a[:, 1, 1] - a[:, 0, 1]))
+    h = np.sqrt(area2d.sum() / n_vertices)
+    lo, hi = uv.min(0), uv.max(0)
+    gx, gy = np.meshgrid(np.arange(lo[0], hi[0], h), np.arange(lo[1], hi[1], h * np.sqrt(3) / 2))
+    gx = gx + (np.arange(gx.shape[0])[:, None] % 2) * h / 2          # hexagonal grid
+    pts = np.stack([gx.ravel(), gy.ravel()], 1) + rng.uniform(-0.2, 0.2, (gx.size, 2)) * h
+    cent = a.mean(1)
+    tree = cKDTree(cent)
+
+    def outermost(q, k=24):
+        """Outermost original triangle under 2D points q: (triangle, bary, found)."""
+        _, cand = tree.query(q, k=k)
+        ct = tri[usable[cand.reshape(-1)]]
+        bc = barycentric_2d(np.repeat(q, k, 0), uv[ct[:, 0]], uv[ct[:, 1]], uv[ct[:, 2]]).reshape(len(q), k, 3)
+        bc = np.nan_to_num(bc, nan=-1)
+        rr = np.einsum("ijk,ijk->ij", bc, r[tri[usable[cand]]])
+        score = np.where((bc >= 0).all(2), rr, -np.inf)
+        best = np.argmax(score, 1)
+        rows = np.arange(len(q))
+        return usable[cand[rows, best]], bc[rows, best], np.isfinite(score[rows, best])
+
+    t_of, b_of, keep = outermost(pts)
+    pts, t_of, b_of = pts[keep], t_of[keep], b_of[keep]
+    v3 = np.einsum("ij,ijk->ik", b_of, mesh.vertices[tri[t_of]])
+    # triangulate in the cylinder map; a triangle whose centroid or edge midpoints fall where
+    # the original has no surface (eyes, mouth, the seam at the back) is a hole
+    d = Delaunay(pts).simplices
+    probes = [pts[d].mean(1)] + [0.5 * (pts[d[:, i]] + pts[d[:, (i + 1) % 3]]) for i in range(3)]
+    ok = np.ones(len(d), bool)
+    for q in probes:
+        ok &= outermost(q)[2]
+    # a triangle must not bridge parts that the original keeps apart (closed lips, lids):
+    # the original vertices under its corners must lie within a few rings of each other
+    near_v = tri[t_of, np.argmax(b_of, 1)]
+    reach = sp.identity(mesh.n_vertices, format="csr") + mesh.adjacency
+    ring = reach
+    for _ in range(rings - 1):
+        ring = (ring @ reach).tocsr()
+        ring.data[:] = 1
+    for i in range(3):
+        ok &= np.asarray(ring[near_v[d[:, i]], near_v[d[:, (i + 1) % 3]]]).ravel() > 0
+    faces = d[ok]
+    if nostril_holes:
+        lm = np.asarray(landmarks)
+        width = np.linalg.norm(lm[35] - lm[31])
+        for a_, b_ in ((31, 33), (33, 35)):
+            c = 0.5 * (lm[a_] + lm[b_]) + 0.1 * width * cyl.axes[1]
+            near = np.linalg.norm(v3 - c, axis=1) < 0.17 * width
+            faces = faces[~near[faces].any(1)]
+    # orient like the original (normals outward, away from the axis)
+    n = np.cross(v3[faces[:, 1]] - v3[faces[:, 0]], v3[faces[:, 2]] - v3[faces[:, 0]])
+    out = v3[faces].mean(1) - cyl.origin
+    out -= np.outer(out @ cyl.axes[1], cyl.axes[1])
+    flip = np.einsum("ij,ij->i", n, out) < 0
+    faces[flip] = faces[flip][:, ::-1]
+    used = np.unique(faces)
+    remap = np.full(len(v3), -1)
+    remap[used] = np.arange(len(used))
+    new = Mesh.from_faces(v3[used], remap[faces], name=mesh.name + "_remeshed")
+    return Resampled(new, t_of[used], b_of[used], tri)
+

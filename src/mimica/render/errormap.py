@@ -1,0 +1,48 @@
+"""Colour-coded per-vertex error maps, like Song et al. Fig. 11."""
+
+from __future__ import annotations
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from ..mesh import Mesh
+from .raster import render_mesh
+from .sheet import _font, save_png
+
+# Song Fig. 11 levels: < 0.1 % green, [0.1 %, 0.5 %) blue, [0.5 %, 2 %) red; beyond: purple
+BINS = (0.001, 0.005, 0.02)
+COLORS = ((0.20, 0.72, 0.30), (0.20, 0.40, 0.85), (0.85, 0.18, 0.15), (0.45, 0.10, 0.45))
+LABELS = ("< 0.1%", "0.1 - 0.5%", "0.5 - 2%", ">= 2%")
+NO_MOTION = (0.75, 0.75, 0.75)
+
+
+def error_colors(err: np.ndarray, bins=BINS, colors=COLORS) -> np.ndarray:
+    idx = np.digitize(np.nan_to_num(err, nan=0.0), bins)
+    col = np.asarray(colors, float)[np.minimum(idx, len(colors) - 1)]
+    col[~np.isfinite(err)] = NO_MOTION
+    return col
+
+
+def error_map_image(mesh: Mesh, err: np.ndarray, title="", size=420) -> np.ndarray:
+    col = error_colors(err)
+    views = [render_mesh(mesh, size=(size, size), yaw=y, colors=col) for y in (0.0, 35.0)]
+    pad, legend_h, top = 8, 34, 28
+    w = 2 * size + 3 * pad
+    img = Image.new("RGB", (w, top + size + legend_h + pad), "white")
+    draw = ImageDraw.Draw(img)
+    draw.text((pad, 6), title, fill=(20, 20, 20), font=_font(16))
+    for i, v in enumerate(views):
+        img.paste(Image.fromarray(v), (pad + i * (size + pad), top))
+    x = pad
+    y = top + size + 8
+    font = _font(13)
+    entries = list(zip(LABELS, COLORS)) + [("no motion", NO_MOTION)]
+    for lab, c in entries:
+        draw.rectangle([x, y, x + 16, y + 16], fill=tuple(int(255 * t) for t in c))
+        draw.text((x + 22, y + 1), lab, fill=(30, 30, 30), font=font)
+        x += 40 + int(draw.textlength(lab, font=font))
+    return np.asarray(img)
+
+
+def error_map_png(path, mesh: Mesh, err: np.ndarray, title=""):
+    return save_png(path, error_map_image(mesh, err, title))

@@ -1,0 +1,171 @@
+"""Expression transfer as one sparse least-squares system per target (Song §IV, eqs. 4-7).
+
+    min_x  sum_e || Q_t,e(x) - Q_s,e ||_F^2  +  eps * sum_i || x_i - a_i ||^2
+
+Q_s,e is the source deformation of element e (Song eq. 2), carried to the target's
+elements through a correspondence matrix P (identity on the same topology);
+Q_t,e(x) = A x is linear in the target unknowns (vertices and tips; Song eq. 5).  Vertices
+that never move in the source are fixed to the target's rest positions ("regions that do
+not move stay put").  The eps term (1e-6 of the mean stiffness) ties every vertex weakly to
+its rest position plus the source's displacement there; it only removes the translation of
+parts that have no fixed vertex, and since the source's own S' satisfies every term
+exactly, self-transfer stays exact.
+
+`TransferSolver(...)` does everything that depends on the target (the factorization);
+`apply(frames)` moves a whole batch of source frames through one back-substitution.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import MimicaError
+from ..mesh import Mesh
+from .elements import Elements, dt_elements, gradient_operator, vtc_elements
+from .solver import SPDSolver
+
+METHODS = {"vtc": vtc_elements, "dt": dt_elements}
+EPS_ANCHOR = 1e-6
+
+
+def static_vertices(source_neutral: np.ndarray, frames: np.ndarray, rtol=1e-7) -> np.ndarray:
+    """Vertices of the source that move in none of the frames (bool (n,))."""
+    scale = np.linalg.norm(source_neutral.max(0) - source_neutral.min(0))
+    d = np.abs(np.asarray(frames) - source_neutral).max(axis=(0, 2)) if len(frames) else \
+        np.zeros(len(source_neutral))
+    return d <= rtol * scale
+
+
+class TransferSolver:
+    """Factor once per (source neutral, target neutral, correspondence); apply to many frames.
+
+    source, target: the two neutral meshes, already aligned (same frame and scale).
+    vertex_map: sparse (n_target x n_source) rows of barycentric weights mapping target
+        vertices to source surface points, or None for the same topology (identity).
+    matched: bool (n_target,) target vertices that have a partner; the others keep their
+        rest shape (Q = identity).
+    fixed: bool (n_target,) target vertices held at their rest position.
+    """
+
+    def __init__(self, source: Mesh, target: Mesh, method="vtc", vertex_map=None,
+                 matched=None, fixed=None, solver_kind=None, weighting="area"):
+        if method not in METHODS:
+            raise MimicaError(f"unknown transfer method {method!r}; use one of {', '.join(METHODS)}")
+        self.method = method
+        self.source, self.target = source, target
+        ns, nt = source.n_vertices, target.n_vertices
+        self.same_topology = vertex_map is None
+        if vertex_map is None:
+            if not source.same_topology(target):
+                raise MimicaError("source and target have different topologies; "
+                                  "a correspondence (vertex_map) is needed")
+            vertex_map = sp.identity(ns, format="csr")
+        self.vertex_map = sp.csr_matrix(vertex_map)
+        matched = np.ones(nt, bool) if matched is None else np.asarray(matched, bool)
+        fixed = np.zeros(nt, bool) if fixed is None else np.asarray(fixed, bool)
+
+        self.el_s = METHODS[method](source)
+        self.el_t = METHODS[method](target)
+        es, et = self.el_s.n_elements, self.el_t.n_elements
+        self.A_s = gradient_operator(self.el_s, source.vertices)              # 3Es x (ns+Es)
+        A_t = gradient_operator(self.el_t, target.vertices)                  # 3Et x (nt+Et)
+
+        # P: target element -> source elements (Song §V.A: each target VTC gets the source
+        # deformation at its corresponding surface point, barycentric weights)
+        p_el = self._element_map(matched)
+        self.P3 = sp.kron(p_el, sp.identity(3), format="csr")
+        unmatched_el = np.asarray(p_el.sum(axis=1)).ravel() < 0.5
+        # unmatched elements keep Q = I: constant right-hand side rows
+        c_id = np.zeros((3 * et, 3))
+        ue = np.nonzero(unmatched_el)[0]
+        for j in range(3):
+            c_id[3 * ue + j, j] = 1.0
+
+        n_unk = nt + et
+        is_fixed = np.zeros(n_unk, bool)
+        is_fixed[:nt] = fixed
+        self.free = np.nonzero(~is_fixed)[0]
+        self.fixed = np.nonzero(is_fixed)[0]
+        A_f = A_t[:, self.free].tocsc()
+        A_c = A_t[:, self.fixed].tocsc()
+        # rows weighted by the element's surface area, so that the energy is a surface
+        # integral and does not depend on how densely each face is meshed
+        wts = np.repeat(self._element_areas(self.el_t, target.vertices) if weighting == "area"
+                        else np.ones(et), 3)
+        AfW = (A_f.T @ sp.diags(wts)).tocsr()
+        AtA = (AfW @ A_f).tocsr()
+        eps = EPS_ANCHOR * float(AtA.diagonal().mean())
+        vfree = self.free < nt                       # free unknowns that are vertices
+        anchor_sel = sp.csr_matrix((np.ones(vfree.sum()), (np.nonzero(vfree)[0], self.free[vfree])),
+                                   shape=(len(self.free), nt))
+        M = AtA + eps * sp.diags(vfree.astype(float))
+        self.solver = SPDSolver(M, solver_kind)
+
+        # rhs = R @ [S'; tips(S')] + k0, linear in the source frame (see module docstring)
+        Vm = self.vertex_map
+        fixed_v = self.fixed                                   # all fixed unknowns are vertices
+        Vm_c = Vm[fixed_v]
+        right = (eps * anchor_sel @ Vm - AfW @ (A_c @ Vm_c)).tocsr()
+        right.resize((len(self.free), ns + es))
+        self.R = (AfW @ (self.P3 @ self.A_s)).tocsr() + right
+        S, T = source.vertices, target.vertices
+        self.k0 = (-AfW @ (A_c @ (T[fixed_v] - Vm_c @ S)) + AfW @ c_id
+                   + eps * (anchor_sel @ (T - Vm @ S)))
+        self.n_target, self.n_unknowns = nt, n_unk
+
+    @staticmethod
+    def _element_areas(el: Elements, vertices) -> np.ndarray:
+        """Area carried by each element (a third of the adjacent triangles for a vertex), mean 1."""
+        t = el.triangles
+        a = 0.5 * np.linalg.norm(np.cross(vertices[t[:, 1]] - vertices[t[:, 0]],
+                                          vertices[t[:, 2]] - vertices[t[:, 0]]), axis=1)
+        if el.kind == "vtc":
+            a = np.bincount(t.reshape(-1), weights=np.repeat(a / 3, 3), minlength=el.n_vertices)
+        a = np.maximum(a, 1e-6 * a.mean())
+        return a / a.mean()
+
+    def _element_map(self, matched) -> sp.csr_matrix:
+        """(E_t x E_s) weights: which source elements a target element takes its Q from."""
+        Vm = self.vertex_map
+        rowsum = np.asarray(Vm.sum(axis=1)).ravel()
+        ok = matched & (rowsum > 0.5)
+        D = sp.diags(ok.astype(float))
+        if self.method == "vtc":
+            return (D @ Vm).tocsr()                              # vertex elements on both sides
+        tt = self.target.triangles
+        corner_ok = ok[tt].all(axis=1).astype(float)
+        if self.same_topology:
+            return sp.diags(corner_ok).tocsr()                   # triangle e <- triangle e
+        # DT: a target triangle takes the mean of the source triangles under its corners
+        ts = self.source.triangles
+        vt_s = sp.csr_matrix((np.ones(ts.size), (ts.reshape(-1), np.repeat(np.arange(len(ts)), 3))),
+                             shape=(self.source.n_vertices, len(ts)))
+        deg = np.asarray(vt_s.sum(axis=1)).ravel()
+        v2t = sp.diags(1 / np.maximum(deg, 1)) @ vt_s           # source vertex -> its triangles
+        t2v = sp.csr_matrix((np.repeat(corner_ok / 3, 3), (np.repeat(np.arange(len(tt)), 3), tt.reshape(-1))),
+                            shape=(len(tt), self.target.n_vertices))
+        return (t2v @ Vm @ v2t).tocsr()
+
+    def apply(self, frames: np.ndarray) -> np.ndarray:
+        """Source expression frames (F, n_s, 3) or (n_s, 3) -> target frames, same leading shape."""
+        frames = np.asarray(frames, dtype=np.float64)
+        single = frames.ndim == 2
+        f = frames[None] if single else frames
+        if f.shape[1:] != self.source.vertices.shape:
+            raise MimicaError(f"source frames have {f.shape[1]} vertices, the source neutral has "
+                              f"{self.source.n_vertices}")
+        tips = self.el_s.tips(f)                                           # (F, Es, 3)
+        y = np.concatenate([f, tips], axis=1)                              # (F, ns+Es, 3)
+        nf = len(f)
+        ycols = np.moveaxis(y, 0, 1).reshape(y.shape[1], 3 * nf)           # columns: frame-major
+        rhs = self.R @ ycols + np.tile(self.k0, (1, nf))
+        sol = self.solver.solve(rhs)                                        # (n_free, 3F)
+        out = np.empty((self.n_unknowns, 3 * nf))
+        out[self.free] = sol
+        if len(self.fixed):
+            S = self.source.vertices
+            disp = (self.vertex_map[self.fixed] @ (ycols[:len(S)] - np.tile(S, (1, nf))))
+            out[self.fixed] = np.tile(self.target.vertices[self.fixed], (1, nf)) + disp
+        res = np.moveaxis(out[:self.n_target].reshape(self.n_target, nf, 3), 1, 0)
+        return res[0] if single else res

@@ -1,0 +1,27 @@
+"""Error measures for transferred expressions."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def relative_error(result, truth, rest, region=None) -> float:
+    """mean |result - truth| / mean |truth - rest| over `region` (the issue's figure of merit)."""
+    r = slice(None) if region is None else region
+    num = np.linalg.norm(np.asarray(result)[..., r, :] - np.asarray(truth)[..., r, :], axis=-1).mean()
+    den = np.linalg.norm(np.asarray(truth)[..., r, :] - np.asarray(rest)[..., r, :], axis=-1).mean()
+    return float(num / max(den, 1e-300))
+
+
+def song_vertex_error(result, result_rest, reference, reference_rest, min_motion=1e-9):
+    """Song et al., appendix: E = | |V_TE - V_TN| / |V_SE - V_SN| - 1 | per vertex.
+
+    Vertices whose reference motion is below `min_motion` (relative to the largest motion)
+    have no defined error and come back as NaN.
+    """
+    mt = np.linalg.norm(np.asarray(result) - np.asarray(result_rest), axis=-1)
+    ms = np.linalg.norm(np.asarray(reference) - np.asarray(reference_rest), axis=-1)
+    ok = ms > min_motion * max(float(ms.max()), 1e-300)
+    e = np.full(ms.shape, np.nan)
+    e[ok] = np.abs(mt[ok] / ms[ok] - 1.0)
+    return e

@@ -1,0 +1,44 @@
+"""Sparse symmetric positive-definite factorization, factored once and reused.
+
+CHOLMOD (scikit-sparse) when it is installed, else SciPy's SuperLU; both take a block of
+right-hand sides at once. `backend()` says which one is in use.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+try:  # pragma: no cover - depends on the machine
+    from sksparse.cholmod import cholesky as _cholmod_cholesky
+except Exception:  # ImportError, or a broken shared library
+    _cholmod_cholesky = None
+
+
+def backend() -> str:
+    if _cholmod_cholesky is not None and os.environ.get("MIMICA_SOLVER", "") != "scipy":
+        return "cholmod"
+    return "scipy"
+
+
+class SPDSolver:
+    """Factor a sparse SPD matrix once; `solve(B)` for B of shape (n,) or (n, k)."""
+
+    def __init__(self, m: sp.spmatrix, kind: str | None = None):
+        self.kind = kind or backend()
+        m = sp.csc_matrix(m)
+        self.n = m.shape[0]
+        if self.kind == "cholmod":
+            self._f = _cholmod_cholesky(m)
+        else:
+            self._f = spla.splu(m, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                                options={"SymmetricMode": True})
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        b = np.asarray(b, dtype=np.float64)
+        if self.kind == "cholmod":
+            return self._f(b)
+        return self._f.solve(np.asfortranarray(b))
