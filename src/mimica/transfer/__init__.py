@@ -12,7 +12,11 @@ vertex order.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..align import Similarity, fit_similarity
 from ..correspond import Correspondence, correspond
@@ -62,12 +66,26 @@ class ExpressionTransfer:
                                      fixed=fixed, solver_kind=solver_kind)
         self._back = self.similarity.inverse()
 
-    def apply(self, frames: np.ndarray, batch: int = 64) -> np.ndarray:
-        """Source frames (F, n_S, 3) or (n_S, 3) -> target frames (F, n_T, 3) or (n_T, 3)."""
+    def apply(self, frames: np.ndarray, batch: int = 32, workers: int | None = None) -> np.ndarray:
+        """Source frames (F, n_S, 3) or (n_S, 3) -> target frames (F, n_T, 3) or (n_T, 3).
+
+        Frames go through in batches (one back-substitution with 3 x batch right-hand
+        sides each); batches run on `workers` threads (default: the CPU count), each with
+        single-threaded BLAS, which keeps every core busy through all stages.
+        """
         frames = np.asarray(frames, dtype=np.float64)
         single = frames.ndim == 2
         f = frames[None] if single else frames
         out = np.empty((len(f), self.target.n_vertices, 3))
-        for i in range(0, len(f), batch):
-            out[i:i + batch] = self._back.apply(self.solver.apply(f[i:i + batch]))
+        starts = range(0, len(f), batch)
+        workers = min(workers or os.cpu_count() or 1, len(starts))
+        if workers <= 1:
+            for i in starts:
+                self.solver.apply(f[i:i + batch], self._back, out=out[i:i + batch])
+        else:
+            with threadpool_limits(limits=1), ThreadPoolExecutor(workers) as ex:
+                jobs = [ex.submit(self.solver.apply, f[i:i + batch], self._back, out[i:i + batch])
+                        for i in starts]
+                for j in jobs:
+                    j.result()
         return out[0] if single else out

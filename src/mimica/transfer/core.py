@@ -99,8 +99,7 @@ class TransferSolver:
         vfree = self.free < nt                       # free unknowns that are vertices
         anchor_sel = sp.csr_matrix((np.ones(vfree.sum()), (np.nonzero(vfree)[0], self.free[vfree])),
                                    shape=(len(self.free), nt))
-        M = AtA + eps * sp.diags(vfree.astype(float))
-        self.solver = SPDSolver(M, solver_kind)
+        M = (AtA + eps * sp.diags(vfree.astype(float))).tocsr()
 
         # rhs = R @ [S'; tips(S')] + k0, linear in the source frame (see module docstring)
         Vm = self.vertex_map
@@ -110,8 +109,19 @@ class TransferSolver:
         right.resize((len(self.free), ns + es))
         self.R = (AfW @ (self.P3 @ self.A_s)).tocsr() + right
         S, T = source.vertices, target.vertices
-        self.k0 = (-AfW @ (A_c @ (T[fixed_v] - Vm_c @ S)) + AfW @ c_id
-                   + eps * (anchor_sel @ (T - Vm @ S)))
+        k0 = (-AfW @ (A_c @ (T[fixed_v] - Vm_c @ S)) + AfW @ c_id
+              + eps * (anchor_sel @ (T - Vm @ S)))
+        # Each tip appears only in its own element's rows, so the tip block of M is diagonal
+        # and the tips are eliminated exactly (Schur complement): the factored system has
+        # the free vertices only, with the sparsity of the two-ring.
+        iv, it = np.nonzero(vfree)[0], np.nonzero(~vfree)[0]
+        Mvt = M[iv][:, it]
+        dinv = sp.diags(1.0 / M[it][:, it].diagonal())
+        G = (Mvt @ dinv).tocsr()
+        self.solver = SPDSolver((M[iv][:, iv] - G @ Mvt.T).tocsr(), solver_kind)
+        self.R = (self.R[iv] - G @ self.R[it]).tocsr()
+        self.k0 = k0[iv] - G @ k0[it]
+        self.free = self.free[iv]
         self.n_target, self.n_unknowns = nt, n_unk
 
     @staticmethod
@@ -147,25 +157,48 @@ class TransferSolver:
                             shape=(len(tt), self.target.n_vertices))
         return (t2v @ Vm @ v2t).tocsr()
 
-    def apply(self, frames: np.ndarray) -> np.ndarray:
-        """Source expression frames (F, n_s, 3) or (n_s, 3) -> target frames, same leading shape."""
+    def apply(self, frames: np.ndarray, similarity=None, out=None) -> np.ndarray:
+        """Source frames (F, n_s, 3) or (n_s, 3) -> target frames, same leading shape.
+
+        similarity: optional transform applied to the results (the way back to the
+        target's own frame), fused here to save a pass over the data.
+        out: optional (F, n_t, 3) array to write the results into.
+        """
         frames = np.asarray(frames, dtype=np.float64)
         single = frames.ndim == 2
         f = frames[None] if single else frames
         if f.shape[1:] != self.source.vertices.shape:
             raise MimicaError(f"source frames have {f.shape[1]} vertices, the source neutral has "
                               f"{self.source.n_vertices}")
-        tips = self.el_s.tips(f)                                           # (F, Es, 3)
-        y = np.concatenate([f, tips], axis=1)                              # (F, ns+Es, 3)
-        nf = len(f)
-        ycols = np.moveaxis(y, 0, 1).reshape(y.shape[1], 3 * nf)           # columns: frame-major
-        rhs = self.R @ ycols + np.tile(self.k0, (1, nf))
+        nf, ns = f.shape[0], f.shape[1]
+        ycols = np.empty((ns + self.el_s.n_elements, 3 * nf))            # columns: frame-major
+        fv = ycols[:ns].reshape(ns, nf, 3)
+        fv[:] = np.moveaxis(f, 0, 1)                                       # vertex-first
+        ycols[ns:] = self.el_s.tips(fv).reshape(-1, 3 * nf)
+        rhs = self.R @ ycols
+        rhs.reshape(-1, nf, 3)[:] += self.k0[:, None, :]
         sol = self.solver.solve(rhs)                                        # (n_free, 3F)
-        out = np.empty((self.n_unknowns, 3 * nf))
-        out[self.free] = sol
+        x = np.empty((self.n_target, nf, 3))
+        x[self.free] = sol.reshape(-1, nf, 3)
         if len(self.fixed):
-            S = self.source.vertices
-            disp = (self.vertex_map[self.fixed] @ (ycols[:len(S)] - np.tile(S, (1, nf))))
-            out[self.fixed] = np.tile(self.target.vertices[self.fixed], (1, nf)) + disp
-        res = np.moveaxis(out[:self.n_target].reshape(self.n_target, nf, 3), 1, 0)
-        return res[0] if single else res
+            x[self.fixed] = (self._vm_fixed @ ycols[:ns]).reshape(-1, nf, 3) + self._fixed_base[:, None, :]
+        if similarity is not None:
+            flat = x.reshape(-1, 3)
+            flat[:] = flat @ (similarity.scale * similarity.rotation.T)
+            flat += similarity.translation
+        if out is None:
+            out = np.empty((nf, self.n_target, 3))
+        out[:] = np.moveaxis(x, 1, 0)
+        return out[0] if single else out
+
+    @property
+    def _vm_fixed(self):
+        if "_vmf" not in self.__dict__:
+            self._vmf = self.vertex_map[self.fixed].tocsr()
+            self._fb = self.target.vertices[self.fixed] - self._vmf @ self.source.vertices
+        return self._vmf
+
+    @property
+    def _fixed_base(self):
+        _ = self._vm_fixed
+        return self._fb

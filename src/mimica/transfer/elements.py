@@ -12,6 +12,7 @@ surface; its frame w is the 3 x (K+1) matrix of vectors from the centre to the o
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -19,7 +20,7 @@ import scipy.sparse as sp
 from ..mesh import Mesh
 
 
-@dataclass
+@dataclass(eq=False)
 class Elements:
     kind: str
     n_vertices: int
@@ -27,30 +28,43 @@ class Elements:
     nbrs: np.ndarray          # (E, K) neighbour vertices, -1 = padding
     triangles: np.ndarray     # (T, 3) triangulation used for normals
     adjacency: sp.csr_matrix | None = None
+    ring_length: np.ndarray | None = None    # VTC: rest mean one-ring edge length per vertex
+    tangent_u: sp.csr_matrix | None = None   # VTC: linear maps to two tangents per vertex,
+    tangent_v: sp.csr_matrix | None = None   # whose cross product is the vertex normal
+
+    @cached_property
+    def _tangents(self) -> sp.csr_matrix:
+        return sp.vstack([self.tangent_u, self.tangent_v]).tocsr()
+
+    @cached_property
+    def _acc(self) -> sp.csr_matrix:
+        """(n x T) incidence: sums triangle normals into vertex normals."""
+        t = self.triangles
+        return sp.csr_matrix((np.ones(t.size), (t.reshape(-1), np.repeat(np.arange(len(t)), 3))),
+                             shape=(self.n_vertices, len(t)))
 
     @property
     def n_elements(self) -> int:
         return int(self.center.shape[0])
 
     def tips(self, vertices: np.ndarray) -> np.ndarray:
-        """Tip vertices for positions (n, 3) or a batch (F, n, 3)."""
+        """Tip vertices for positions (n, 3) or a batch laid out vertex-first, (n, F, 3)."""
         v = vertices
         if self.kind == "vtc":
-            # Song §IV: v_{n+1} in the vertex normal direction; its length is the mean ring
-            # edge length so that the frame scales with the mesh.
-            nrm = _batched_vertex_normals(v, self.triangles)
-            a = self.adjacency
-            rows = np.repeat(np.arange(a.shape[0]), np.diff(a.indptr))
-            el = np.linalg.norm(v[..., a.indices, :] - v[..., rows, :], axis=-1)
-            deg = np.maximum(np.diff(a.indptr), 1)
-            h = np.add.reduceat(el, a.indptr[:-1], axis=-1) / deg if el.shape[-1] else np.ones(v.shape[:-1])
-            h = np.where(np.diff(a.indptr) > 0, h, 1.0)
-            return v + nrm * h[..., None]
+            # Song §IV: v_{n+1} = v_0 + normal; its length is the rest mean ring edge length
+            # so that the frame scales with the mesh (any fixed length keeps self-transfer exact)
+            n_ = v.shape[0]
+            tt = (self._tangents @ v.reshape(n_, -1)).reshape((2,) + v.shape)
+            nrm = _cross(tt[0], tt[1])
+            ln = np.sqrt(np.einsum("...k,...k->...", nrm, nrm))
+            np.divide(nrm, ln[..., None], out=nrm, where=ln[..., None] > 0)
+            h = self.ring_length
+            return v + nrm * (h[:, None, None] if v.ndim == 3 else h[:, None])
         # Sumner & Popović 2004, eq. 1: v4 = v1 + (v2-v1)x(v3-v1) / sqrt(|(v2-v1)x(v3-v1)|)
         t = self.triangles
-        c = np.cross(v[..., t[:, 1], :] - v[..., t[:, 0], :], v[..., t[:, 2], :] - v[..., t[:, 0], :])
-        ln = np.sqrt(np.maximum(np.linalg.norm(c, axis=-1, keepdims=True), 1e-300))
-        return v[..., t[:, 0], :] + c / ln
+        c = _cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+        ln = np.sqrt(np.maximum(np.sqrt(np.einsum("...k,...k->...", c, c)), 1e-300))
+        return v[t[:, 0]] + c / ln[..., None]
 
     def frames(self, vertices: np.ndarray, tips: np.ndarray) -> np.ndarray:
         """w = [v_k - v_0 ..., tip - v_0] as (E, 3, K+1); padding columns are zero."""
@@ -62,19 +76,20 @@ class Elements:
         return np.transpose(w, (0, 2, 1))
 
 
-def _batched_vertex_normals(v: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """Unit area-weighted vertex normals for (n, 3) or (F, n, 3) positions."""
-    fn = np.cross(v[..., tri[:, 1], :] - v[..., tri[:, 0], :], v[..., tri[:, 2], :] - v[..., tri[:, 0], :])
-    n = v.shape[-2]
-    acc = sp.csr_matrix((np.ones(tri.size), (tri.reshape(-1), np.repeat(np.arange(len(tri)), 3))),
-                        shape=(n, len(tri)))
-    if v.ndim == 2:
-        vn = acc @ fn
-    else:
-        f = fn.shape[0]
-        vn = (acc @ np.moveaxis(fn, 0, 1).reshape(len(tri), 3 * f)).reshape(n, f, 3)
-        vn = np.moveaxis(vn, 1, 0)
-    ln = np.linalg.norm(vn, axis=-1, keepdims=True)
+def _cross(a, b):
+    """Cross product over the last axis (faster than np.cross for large batches)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
+def _vertex_normals_first(v, tri, acc):
+    """Unit area-weighted vertex normals for (n, 3) or vertex-first (n, F, 3) positions."""
+    fn = _cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])
+    vn = (acc @ fn.reshape(len(tri), -1)).reshape(v.shape)
+    ln = np.sqrt(np.einsum("...k,...k->...", vn, vn))[..., None]
     return np.divide(vn, ln, out=np.zeros_like(vn), where=ln > 0)
 
 
@@ -87,7 +102,45 @@ def vtc_elements(mesh: Mesh) -> Elements:
     rows = np.repeat(np.arange(mesh.n_vertices), deg)
     cols = np.arange(a.indices.size) - np.repeat(a.indptr[:-1], deg)
     nbrs[rows, cols] = a.indices
-    return Elements("vtc", mesh.n_vertices, np.arange(mesh.n_vertices), nbrs, mesh.triangles, a)
+    el = mesh.edges
+    ln = np.linalg.norm(mesh.vertices[el[:, 0]] - mesh.vertices[el[:, 1]], axis=1)
+    tot = np.bincount(el.reshape(-1), weights=np.repeat(ln, 2), minlength=mesh.n_vertices)
+    h = np.where(deg > 0, tot / np.maximum(deg, 1), 1.0)
+    tu, tv = _tangent_operators(mesh, nbrs)
+    return Elements("vtc", mesh.n_vertices, np.arange(mesh.n_vertices), nbrs, mesh.triangles, a, h, tu, tv)
+
+
+def _tangent_operators(mesh: Mesh, nbrs: np.ndarray):
+    """Sparse Du, Dv with (Du x) x (Dv x) = the vertex normal direction of positions x.
+
+    At rest, the one-ring vectors are expressed in the tangent plane (basis e1, e2 of the
+    area-weighted normal); least-squares weights W = Y (Y^T Y)^-1 make sum_k W_k (v_k - v_0)
+    equal e1 and e2.  Being linear in the positions, they give every frame's normals with
+    two sparse products and one cross product per vertex.
+    """
+    v = mesh.vertices
+    n = mesh.n_vertices
+    n0 = mesh.vertex_normals()
+    ref = np.where(np.abs(n0[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    e1 = np.cross(n0, ref)
+    e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-300)
+    e2 = np.cross(n0, e1)
+    pad = nbrs < 0
+    d = v[np.where(pad, 0, nbrs)] - v[:, None, :]
+    d[pad] = 0
+    y = np.stack([np.einsum("ikc,ic->ik", d, e1), np.einsum("ikc,ic->ik", d, e2)], axis=2)   # (n, K, 2)
+    yty = np.transpose(y, (0, 2, 1)) @ y
+    tr = np.trace(yty, axis1=1, axis2=2)[:, None, None]
+    w = y @ np.linalg.inv(yty + 1e-9 * tr * np.eye(2) + 1e-300 * np.eye(2))              # (n, K, 2)
+    rows = np.repeat(np.arange(n), nbrs.shape[1]).reshape(n, -1)
+    ops = []
+    for j in range(2):
+        wj = np.where(pad, 0.0, w[:, :, j])
+        data = np.concatenate([wj[~pad], -wj.sum(1)])
+        ri = np.concatenate([rows[~pad], np.arange(n)])
+        ci = np.concatenate([nbrs[~pad], np.arange(n)])
+        ops.append(sp.csr_matrix((data, (ri, ci)), shape=(n, n)))
+    return ops[0], ops[1]
 
 
 def dt_elements(mesh: Mesh) -> Elements:

@@ -13,11 +13,11 @@ def relative_error(result, truth, rest, region=None) -> float:
     return float(num / max(den, 1e-300))
 
 
-def song_vertex_error(result, result_rest, reference, reference_rest, min_motion=1e-9):
+def song_vertex_error(result, result_rest, reference, reference_rest, min_motion=0.01):
     """Song et al., appendix: E = | |V_TE - V_TN| / |V_SE - V_SN| - 1 | per vertex.
 
-    Vertices whose reference motion is below `min_motion` (relative to the largest motion)
-    have no defined error and come back as NaN.
+    The ratio is unstable where the reference barely moves, so vertices whose reference
+    motion is below `min_motion` of the largest motion have no defined error (NaN).
     """
     mt = np.linalg.norm(np.asarray(result) - np.asarray(result_rest), axis=-1)
     ms = np.linalg.norm(np.asarray(reference) - np.asarray(reference_rest), axis=-1)

@@ -7,6 +7,7 @@ right-hand sides at once. `backend()` says which one is in use.
 from __future__ import annotations
 
 import os
+import threading
 
 import numpy as np
 import scipy.sparse as sp
@@ -29,6 +30,7 @@ class SPDSolver:
 
     def __init__(self, m: sp.spmatrix, kind: str | None = None):
         self.kind = kind or backend()
+        self._lock = threading.Lock()
         m = sp.csc_matrix(m)
         self.n = m.shape[0]
         if self.kind == "cholmod":
@@ -39,6 +41,9 @@ class SPDSolver:
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         b = np.asarray(b, dtype=np.float64)
-        if self.kind == "cholmod":
-            return self._f(b)
-        return self._f.solve(np.asfortranarray(b))
+        # one solve at a time per factor: CHOLMOD keeps workspace in its common object, so
+        # concurrent solves must not share it; other stages of a batch still overlap
+        with self._lock:
+            if self.kind == "cholmod":
+                return self._f(b)
+            return self._f.solve(np.asfortranarray(b))
