@@ -1,0 +1,93 @@
+"""The command line: transfer and error end to end; user errors are one line, exit 2, no output."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from mimica import read_mesh, write_mesh
+from mimica.cli import main
+from mimica.data import ICT_LANDMARKS_68, ict_path
+from mimica.landmarks import write_landmarks
+from mimica.mesh.remesh import resample_face
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory, head_model):
+    d = tmp_path_factory.mktemp("cli")
+    S = head_model.mesh
+    write_mesh(d / "S.obj", S)
+    (d / "seq").mkdir()
+    for k, e in enumerate(["jawOpen", "mouthSmile_L", "browInnerUp_L"]):
+        write_mesh(d / "seq" / f"f{k:03d}_{e}.obj", S.with_vertices(S.vertices + head_model.delta({e: 1.0})))
+    tv = head_model.identity("identity015")
+    write_mesh(d / "T.obj", S.with_vertices(tv))
+    face, _ = S.with_vertices(tv).submesh(np.arange(9230))
+    rs = resample_face(face, tv[ICT_LANDMARKS_68], n_vertices=6000, seed=2)
+    write_mesh(d / "scan.ply", rs.mesh)
+    write_landmarks(d / "scan.json", tv[ICT_LANDMARKS_68])
+    return d
+
+
+def test_transfer_folder_same_topology_keeps_quads(files, tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main(["transfer", str(files / "S.obj"), str(files / "seq"), "--target", str(files / "T.obj"),
+                 "--out", str(out)]) == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted(p.name for p in (files / "seq").iterdir())
+    T = read_mesh(files / "T.obj")
+    r = read_mesh(out / names[0])
+    assert r.same_topology(T) and (r.face_sizes == 4).sum() > 10000 and r.uv is not None
+    assert "frames/s" in capsys.readouterr().err
+
+
+def test_transfer_onto_other_topology_needs_landmarks(files, tmp_path, capsys):
+    out = tmp_path / "o"
+    args = ["transfer", str(files / "S.obj"), str(files / "seq" / "f000_jawOpen.obj"),
+            "--target", str(files / "scan.ply"), "--out", str(out)]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--target-landmarks" in err and len(err.splitlines()) == 1 and not out.exists()
+    assert main(args + ["--target-landmarks", str(files / "scan.json"), "--method", "dt"]) == 0
+    r = read_mesh(out / "f000_jawOpen.obj")
+    assert r.same_topology(read_mesh(files / "scan.ply"))
+
+
+@pytest.mark.parametrize("case", ["bad_frame", "wrong_count", "missing_target", "bad_landmarks", "dup"])
+def test_transfer_bad_input_writes_nothing(files, tmp_path, capsys, case):
+    out = tmp_path / "o"
+    S, T = str(files / "S.obj"), str(files / "T.obj")
+    frames = [str(files / "seq")]
+    extra = []
+    if case == "bad_frame":
+        bad = tmp_path / "bad.obj"
+        bad.write_text("v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n")
+        frames.append(str(bad))
+    elif case == "wrong_count":
+        frames.append(str(files / "scan.ply"))
+    elif case == "missing_target":
+        T = str(tmp_path / "nope.obj")
+    elif case == "bad_landmarks":
+        lm = tmp_path / "lm.json"
+        lm.write_text(json.dumps({"scheme": "ibug68", "points": [[0, 0, 0]]}))
+        extra = ["--target-landmarks", str(lm)]
+    elif case == "dup":
+        frames.append(str(files / "seq" / "f000_jawOpen.obj"))
+    rc = main(["transfer", S, *frames, "--target", T, "--out", str(out), *extra])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and err.startswith("mimica: error:") and len(err.splitlines()) == 1
+    assert not out.exists()
+
+
+def test_error_map_png(files, tmp_path, capsys):
+    from PIL import Image
+    png = tmp_path / "err.png"
+    ref = ict_path("jawOpen")
+    assert main(["error", str(ref), str(ref), "--reference-neutral", str(ict_path("generic_neutral_mesh")),
+                 "--out", str(png)]) == 0
+    assert "median 0.00%" in capsys.readouterr().err                # a result against itself
+    img = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    green = (img[..., 1] > 150) & (img[..., 0] < 100) & (img[..., 2] < 120)
+    assert green.sum() > 5000                                       # the moving part, all < 0.1 %
