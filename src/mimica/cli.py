@@ -105,15 +105,23 @@ def cmd_error(a):
                               "the error needs meshes of one topology")
     region = None
     if a.region:
-        lo, hi = (int(x) for x in a.region.split(":"))
+        try:
+            lo, hi = (int(x) for x in a.region.split(":"))
+        except ValueError:
+            raise MimicaError(f"--region {a.region!r}: expected LO:HI vertex indices, e.g. 0:9409") from None
         region = slice(lo, hi)
+    try:
+        bins = tuple(float(x) / 100 for x in a.bins.split(","))
+        assert len(bins) == 3 and list(bins) == sorted(bins)
+    except (ValueError, AssertionError):
+        raise MimicaError(f"--bins {a.bins!r}: expected three increasing percentages, e.g. 0.1,0.5,2") from None
     e = song_vertex_error(res.vertices, res_n.vertices, ref.vertices, ref_n.vertices)
     rel = relative_error(res.vertices, ref.vertices + (res_n.vertices - ref_n.vertices), res_n.vertices, region)
     ee = e if region is None else e[region]
     _say(f"Song per-vertex error: median {100 * np.nanmedian(ee):.2f}%, mean {100 * np.nanmean(ee):.2f}%; "
          f"relative error {rel:.4f}")
     if a.out:
-        error_map_png(a.out, res, e, title=f"{Path(a.result).name} vs {Path(a.reference).name}")
+        error_map_png(a.out, res, e, title=f"{Path(a.result).name} vs {Path(a.reference).name}", bins=bins)
         _say(f"error map -> {a.out}")
     return 0
 
@@ -146,6 +154,7 @@ def build_parser():
     e.add_argument("--reference-neutral", required=True, help="the reference's neutral")
     e.add_argument("--result-neutral", help="the result's neutral (default: the reference neutral)")
     e.add_argument("--region", help="vertex range LO:HI for the summary (e.g. 0:9409, ICT face area)")
+    e.add_argument("--bins", default="0.1,0.5,2", help="colour thresholds in percent (Song Fig. 11: 0.1,0.5,2)")
     e.add_argument("--out", help="PNG to write")
     e.set_defaults(func=cmd_error)
 

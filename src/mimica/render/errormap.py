@@ -12,8 +12,12 @@ from .sheet import _font, save_png
 # Song Fig. 11 levels: < 0.1 % green, [0.1 %, 0.5 %) blue, [0.5 %, 2 %) red; beyond: purple
 BINS = (0.001, 0.005, 0.02)
 COLORS = ((0.20, 0.72, 0.30), (0.20, 0.40, 0.85), (0.85, 0.18, 0.15), (0.45, 0.10, 0.45))
-LABELS = ("< 0.1%", "0.1 - 0.5%", "0.5 - 2%", ">= 2%")
 NO_MOTION = (0.75, 0.75, 0.75)
+
+
+def bin_labels(bins) -> tuple[str, ...]:
+    pct = [f"{100 * b:g}%" for b in bins]
+    return tuple([f"< {pct[0]}"] + [f"{a} - {b}" for a, b in zip(pct, pct[1:])] + [f">= {pct[-1]}"])
 
 
 def error_colors(err: np.ndarray, bins=BINS, colors=COLORS) -> np.ndarray:
@@ -23,8 +27,11 @@ def error_colors(err: np.ndarray, bins=BINS, colors=COLORS) -> np.ndarray:
     return col
 
 
-def error_map_image(mesh: Mesh, err: np.ndarray, title="", size=420) -> np.ndarray:
-    col = error_colors(err)
+def error_map_image(mesh: Mesh, err: np.ndarray, title="", size=420, bins=BINS) -> np.ndarray:
+    """Front and three-quarter views coloured by error level (3 thresholds, 4 colours)."""
+    if len(bins) != 3 or list(bins) != sorted(bins):
+        raise ValueError("bins: three increasing thresholds")
+    col = error_colors(err, bins)
     views = [render_mesh(mesh, size=(size, size), yaw=y, colors=col) for y in (0.0, 35.0)]
     pad, legend_h, top = 8, 34, 28
     w = 2 * size + 3 * pad
@@ -36,7 +43,7 @@ def error_map_image(mesh: Mesh, err: np.ndarray, title="", size=420) -> np.ndarr
     x = pad
     y = top + size + 8
     font = _font(13)
-    entries = list(zip(LABELS, COLORS)) + [("no motion", NO_MOTION)]
+    entries = list(zip(bin_labels(bins), COLORS)) + [("no motion", NO_MOTION)]
     for lab, c in entries:
         draw.rectangle([x, y, x + 16, y + 16], fill=tuple(int(255 * t) for t in c))
         draw.text((x + 22, y + 1), lab, fill=(30, 30, 30), font=font)
@@ -44,5 +51,5 @@ def error_map_image(mesh: Mesh, err: np.ndarray, title="", size=420) -> np.ndarr
     return np.asarray(img)
 
 
-def error_map_png(path, mesh: Mesh, err: np.ndarray, title=""):
-    return save_png(path, error_map_image(mesh, err, title))
+def error_map_png(path, mesh: Mesh, err: np.ndarray, title="", bins=BINS):
+    return save_png(path, error_map_image(mesh, err, title, bins=bins))
