@@ -79,3 +79,11 @@ def test_landmarks_follow_the_mesh(head_model):
     lm = Landmarks.snap(head_model.mesh, head_model.neutral[ICT_LANDMARKS_68])
     moved = head_model.neutral + head_model.delta({"jawOpen": 1.0})
     np.testing.assert_allclose(lm.positions(head_model.mesh, moved), moved[ICT_LANDMARKS_68], atol=1e-9)
+
+
+def test_canonical_names():
+    from mimica.landmarks import NAMES, index
+    assert len(NAMES) == 68 == len(set(NAMES))
+    assert index("jaw.8") == 8 and index("eye.right.0") == 36 and index("mouth.inner.7") == 67
+    with pytest.raises(MimicaError, match="unknown landmark"):
+        index("nose.tip")

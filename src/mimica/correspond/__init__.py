@@ -30,7 +30,7 @@ from ..mesh import Mesh
 from ..mesh.query import barycentric_2d
 
 # iBUG 68 indices used to build the face frame
-_JAW_CHIN, _EYE_R_OUT, _EYE_L_OUT = 8, 36, 45
+_JAW_CHIN, _EYE_R_OUT, _EYE_L_OUT = 8, 36, 45     # jaw.8, eye.right.0, eye.left.3
 _BROWS = slice(17, 27)
 
 

@@ -23,12 +23,21 @@ from ..mesh.query import TriangleLocator
 
 SCHEME = "ibug68"
 N_POINTS = 68
-# iBUG 68 groups (0-based): jaw 0-16, brows 17-26, nose 27-35, eyes 36-47, mouth 48-67.
+# iBUG 68 groups (0-based): jaw 0-16, brows 17-26, nose 27-35, eyes 36-47, mouth 48-67;
+# "right" is the subject's right (image left).
 NAMES = ([f"jaw.{i}" for i in range(17)] + [f"brow.right.{i}" for i in range(5)]
          + [f"brow.left.{i}" for i in range(5)] + [f"nose.bridge.{i}" for i in range(4)]
          + [f"nose.base.{i}" for i in range(5)] + [f"eye.right.{i}" for i in range(6)]
          + [f"eye.left.{i}" for i in range(6)] + [f"mouth.outer.{i}" for i in range(12)]
          + [f"mouth.inner.{i}" for i in range(8)])
+
+
+def index(name: str) -> int:
+    """Index of a canonical landmark name, e.g. 'eye.left.0' -> 42."""
+    try:
+        return NAMES.index(name)
+    except ValueError:
+        raise MimicaError(f"unknown landmark name {name!r}; names look like 'eye.left.0', 'jaw.8'") from None
 
 
 @dataclass

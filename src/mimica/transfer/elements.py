@@ -27,7 +27,6 @@ class Elements:
     center: np.ndarray        # (E,) centre vertex
     nbrs: np.ndarray          # (E, K) neighbour vertices, -1 = padding
     triangles: np.ndarray     # (T, 3) triangulation used for normals
-    adjacency: sp.csr_matrix | None = None
     ring_length: np.ndarray | None = None    # VTC: rest mean one-ring edge length per vertex
     tangent_u: sp.csr_matrix | None = None   # VTC: linear maps to two tangents per vertex,
     tangent_v: sp.csr_matrix | None = None   # whose cross product is the vertex normal
@@ -35,13 +34,6 @@ class Elements:
     @cached_property
     def _tangents(self) -> sp.csr_matrix:
         return sp.vstack([self.tangent_u, self.tangent_v]).tocsr()
-
-    @cached_property
-    def _acc(self) -> sp.csr_matrix:
-        """(n x T) incidence: sums triangle normals into vertex normals."""
-        t = self.triangles
-        return sp.csr_matrix((np.ones(t.size), (t.reshape(-1), np.repeat(np.arange(len(t)), 3))),
-                             shape=(self.n_vertices, len(t)))
 
     @property
     def n_elements(self) -> int:
@@ -85,14 +77,6 @@ def _cross(a, b):
     return out
 
 
-def _vertex_normals_first(v, tri, acc):
-    """Unit area-weighted vertex normals for (n, 3) or vertex-first (n, F, 3) positions."""
-    fn = _cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])
-    vn = (acc @ fn.reshape(len(tri), -1)).reshape(v.shape)
-    ln = np.sqrt(np.einsum("...k,...k->...", vn, vn))[..., None]
-    return np.divide(vn, ln, out=np.zeros_like(vn), where=ln > 0)
-
-
 def vtc_elements(mesh: Mesh) -> Elements:
     """One element per vertex: its polygon one-ring (Song §IV, Fig. 2)."""
     a = mesh.adjacency
@@ -107,7 +91,7 @@ def vtc_elements(mesh: Mesh) -> Elements:
     tot = np.bincount(el.reshape(-1), weights=np.repeat(ln, 2), minlength=mesh.n_vertices)
     h = np.where(deg > 0, tot / np.maximum(deg, 1), 1.0)
     tu, tv = _tangent_operators(mesh, nbrs)
-    return Elements("vtc", mesh.n_vertices, np.arange(mesh.n_vertices), nbrs, mesh.triangles, a, h, tu, tv)
+    return Elements("vtc", mesh.n_vertices, np.arange(mesh.n_vertices), nbrs, mesh.triangles, h, tu, tv)
 
 
 def _tangent_operators(mesh: Mesh, nbrs: np.ndarray):
