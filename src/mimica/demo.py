@@ -37,6 +37,7 @@ def run_demo(out: Path, quick=False) -> int:
         tv = model.identity(w)
         T = S.with_vertices(tv)
         lt = None
+        name = label.split(" (")[0].replace(" ", "_")
         if "remeshed" in label:
             # a scan-like face of its own topology: resampled face area with holes at the
             # eyes, nostrils and mouth; its landmarks go to a JSON file as a user would give them
@@ -44,9 +45,8 @@ def run_demo(out: Path, quick=False) -> int:
             rs = resample_face(face, tv[ICT_LANDMARKS_68], n_vertices=12000, seed=3)
             T = rs.mesh
             pts = Landmarks.snap(T, tv[ICT_LANDMARKS_68]).positions(T)
-            write_landmarks(out / "remeshed" / "neutral.landmarks.json", pts)
+            write_landmarks(out / name / "neutral.landmarks.json", pts)
             lt = Landmarks.snap(T, pts)
-        name = label.split(" (")[0].replace(" ", "_")
         t1 = time.perf_counter()
         xfer = ExpressionTransfer(S, T, ict_landmarks(S), lt or ict_landmarks(T), static=static)
         res = xfer.apply(frames)
@@ -66,4 +66,6 @@ def run_demo(out: Path, quick=False) -> int:
                           title="mimica: ICT-FaceKit expressions transferred (VTC, Song et al.)")
     save_png(out / "contact_sheet.png", sheet)
     log(f"demo done in {time.perf_counter() - t0:.1f}s: meshes in {out}/, picture {out / 'contact_sheet.png'}")
+    log(f"try: mimica transfer {out}/source/neutral.obj {out}/source --target {out}/identity_C/neutral.obj "
+        f"--target-landmarks {out}/identity_C/neutral.landmarks.json --out {out}/again")
     return 0
