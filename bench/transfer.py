@@ -23,7 +23,7 @@ from mimica.data import (EXPRESSIONS, ICT_FACE_AREA_FACES, ICT_FACE_AREA_VERTICE
 from mimica.landmarks import Landmarks, ict_landmarks  # noqa: E402
 from mimica.mesh.remesh import resample_face  # noqa: E402
 from mimica.transfer import ExpressionTransfer, relative_error, static_vertices  # noqa: E402
-from mimica.transfer.solver import backend  # noqa: E402
+from mimica.solver import backend  # noqa: E402
 
 FACE = slice(0, ICT_FACE_AREA_VERTICES)
 

@@ -126,6 +126,67 @@ def cmd_error(a):
     return 0
 
 
+def cmd_rig(a):
+    from .landmarks import landmarks_for
+    from .mesh import read_mesh
+    from .rig import build_rig
+    t0 = time.perf_counter()
+    skin = read_mesh(a.face)
+    lm = landmarks_for(skin, a.landmarks, "--landmarks", str(a.face)).positions(skin)
+    bar = _progress(range(1), 1, "muscles")
+
+    def progress(k, n, name):
+        bar.total = n
+        bar.set_postfix_str(name)
+        bar.update(1 if k else 0)
+    rig = build_rig(skin, lm, muscles=a.muscles, alpha=a.alpha, modes=a.modes, progress=progress)
+    bar.close()
+    rig.save(a.out)
+    _say(f"rig: {len(rig.muscles)} muscles on {skin.n_vertices} skin nodes -> {a.out} "
+         f"({time.perf_counter() - t0:.1f}s)")
+    return 0
+
+
+def cmd_simulate(a):
+    from .anim import Timeline
+    from .mesh import write_mesh
+    from .physics.face import FaceSimulator
+    from .render import contact_sheet, render_mesh, save_png, shared_frame
+    from .rig import Rig
+    rig = Rig.load(a.rig)
+    names = [m.name for m in rig.muscles]
+    if a.timeline:
+        tl = Timeline.load(a.timeline)
+        unknown = sorted(set(tl.channels) - set(names) - {"age", "gravity"})
+        if unknown:
+            raise MimicaError(f"{a.timeline}: channel {unknown[0]!r} is not a muscle of {a.rig} "
+                              f"(muscles: {', '.join(names)})")
+        duration = a.duration or tl.duration
+    else:
+        tl = Timeline.preset(a.expression, names, duration=a.duration or 2.0)
+        duration = a.duration or 2.0
+    sim = FaceSimulator(rig, fps=a.fps, warp=a.warp)
+    if a.gravity:
+        sim.set_gravity(np.array([0.0, -a.gravity, 0.0]))
+    bar = _progress(range(1), int(duration * a.fps) + 1, "simulating")
+    t0 = time.perf_counter()
+    frames = sim.run(lambda t: tl.values(t, names), duration, progress=lambda f, n: bar.update(1))
+    bar.close()
+    el = time.perf_counter() - t0
+    out = Path(a.out)
+    skin = rig.skin
+    for i, v in enumerate(frames):
+        write_mesh(out / f"frame_{i:04d}.obj", skin.with_vertices(v))
+    pick = np.linspace(0, len(frames) - 1, min(6, len(frames))).round().astype(int)
+    frame = shared_frame([frames[i] for i in pick])
+    tiles = [render_mesh(skin, frames[i], size=(320, 320), frame=frame) for i in pick]
+    save_png(out / "strip.png", contact_sheet(tiles, [f"t = {i / a.fps:.2f}s" for i in pick],
+                                              title=f"{a.expression if not a.timeline else Path(a.timeline).name}"))
+    steps = (len(frames) - 1) * sim.substeps
+    _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, strip.png); {steps} steps in {el:.2f}s")
+    return 0
+
+
 def cmd_demo(a):
     from .demo import run_demo
     return run_demo(Path(a.out), quick=a.quick)
@@ -157,6 +218,29 @@ def build_parser():
     e.add_argument("--bins", default="0.1,0.5,2", help="colour thresholds in percent (Song Fig. 11: 0.1,0.5,2)")
     e.add_argument("--out", help="PNG to write")
     e.set_defaults(func=cmd_error)
+
+    r = sub.add_parser("rig", help="place muscles, springs and regions of interest on a face (Kim 2020)")
+    r.add_argument("face", help="face mesh (OBJ/PLY/glTF)")
+    r.add_argument("--landmarks", help="68-point landmark JSON (built in for ICT-FaceKit)")
+    r.add_argument("--muscles", default="kim", help="kim (Kim's 8), all (the whole library), or a comma list")
+    r.add_argument("--alpha", type=float, default=10.0, help="ROI range (Kim eq. 19) where a muscle has none of its own")
+    r.add_argument("--modes", type=int, default=8, help="skin modes per force type")
+    r.add_argument("--out", required=True, help="rig file to write")
+    r.set_defaults(func=cmd_rig)
+
+    s = sub.add_parser("simulate", help="animate a rig by its muscles")
+    s.add_argument("rig", help="rig file from `mimica rig`")
+    g = s.add_mutually_exclusive_group()
+    g.add_argument("--expression", default="happiness", help="a preset: neutral, happiness, sadness, "
+                   "surprise, anger, disgust, fear")
+    g.add_argument("--timeline", help="timeline JSON of muscle activation curves")
+    s.add_argument("--duration", type=float, help="seconds (default: the timeline's, or 2)")
+    s.add_argument("--fps", type=float, default=60.0)
+    s.add_argument("--gravity", type=float, default=0.0, help="downward acceleration on the skin (0: off)")
+    s.add_argument("--engine", choices=["shell"], default="shell", help="shell: Kim 2020 shells in modal coordinates")
+    s.add_argument("--warp", action="store_true", help="apply modal warping rotations to the output (experimental)")
+    s.add_argument("--out", required=True, help="output folder")
+    s.set_defaults(func=cmd_simulate)
 
     d = sub.add_parser("demo", help="transfer bundled ICT-FaceKit expressions; write meshes and a contact sheet")
     d.add_argument("--out", default="out/demo")

@@ -23,7 +23,7 @@ import scipy.sparse as sp
 from ..errors import MimicaError
 from ..mesh import Mesh
 from .elements import Elements, dt_elements, gradient_operator, vtc_elements
-from .solver import SPDSolver
+from ..solver import SPDSolver
 
 METHODS = {"vtc": vtc_elements, "dt": dt_elements}
 EPS_ANCHOR = 1e-6

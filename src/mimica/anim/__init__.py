@@ -1,0 +1,121 @@
+"""Curves over time (Viaud & Yahia §4): named channels of keyframes, saved as JSON.
+
+    {"format": "mimica-timeline/1", "duration": 2.0,
+     "channels": {"zygomaticus_major_L": {"interp": "cubic", "keys": [[0, 0], [0.5, 1], [2, 0]]}}}
+
+A channel is a muscle's activation, an external force or age; `interp` is "linear",
+"cubic" (monotone Hermite: no overshoot between keys) or "step".
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MimicaError
+from ..mesh import atomic_path
+
+FORMAT = "mimica-timeline/1"
+INTERPS = ("linear", "cubic", "step")
+
+# the six basic expressions and neutral as muscle activations (FACS action units mapped to
+# the muscles that produce them, after Ekman & Friesen and Hjortsjö)
+PRESETS = {
+    "neutral": {},
+    "happiness": {"zygomaticus_major": 1.0, "orbicularis_oculi": 0.3},                     # AU6+12
+    "sadness": {"frontalis": 0.4, "corrugator_supercilii": 0.5, "depressor_anguli_oris": 1.0,  # AU1+4+15
+                "mentalis": 0.3},
+    "surprise": {"frontalis": 1.0, "depressor_labii_inferioris": 0.4},                     # AU1+2+26
+    "anger": {"corrugator_supercilii": 1.0, "orbicularis_oris": 0.5, "orbicularis_oculi": 0.4},  # AU4+7+23
+    "disgust": {"levator_labii_superioris_alaeque_nasi": 1.0, "levator_labii_superioris": 0.6,  # AU9+10+15
+                "depressor_anguli_oris": 0.4, "nasalis": 0.5},
+    "fear": {"frontalis": 0.8, "corrugator_supercilii": 0.5, "depressor_labii_inferioris": 0.6},  # AU1+2+4+20
+}
+
+
+@dataclass
+class Channel:
+    keys: np.ndarray            # (k, 2): time, value; times increasing
+    interp: str = "linear"
+
+    def __call__(self, t):
+        t = np.asarray(t, float)
+        k = self.keys
+        if len(k) == 1:
+            return np.full_like(t, k[0, 1])
+        if self.interp == "step":
+            i = np.clip(np.searchsorted(k[:, 0], t, side="right") - 1, 0, len(k) - 1)
+            return k[i, 1]
+        if self.interp == "linear":
+            return np.interp(t, k[:, 0], k[:, 1])
+        from scipy.interpolate import PchipInterpolator
+        return PchipInterpolator(k[:, 0], k[:, 1], extrapolate=False)(np.clip(t, k[0, 0], k[-1, 0]))
+
+
+@dataclass
+class Timeline:
+    channels: dict = field(default_factory=dict)
+    duration: float = 1.0
+
+    def values(self, t: float, names) -> np.ndarray:
+        return np.array([float(self.channels[n](t)) if n in self.channels else 0.0 for n in names])
+
+    @classmethod
+    def preset(cls, expression: str, muscles, duration=2.0, onset=0.3, hold=None) -> "Timeline":
+        """Ramp into an expression preset, hold it, and (if the clip is long) release it."""
+        if expression not in PRESETS:
+            raise MimicaError(f"unknown expression {expression!r}; presets: {', '.join(PRESETS)}")
+        onset = min(onset, 0.4 * duration)
+        hold = duration * 0.6 if hold is None else hold
+        ch = {}
+        for name in muscles:
+            base = name.rsplit("_", 1)[0]
+            a = PRESETS[expression].get(base, PRESETS[expression].get(name, 0.0))
+            if a:
+                keys = [[0.0, 0.0], [onset, a]]
+                if onset + hold + 0.2 < duration:              # long enough to let go again
+                    keys += [[onset + hold, a], [duration, 0.0]]
+                ch[name] = Channel(np.array(keys), "cubic")
+        return cls(ch, duration)
+
+    def save(self, path) -> Path:
+        doc = {"format": FORMAT, "duration": self.duration,
+               "channels": {n: {"interp": c.interp, "keys": c.keys.tolist()} for n, c in self.channels.items()}}
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(doc, indent=1) + "\n")
+        return path
+
+    @classmethod
+    def load(cls, path) -> "Timeline":
+        path = Path(path)
+        try:
+            doc = json.loads(path.read_text())
+        except OSError as e:
+            raise MimicaError(f"{path}: cannot read the timeline ({e.strerror})") from None
+        except json.JSONDecodeError as e:
+            raise MimicaError(f"{path}: not valid JSON (line {e.lineno}: {e.msg})") from None
+        if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+            raise MimicaError(f"{path}: expected a timeline with 'format': '{FORMAT}'")
+        chans = {}
+        for name, c in (doc.get("channels") or {}).items():
+            try:
+                keys = np.asarray(c["keys"], float)
+                interp = c.get("interp", "linear")
+            except (TypeError, KeyError, ValueError):
+                raise MimicaError(f"{path}: channel {name!r} needs 'keys': [[time, value], ...]") from None
+            if keys.ndim != 2 or keys.shape[1] != 2 or len(keys) == 0 or not np.isfinite(keys).all():
+                raise MimicaError(f"{path}: channel {name!r}: keys must be [[time, value], ...] with finite numbers")
+            if (np.diff(keys[:, 0]) <= 0).any():
+                raise MimicaError(f"{path}: channel {name!r}: key times must increase")
+            if interp not in INTERPS:
+                raise MimicaError(f"{path}: channel {name!r}: interp {interp!r} is not one of {', '.join(INTERPS)}")
+            chans[name] = Channel(keys, interp)
+        last = max((c.keys[-1, 0] for c in chans.values()), default=0.0)
+        dur = doc.get("duration", last if last > 0 else 1.0)
+        if not isinstance(dur, (int, float)) or dur <= 0:
+            raise MimicaError(f"{path}: duration must be a positive number of seconds")
+        return cls(chans, float(dur))

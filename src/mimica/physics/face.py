@@ -1,0 +1,152 @@
+"""Muscle-driven skin (Kim 2020 §V-VI): muscles stretch, springs pull the skin, and each
+force type moves the skin in its own modal system; the displacement fields are summed.
+
+Per step and per muscle i (all vectorized over the muscle's spring nodes):
+  muscle:  q_m'' + 2 w q_m' + w^2 q_m = w^2 a_i(t)     (the stretch mode, Kim eqs. 11-13)
+  springs: |F| = k |S_d| - |S_init| / |S_init|  along (S_d - S_ud)/|S_d - S_ud|  (eqs. 14-16)
+  skin:    modal warping of the muscle's ROI system driven by F         (eqs. 17-19)
+  total:   u_s = sum_f u_f                                               (eqs. 20-21)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import MimicaError
+from .modal import ModalWarpingSolver
+
+
+class _MuscleSystem:
+    """One muscle's skin system: its ROI's modes, coupled to the muscle by springs.
+
+    The springs are integrated implicitly with the skin: in modal coordinates the spring
+    stiffness is the small dense matrix Phi_a^T K_s Phi_a (Phi_a: the mode rows at the
+    spring nodes), so a step is one r x r matrix-vector product, stable at any spring
+    stiffness.  The spring force is linear in the stretch of the layer, k (u_m - u_s) with
+    k = k_spring / |S_init|: Kim's eq. 15 (relative elongation) for motions large against
+    the layer's thickness, eq. 16's direction S_d - S_ud = u_m - u_s.
+    """
+
+    def __init__(self, rig, muscle, h, spring, xi, zeta, rho):
+        self.m = muscle
+        b = muscle.basis
+        self.solver = sv = ModalWarpingSolver(b, h, xi=xi, zeta=zeta, density=rho)
+        self.uniq, inv = np.unique(muscle.attach, return_inverse=True)
+        self.phi, self.psi, _ = sv.rows(self.uniq)                   # (u, 3, r)
+        k_springs = len(muscle.attach)
+        self.gather = sp.csr_matrix((np.ones(k_springs), (inv, np.arange(k_springs))),
+                                    shape=(len(self.uniq), k_springs))
+        l_init = np.maximum(np.linalg.norm(muscle.nodes - rig.skin.vertices[muscle.attach], axis=1), 1e-12)
+        edge = rig.params["mean_edge"]
+        # each spring about as stiff as `spring` skin edges (k_L / l per edge energy)
+        k = spring * 2.0 * rig.params["k_length"] / edge * np.ones(k_springs)
+        self.k_spring = k
+        k_node = self.gather @ k                                      # (u,)
+        pr = self.phi.reshape(-1, self.phi.shape[2])
+        ks = pr.T @ (np.repeat(k_node, 3)[:, None] * pr) / rho        # Phi_a^T K_s Phi_a
+        r = len(b.lam)
+        stiff = np.diag(sv.lam) + ks
+        self.stiff = stiff
+        self.step_inv = np.linalg.inv(np.eye(r) + h * np.diag(sv.c) + h * h * stiff)
+        self.pull = self.gather @ (k[:, None] * muscle.stretch) / rho  # (u, 3) per unit activation
+        self.h, self.w = h, muscle.omega
+        self.l_init = l_init
+        self.q = self.v = 0.0
+
+    def step(self, a):
+        h, w = self.h, self.w
+        # the muscle's stretch mode follows its activation, critically damped (Kim eq. 13)
+        self.v = (self.v + h * w * w * (a - self.q)) / (1 + 2 * h * w + h * h * w * w)
+        self.q = self.q + h * self.v
+        sv = self.solver
+        # the spring pull in the modes' frame; the rotation is applied to the displacement
+        # (modal warping, see displacement()); rotating the forces too would feed the
+        # rotation back into the stiff spring layer and is left out
+        fq = np.einsum("kcr,kc->r", self.phi, self.q * self.pull)
+        sv.v = self.step_inv @ (sv.v + h * (fq - self.stiff @ sv.q))
+        sv.q = sv.q + h * sv.v
+
+
+def skin_density(rig, frequency: float) -> float:
+    """Areal density that puts the softest muscle system's lowest mode at `frequency` Hz.
+
+    The shell's stiffness is scale-free (ShellEnergy.default), so the time scale is set
+    here: the skin settles in a fraction of a second, as faces do.
+    """
+    lam = [m.basis.lam.min() for m in rig.muscles if m.basis is not None]
+    if rig.gravity_basis is not None:
+        lam.append(rig.gravity_basis.lam.min())
+    return max(min(lam), 1e-12) / (2 * np.pi * frequency) ** 2
+
+
+class FaceSimulator:
+    """Step a rig's muscles (activations in [-1, 1]: contraction > 0, relaxation < 0)."""
+
+    def __init__(self, rig, fps: float = 60.0, substeps: int = 4, spring: float = 4.0,
+                 frequency: float = 4.0, damping: float = 1.6, zeta: float = 0.0005, warp: bool = False):
+        """warp: rotate each node's modal displacement by its linearized rotation (modal
+        warping, Kim §III.B).  Off by default: for muscle-driven displacements of a
+        centimetre over a few centimetres the rotation estimated from the curl overshoots
+        and creases the skin (see docs/benchmarks.md); the linear field looks right."""
+        self.warp = warp
+        if "mean_edge" not in rig.params:
+            raise MimicaError("rig: built by an older mimica; rebuild it with `mimica rig`")
+        self.rig, self.fps, self.substeps = rig, fps, substeps
+        self.h = 1.0 / (fps * substeps)
+        rho = skin_density(rig, frequency)
+        xi = damping * 2 * np.pi * frequency                  # Rayleigh mass term: near-critical
+        self.systems = [_MuscleSystem(rig, m, self.h, spring, xi, zeta, rho) for m in rig.muscles]
+        self.names = [m.name for m in rig.muscles]
+        self.gravity = None
+        if rig.gravity_basis is not None:
+            self.gravity = ModalWarpingSolver(rig.gravity_basis, self.h, xi=xi, zeta=zeta, density=rho)
+        self._g_fq = None
+
+    def set_gravity(self, g):
+        """Constant body acceleration (3,) in the skin's units per s^2, or None."""
+        if g is None or self.gravity is None:
+            self._g_fq = None
+            return
+        b = self.gravity.b
+        f = (b.mass[b.free, None] * np.asarray(g, float)[None, :]).ravel()
+        self._g_fq = b.phi.T @ f / self.gravity.density                # rotation of gravity ignored
+
+    def step(self, activations: np.ndarray):
+        """One time step with activations (n_muscles,)."""
+        for s, a in zip(self.systems, activations):
+            s.step(float(a))
+        if self._g_fq is not None:
+            g = self.gravity
+            g.v = (g.v + g.h * (self._g_fq - g.lam * g.q)) / g.denom
+            g.q = g.q + g.h * g.v
+
+    def displacement(self) -> np.ndarray:
+        """The skin's displacement: the sum over force types (Kim eq. 21), (n, 3)."""
+        u = np.zeros_like(self.rig.skin.vertices)
+        for s in self.systems:
+            u += s.solver.displacement(self.warp)
+        if self._g_fq is not None:
+            u += self.gravity.displacement(self.warp)
+        return u
+
+    def fields(self) -> dict:
+        """Each force type's own displacement field (Kim Fig. 14)."""
+        out = {n: s.solver.displacement(self.warp) for n, s in zip(self.names, self.systems)}
+        if self._g_fq is not None:
+            out["gravity"] = self.gravity.displacement(self.warp)
+        return out
+
+    def run(self, activation_at, duration: float, progress=None) -> np.ndarray:
+        """Frames (F, n, 3) of skin positions; activation_at(t) -> (n_muscles,)."""
+        n_frames = int(round(duration * self.fps)) + 1
+        frames = np.empty((n_frames, self.rig.skin.n_vertices, 3))
+        frames[0] = self.rig.skin.vertices + self.displacement()
+        for f in range(1, n_frames):
+            for k in range(self.substeps):
+                t = ((f - 1) * self.substeps + k + 1) * self.h
+                self.step(activation_at(t))
+            frames[f] = self.rig.skin.vertices + self.displacement()
+            if progress:
+                progress(f, n_frames)
+        return frames

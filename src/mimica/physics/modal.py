@@ -1,0 +1,258 @@
+"""Modal warping for shells (Kim 2020 §III.B; Choi & Ko 2005), and the full-space reference.
+
+Linearize the shell at rest (K = Hessian of Kim eq. 4 at rest, M lumped), remove the fixed
+nodes, and solve K Phi = M Phi Lambda for the r lowest modes (Kim eq. 8).  Each mode is
+then an independent damped oscillator (Kim eq. 10 with Rayleigh damping,
+C_q = xi I + zeta Lambda), integrated semi-implicitly (implicit Euler per mode, stable at
+any step).  The displacement is warped node by node, u_i = R_i (Phi q)_i, with R_i the
+rotation of the linearized rotation field w = Psi q (Psi = W Phi, W the per-node curl).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..errors import MimicaError
+from ..solver import SPDSolver
+from .shell import ShellEnergy
+
+
+def rotation_operator(rest: np.ndarray, triangles: np.ndarray, smooth: int = 0) -> sp.csr_matrix:
+    """Sparse W (3n x 3n): displacements -> per-node infinitesimal rotation vectors.
+
+    Per triangle, the displacement gradient on the tangent plane is completed by the
+    linearized normal change; the axial vector of its skew part is the rotation; nodes
+    take the area-weighted mean of their triangles.  Exact for infinitesimal rotations.
+    """
+    x, t = rest, triangles
+    e1, e2 = x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]]
+    nrm = np.cross(e1, e2)
+    area = 0.5 * np.linalg.norm(nrm, axis=1)
+    n = nrm / (2 * area[:, None])
+    t1 = e1 / np.linalg.norm(e1, axis=1, keepdims=True)
+    t2 = np.cross(n, t1)
+    T = np.stack([t1, t2], axis=2)                                   # (m, 3, 2)
+    P = np.einsum("mck,mcj->mkj", T, np.stack([e1, e2], axis=2))     # local 2D edge coords
+    Pinv = np.linalg.inv(P)
+
+    def rot_of(d1, d2):
+        D = np.stack([d1, d2], axis=2)                               # (m, 3, 2)
+        gs = D @ Pinv                                                # du/ds in the tangent basis
+        dn = -np.einsum("mck,mk->mc", T, np.einsum("mck,mc->mk", gs, n))
+        G = np.einsum("mck,mdk->mcd", gs, T) + dn[:, :, None] * n[:, None, :]
+        return 0.5 * np.stack([G[:, 2, 1] - G[:, 1, 2], G[:, 0, 2] - G[:, 2, 0], G[:, 1, 0] - G[:, 0, 1]], 1)
+
+    m = len(t)
+    local = np.zeros((m, 3, 9))
+    z = np.zeros((m, 3))
+    for c in range(3):                                               # probe each corner dof
+        for k in range(3):
+            u = [z.copy(), z.copy(), z.copy()]
+            u[c][:, k] = 1.0
+            local[:, :, 3 * c + k] = rot_of(u[1] - u[0], u[2] - u[0])
+    nv = len(x)
+    wsum = np.bincount(t.ravel(), weights=np.repeat(area, 3), minlength=nv)
+    rows, cols, vals = [], [], []
+    dof = (3 * t[:, :, None] + np.arange(3)).reshape(m, 9)
+    for c in range(3):                                               # scatter to each corner node
+        node = t[:, c]
+        wgt = area / np.maximum(wsum[node], 1e-300)
+        r = 3 * node[:, None] + np.arange(3)                         # (m, 3)
+        rows.append(np.repeat(r[:, :, None], 9, axis=2).ravel())
+        cols.append(np.repeat(dof[:, None, :], 3, axis=1).ravel())
+        vals.append((local * wgt[:, None, None]).ravel())
+    W = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * nv, 3 * nv))
+    if smooth:
+        # average the rotation field over `smooth` rings: a node's frame turns with its
+        # neighbourhood, not with the spikes that point loads make in the strain field
+        e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+        adj = sp.csr_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(nv, nv))
+        adj = (adj + sp.identity(nv)).tocsr()
+        adj.data[:] = 1.0
+        avg = sp.diags(1.0 / np.asarray(adj.sum(1)).ravel()) @ adj
+        S = sp.kron(avg, sp.identity(3), format="csr")
+        for _ in range(smooth):
+            W = (S @ W).tocsr()
+    return W
+
+
+def rodrigues(w: np.ndarray) -> np.ndarray:
+    """Rotation matrices (k, 3, 3) of rotation vectors (k, 3)."""
+    th = np.linalg.norm(w, axis=1)
+    small = th < 1e-8
+    a = np.where(small, 1.0 - th ** 2 / 6, np.sin(th) / np.where(small, 1, th))
+    b = np.where(small, 0.5 - th ** 2 / 24, (1 - np.cos(th)) / np.where(small, 1, th ** 2))
+    K = np.zeros((len(w), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = w[:, 2], -w[:, 1], w[:, 0]
+    return np.eye(3) + a[:, None, None] * K + b[:, None, None] * (K @ K)
+
+
+@dataclass
+class ModalBasis:
+    """Precomputed modes of one shell with fixed nodes (Kim eq. 8)."""
+
+    free: np.ndarray          # (n_free,) free node indices
+    phi: np.ndarray           # (3 n_free, r) mass-normalized mode shapes
+    lam: np.ndarray           # (r,) eigenvalues
+    psi: np.ndarray           # (3 n_free, r) rotation field of each mode
+    mass: np.ndarray          # (n,) lumped masses
+    n: int
+
+    @classmethod
+    def compute(cls, energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, r: int = 20,
+                load_nodes=None, stiffness=None, rotation=None) -> "ModalBasis":
+        """Modes of the shell with `fixed` nodes removed, for forces on `load_nodes`.
+
+        Without load nodes, the loads are uniform body forces (gravity); r sets how many
+        Krylov vectors are added beyond the static load shapes.
+        """
+        n = energy.n
+        fixed = np.asarray(fixed, bool)
+        free = np.nonzero(~fixed)[0]
+        if len(free) == 0:
+            raise MimicaError("modal basis: every node is fixed")
+        K = energy.hessian(energy.rest) if stiffness is None else stiffness
+        dof = (3 * free[:, None] + np.arange(3)).ravel()
+        Kff = K[dof][:, dof].tocsc()
+        m = np.repeat(mass[free], 3)
+        r = max(1, min(r, len(dof) - 2))
+        # Load-dependent Ritz vectors (Wilson, Yuan & Dickens 1982) stand in for ARPACK: the
+        # static shapes of the loads, K^-1 F, then Krylov blocks K^-1 M (...), all with one
+        # sparse Cholesky and block solves; the eigenproblem of eq. 8 is then solved exactly
+        # on that subspace (Rayleigh-Ritz).  The load shapes make the static response to any
+        # force on the load nodes exact, which the lowest (bending) modes alone cannot give
+        # for forces along the skin.
+        shift = -1e-9 * float(np.abs(Kff.diagonal()).mean() / m.mean())   # keeps drifting parts solvable
+        fac = SPDSolver((Kff - shift * sp.diags(m)).tocsc())
+        if load_nodes is not None and len(load_nodes):
+            pos = np.full(n, -1)
+            pos[free] = np.arange(len(free))
+            ln = pos[np.asarray(load_nodes)]
+            ln = ln[ln >= 0]
+            loads = np.zeros((len(dof), 3 * len(ln)))
+            cols = (3 * ln[:, None] + np.arange(3)).ravel()
+            loads[cols, np.arange(len(cols))] = 1.0
+        else:
+            loads = np.zeros((len(dof), 3))                                # uniform body loads
+            for c in range(3):
+                loads[c::3, c] = m[c::3]
+        blocks = [fac.solve(loads)]
+        width = 0
+        while width < r:                                   # r Krylov vectors beyond the loads
+            prev = blocks[-1][:, : min(blocks[-1].shape[1], r - width)]
+            blocks.append(fac.solve(m[:, None] * prev))
+            width += prev.shape[1]
+        V = np.hstack(blocks)
+        # M-orthonormal basis of the span, then the reduced eigenproblem (Rayleigh-Ritz)
+        q, rr = np.linalg.qr(np.sqrt(m)[:, None] * V)
+        keep = np.abs(np.diag(rr)) > 1e-10 * np.abs(np.diag(rr)).max()
+        V = q[:, keep] / np.sqrt(m)[:, None]
+        kr = V.T @ (Kff @ V)
+        lam, y = np.linalg.eigh(0.5 * (kr + kr.T))
+        phi = V @ y
+        order = np.argsort(lam)
+        lam, phi = np.maximum(lam[order], 0.0), phi[:, order]
+        phi /= np.sqrt(np.einsum("ij,i,ij->j", phi, m, phi))[None, :]      # Phi^T M Phi = I
+        W = rotation_operator(energy.rest, energy.triangles) if rotation is None else rotation
+        full = np.zeros((3 * n, phi.shape[1]))
+        full[dof] = phi
+        psi = (W @ full)[dof]
+        return cls(free, phi, lam, psi, mass, n)
+
+
+class ModalWarpingSolver:
+    """Kim eq. 10 integrated per mode; `step(force)` advances one time step h."""
+
+    def __init__(self, basis: ModalBasis, h: float, xi: float = 2.0, zeta: float = 0.01, density: float = 1.0):
+        """density scales the mass (the basis was computed for density 1): eigenvalues and
+        modal forces divide by it, displacements are unchanged."""
+        self.b, self.h, self.density = basis, h, density
+        self.lam = basis.lam / density
+        self.c = xi + zeta * self.lam                          # Rayleigh damping per mode
+        self.q = np.zeros(len(basis.lam))
+        self.v = np.zeros_like(self.q)
+        self.denom = 1.0 + h * self.c + h * h * self.lam
+        self.rot = np.tile(np.eye(3), (len(basis.free), 1, 1))
+
+    def reset(self):
+        self.q[:] = 0
+        self.v[:] = 0
+        self.rot[:] = np.eye(3)
+
+    def step(self, force: np.ndarray) -> np.ndarray:
+        """force: (n, 3) external nodal forces in world space; returns displacements (n, 3)."""
+        b = self.b
+        f_loc = np.einsum("kji,kj->ki", self.rot, force[b.free])        # R^T F per node
+        fq = b.phi.T @ f_loc.ravel() / self.density                     # Phi^T R^T F
+        # implicit Euler per mode: v' = (v + h (f - lam q)) / (1 + h c + h^2 lam)
+        self.v = (self.v + self.h * (fq - self.lam * self.q)) / self.denom
+        self.q = self.q + self.h * self.v
+        return self.displacement()
+
+    def rows(self, nodes: np.ndarray):
+        """Mode shapes and rotation fields restricted to some nodes: ((k,3,r), (k,3,r), valid)."""
+        b = self.b
+        pos = np.full(b.n, -1)
+        pos[b.free] = np.arange(len(b.free))
+        p = pos[np.asarray(nodes)]
+        ok = p >= 0
+        dof = (3 * np.maximum(p, 0)[:, None] + np.arange(3))
+        phi = b.phi[dof] * ok[:, None, None]
+        psi = b.psi[dof] * ok[:, None, None]
+        return phi, psi, ok
+
+    def displacement(self, warp: bool = True) -> np.ndarray:
+        """u = R (Phi q) node by node (modal warping), or the linear Phi q."""
+        b = self.b
+        local = (b.phi @ self.q).reshape(-1, 3)
+        u = np.zeros((b.n, 3))
+        if warp:
+            self.rot = rodrigues((b.psi @ self.q).reshape(-1, 3))
+            u[b.free] = np.einsum("kij,kj->ki", self.rot, local)
+        else:
+            u[b.free] = local
+        return u
+
+
+class FullSolver:
+    """Reference: implicit Euler on the full nonlinear shell, Newton at every step.
+
+    M (v' - v) / h = F - grad E(x + h v') - C v',  C = xi M + zeta K_rest.
+    """
+
+    def __init__(self, energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, h: float,
+                 xi: float = 2.0, zeta: float = 0.01, newton_iters: int = 8, tol: float = 1e-9):
+        self.E, self.h = energy, h
+        self.free = np.nonzero(~np.asarray(fixed, bool))[0]
+        self.dof = (3 * self.free[:, None] + np.arange(3)).ravel()
+        self.m = np.repeat(mass, 3)
+        self.K0 = energy.hessian(energy.rest)
+        self.xi, self.zeta = xi, zeta
+        self.iters, self.tol = newton_iters, tol
+        self.u = np.zeros((energy.n, 3))
+        self.v = np.zeros((energy.n, 3))
+
+    def step(self, force: np.ndarray) -> np.ndarray:
+        h, d = self.h, self.dof
+        x0 = self.E.rest + self.u
+        v = self.v.ravel().copy()
+        C = self.xi * sp.diags(self.m) + self.zeta * self.K0
+        f = force.ravel()
+        for _ in range(self.iters):
+            x = x0.ravel() + h * v
+            g = self.E.gradient(x.reshape(-1, 3)).ravel()
+            res = self.m * (v - self.v.ravel()) / h - f + g + C @ v
+            if np.abs(res[d]).max() < self.tol * max(1.0, np.abs(f).max()):
+                break
+            J = sp.diags(self.m / h) + C + h * self.E.hessian(x.reshape(-1, 3))
+            dv = spla.spsolve(J[d][:, d].tocsc(), -res[d])
+            v[d] += dv
+        self.v = v.reshape(-1, 3)
+        self.v[~np.isin(np.arange(self.E.n), self.free)] = 0
+        self.u = self.u + h * self.v
+        return self.u.copy()

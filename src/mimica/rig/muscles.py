@@ -1,0 +1,82 @@
+"""The muscle library: each muscle defined once relative to the 68 iBUG landmarks.
+
+A linear muscle is a thin strip from its origin (on the skull, deeper) to its insertion
+(under the skin).  Points are weighted sums of landmarks; `lift` moves a point up along the
+face (in eye-to-eye widths) and `out` sideways, away from the mid-line.  Depths are in
+eye-to-eye widths below the skin.  Subject's right = landmarks 0-8 side ("_R").
+Anatomy after Hjortsjö and Kim 2020 §IV (zygomaticus major, corrugator supercilii,
+depressor labii inferioris, depressor anguli oris) and Viaud & Yahia 1992 §4.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class MuscleDef:
+    name: str
+    origin: dict                  # landmark index -> weight
+    insertion: dict
+    origin_lift: float = 0.0      # along the face's up axis, in eye widths
+    insertion_lift: float = 0.0
+    origin_out: float = 0.0       # sideways, away from the mid-line, in eye widths
+    insertion_out: float = 0.0
+    width: float = 0.12           # strip width, eye widths
+    origin_depth: float = 0.10
+    insertion_depth: float = 0.04
+    alpha: float | None = None    # Kim eq. 19 ROI range for this muscle (None: the rig's)
+
+
+def _mirror(d: MuscleDef) -> MuscleDef:
+    """Left-side twin of a right-side muscle (iBUG left/right landmark pairs)."""
+    pair = {i: 16 - i for i in range(17)}
+    pair.update({17 + i: 26 - i for i in range(5)})
+    pair.update({27: 27, 28: 28, 29: 29, 30: 30, 31: 35, 32: 34, 33: 33, 34: 32, 35: 31})
+    pair.update({36: 45, 37: 44, 38: 43, 39: 42, 40: 47, 41: 46})
+    pair.update({45: 36, 44: 37, 43: 38, 42: 39, 47: 40, 46: 41})
+    pair.update({48: 54, 49: 53, 50: 52, 51: 51, 52: 50, 53: 49, 54: 48, 55: 59, 56: 58, 57: 57,
+                 58: 56, 59: 55, 60: 64, 61: 63, 62: 62, 63: 61, 64: 60, 65: 67, 66: 66, 67: 65})
+    mir = lambda w: {pair[k]: v for k, v in w.items()}  # noqa: E731
+    return MuscleDef(d.name[:-2] + "_L", mir(d.origin), mir(d.insertion), d.origin_lift, d.insertion_lift,
+                     d.origin_out, d.insertion_out, d.width, d.origin_depth, d.insertion_depth, d.alpha)
+
+
+_RIGHT = [
+    # Kim 2020's four (placement and ROI range calibrated on the ICT generic face against
+    # its sculpted shapes, see bench/simulate.py)
+    MuscleDef("zygomaticus_major_R", {0: 0.7, 1: 0.3}, {48: 1.0}, origin_lift=0.05, origin_out=-0.2,
+              insertion_out=0.05, width=0.14, alpha=16),
+    MuscleDef("corrugator_supercilii_R", {21: 1.0}, {18: 0.5, 19: 0.5}, origin_lift=-0.6, width=0.3,
+              origin_depth=0.1, alpha=24),
+    MuscleDef("depressor_labii_inferioris_R", {7: 0.7, 6: 0.3}, {58: 0.6, 59: 0.4}, origin_lift=-0.05,
+              width=0.12, alpha=10),
+    MuscleDef("depressor_anguli_oris_R", {5: 0.6, 6: 0.4}, {48: 1.0}, origin_lift=-0.1, width=0.14, alpha=9),
+    # the rest of Viaud & Yahia's list (linear approximations; sphincters as strips)
+    MuscleDef("frontalis_R", {17: 0.3, 19: 0.4, 21: 0.3}, {17: 0.3, 19: 0.4, 21: 0.3}, origin_lift=0.7,
+              width=1.0, origin_depth=0.06, insertion_depth=0.02, alpha=20),
+    # the rest of Viaud & Yahia's list (linear approximations)
+    MuscleDef("orbicularis_oculi_R", {0: 0.6, 36: 0.4}, {36: 0.6, 41: 0.4}, insertion_lift=-0.05,
+              insertion_out=0.05, width=0.15, origin_depth=0.06),
+    MuscleDef("nasalis_R", {31: 0.7, 1: 0.3}, {29: 0.7, 39: 0.3}, width=0.08, origin_depth=0.06),
+    MuscleDef("levator_labii_superioris_alaeque_nasi_R", {39: 0.6, 28: 0.4}, {31: 0.5, 49: 0.5},
+              width=0.07, origin_depth=0.08),
+    MuscleDef("levator_labii_superioris_R", {40: 0.6, 41: 0.4}, {49: 0.6, 50: 0.4}, origin_lift=-0.15,
+              width=0.1),
+    MuscleDef("zygomaticus_minor_R", {0: 0.3, 36: 0.3, 1: 0.4}, {49: 0.7, 48: 0.3}, origin_lift=0.05,
+              width=0.08),
+    MuscleDef("levator_anguli_oris_R", {31: 0.4, 40: 0.3, 2: 0.3}, {48: 1.0}, origin_lift=-0.05, width=0.08),
+    MuscleDef("mentalis_R", {8: 0.8, 7: 0.2}, {57: 0.6, 58: 0.4}, origin_lift=0.15, width=0.08),
+    MuscleDef("orbicularis_oris_R", {51: 0.5, 57: 0.5}, {48: 1.0}, insertion_out=-0.05, width=0.1,
+              origin_depth=0.04),
+    MuscleDef("masseter_R", {0: 0.6, 1: 0.4}, {4: 0.7, 5: 0.3}, origin_out=-0.05, width=0.2, origin_depth=0.12,
+              insertion_depth=0.1),
+]
+
+MUSCLES: dict[str, MuscleDef] = {}
+for _d in _RIGHT:
+    MUSCLES[_d.name] = _d
+    MUSCLES[_d.name[:-2] + "_L"] = _mirror(_d)
+
+KIM_MUSCLES = [n for n in MUSCLES if n.rsplit("_", 1)[0] in
+               ("zygomaticus_major", "corrugator_supercilii", "depressor_labii_inferioris", "depressor_anguli_oris")]

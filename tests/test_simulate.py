@@ -1,0 +1,179 @@
+"""Muscle-driven skin (Kim 2020): modal warping, the face rig, force decomposition, timelines."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from mimica import MimicaError
+from mimica.anim import Channel, Timeline
+from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel
+from mimica.physics import ShellEnergy, lumped_mass
+from mimica.physics.face import FaceSimulator
+from mimica.physics.modal import FullSolver, ModalBasis, ModalWarpingSolver, rotation_operator
+from mimica.rig import Rig, build_rig
+
+MUSCLES = ["zygomaticus_major_L", "depressor_anguli_oris_R"]
+
+
+@pytest.fixture(scope="module")
+def face():
+    return ICTModel(ICT_FACE_AREA_VERTICES)
+
+
+@pytest.fixture(scope="module")
+def rig(face):
+    return build_rig(face.mesh, face.neutral[ICT_LANDMARKS_68], muscles=MUSCLES)
+
+
+@pytest.fixture(scope="module")
+def patch(head_model):
+    return _patch(head_model, 3.0)
+
+
+def _patch(head_model, radius):
+    """Skin within `radius` cm of the right mouth corner, and its border nodes."""
+    m = head_model.mesh
+    c = m.vertices[ICT_LANDMARKS_68[48]]
+    cent = np.array([m.vertices[f].mean(0) for f in np.split(m.face_indices, m.face_starts[1:-1])[:9230]])
+    sub, _ = m.submesh(np.nonzero(np.linalg.norm(cent - c, axis=1) < radius)[0])
+    t = sub.triangles
+    e = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), 1)
+    uq, cnt = np.unique(e, axis=0, return_counts=True)
+    border = np.zeros(sub.n_vertices, bool)
+    border[uq[cnt == 1].ravel()] = True
+    return sub, border
+
+
+def test_rotation_field_exact_for_small_rotations(patch):
+    m, _ = patch
+    W = rotation_operator(m.vertices, m.triangles)
+    w = np.array([0.01, -0.02, 0.03])
+    u = np.cross(w, m.vertices - m.vertices.mean(0))
+    np.testing.assert_allclose((W @ u.ravel()).reshape(-1, 3), np.broadcast_to(w, (m.n_vertices, 3)), atol=1e-12)
+
+
+def test_load_nodes_get_the_exact_static_response(patch):
+    import scipy.sparse.linalg as spla
+    m, border = patch
+    E = ShellEnergy.default(m)
+    mass = lumped_mass(m)
+    load = np.nonzero(~border)[0][::40]
+    b = ModalBasis.compute(E, mass, border, r=8, load_nodes=load)
+    np.testing.assert_allclose(b.phi.T @ (np.repeat(mass[b.free], 3)[:, None] * b.phi), np.eye(b.phi.shape[1]),
+                               atol=1e-8)
+    f = np.zeros((m.n_vertices, 3))
+    f[load] = np.random.default_rng(0).normal(size=(len(load), 3))
+    dof = (3 * b.free[:, None] + np.arange(3)).ravel()
+    K = E.hessian(E.rest)[dof][:, dof].tocsc()
+    exact = spla.spsolve(K, f[b.free].ravel())
+    modal = b.phi @ ((b.phi.T @ f[b.free].ravel()) / b.lam)
+    assert np.abs(modal - exact).max() < 1e-5 * np.abs(exact).max()
+
+
+def test_modal_warping_close_to_full_solver_for_small_loads(head_model):
+    m, border = _patch(head_model, 2.0)
+    E = ShellEnergy.default(m)
+    mass = lumped_mass(m)
+    c = m.vertices.mean(0)
+    w = np.exp(-(np.linalg.norm(m.vertices - c, axis=1) / 0.8) ** 2)
+    load = np.argsort(-w)[:36]
+    f = np.zeros_like(m.vertices)
+    f[load] = np.array([0.0, 0.02, 0.01]) * w[load, None] / w[load].sum() * 10
+    h = 1 / 60
+    modal = ModalWarpingSolver(ModalBasis.compute(E, mass, border, r=20, load_nodes=load), h)
+    full = FullSolver(E, mass, border, h)
+    for _ in range(90):
+        um, uf = modal.step(f), full.step(f)
+    dev = np.linalg.norm(um - uf, axis=1).max() / np.linalg.norm(uf, axis=1).max()
+    assert dev < 0.05
+
+
+def test_face_at_rest_stays_at_rest(rig):
+    sim = FaceSimulator(rig)
+    for _ in range(50):
+        sim.step(np.zeros(len(rig.muscles)))
+    assert np.abs(sim.displacement()).max() == 0.0
+
+
+def test_only_the_roi_moves_and_fields_add_up(rig, face):
+    names = [m.name for m in rig.muscles]
+    runs = {}
+    for k, act in {"a": [1.0, 0.0], "b": [0.0, 0.7], "ab": [1.0, 0.7]}.items():
+        sim = FaceSimulator(rig)
+        frames = sim.run(lambda t, a=np.array(act): a, 0.5)
+        runs[k] = (frames[-1] - face.neutral, sim.fields())
+    ua, fields_a = runs["a"]
+    roi = rig.muscle(names[0]).roi
+    assert np.abs(ua[~roi]).max() == 0.0 and np.abs(ua[roi]).max() > 0.1
+    # Kim eq. 21: the total is the sum of the per-force fields, and each force type moves
+    # in its own system, so running the muscles together equals adding separate runs
+    np.testing.assert_allclose(sum(runs["ab"][1].values()), runs["ab"][0], atol=1e-12)
+    np.testing.assert_allclose(runs["ab"][0], runs["a"][0] + runs["b"][0], atol=1e-9)
+
+
+def test_zygomaticus_moves_the_skin_like_a_smile(rig, face):
+    """The anatomy check for one muscle (the benchmark reports all of Kim's four)."""
+    sim = FaceSimulator(rig)
+    u = sim.run(lambda t: np.array([1.0, 0.0]), 0.6)[-1] - face.neutral
+    d = face.delta({"mouthSmile_L": 1.0})
+    mov = np.linalg.norm(d, axis=1) > 0.05 * np.linalg.norm(d, axis=1).max()
+    cos = (u[mov] * d[mov]).sum() / (np.linalg.norm(u[mov]) * np.linalg.norm(d[mov]))
+    assert cos > 0.6
+
+
+def test_rig_file_round_trip_and_errors(rig, tmp_path):
+    p = rig.save(tmp_path / "f.rig")
+    back = Rig.load(p)
+    assert [m.name for m in back.muscles] == MUSCLES
+    a = FaceSimulator(rig).run(lambda t: np.array([0.5, 0.5]), 0.2)
+    b = FaceSimulator(back).run(lambda t: np.array([0.5, 0.5]), 0.2)
+    assert np.abs(a - b).max() < 1e-4                                 # modes stored in float32
+    bad = tmp_path / "bad.rig"
+    bad.write_bytes(b"not a rig")
+    with pytest.raises(MimicaError, match="not a mimica rig"):
+        Rig.load(bad)
+    with pytest.raises(MimicaError, match="no such rig"):
+        Rig.load(tmp_path / "absent.rig")
+    with pytest.raises(MimicaError, match="no muscle named"):
+        rig.muscle("buccinator_L")
+
+
+def test_timeline_interpolation_and_files(tmp_path):
+    keys = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 0.0]])
+    assert Channel(keys, "linear")(0.5) == pytest.approx(0.5)
+    assert Channel(keys, "step")(0.99) == 0.0 and Channel(keys, "step")(1.0) == 1.0
+    cub = Channel(keys, "cubic")(np.linspace(0, 2, 41))
+    assert cub.max() <= 1.0 + 1e-12 and cub.min() >= -1e-12         # monotone: no overshoot
+    tl = Timeline({"zygomaticus_major_L": Channel(keys, "cubic")}, 2.0)
+    back = Timeline.load(tl.save(tmp_path / "t.json"))
+    assert back.values(1.0, ["zygomaticus_major_L", "other"]).tolist() == [1.0, 0.0]
+    for doc, needle in [({"format": "x"}, "format"),
+                        ({"format": "mimica-timeline/1", "channels": {"a": {"keys": [[1, 0], [0, 1]]}}}, "increase"),
+                        ({"format": "mimica-timeline/1", "channels": {"a": {"keys": [[0, 0]], "interp": "bezier"}}},
+                         "interp"),
+                        ({"format": "mimica-timeline/1", "channels": {"a": {"keys": [[0, "x"]]}}}, "keys")]:
+        p = tmp_path / "bad.json"
+        p.write_text(json.dumps(doc))
+        with pytest.raises(MimicaError, match=needle):
+            Timeline.load(p)
+    with pytest.raises(MimicaError, match="unknown expression"):
+        Timeline.preset("boredom", ["zygomaticus_major_L"])
+
+
+def test_cli_rig_and_simulate(tmp_path, face, capsys):
+    from mimica import write_mesh
+    from mimica.cli import main
+    obj = write_mesh(tmp_path / "face.obj", face.mesh)
+    rig_path = tmp_path / "face.rig"
+    assert main(["rig", str(obj), "--muscles", "zygomaticus_major_R", "--out", str(rig_path)]) == 0
+    out = tmp_path / "sim"
+    assert main(["simulate", str(rig_path), "--expression", "happiness", "--duration", "0.25", "--out", str(out)]) == 0
+    frames = sorted(out.glob("frame_*.obj"))
+    assert len(frames) == 16 and (out / "strip.png").is_file()
+    tl = tmp_path / "t.json"
+    tl.write_text(json.dumps({"format": "mimica-timeline/1", "channels": {"buccinator_R": {"keys": [[0, 1]]}}}))
+    assert main(["simulate", str(rig_path), "--timeline", str(tl), "--out", str(tmp_path / "s2")]) == 2
+    assert "not a muscle" in capsys.readouterr().err and not (tmp_path / "s2").exists()
