@@ -47,8 +47,8 @@ _RIGHT = [
     # its sculpted shapes, see bench/simulate.py)
     MuscleDef("zygomaticus_major_R", {0: 0.7, 1: 0.3}, {48: 1.0}, origin_lift=0.05, origin_out=-0.2,
               insertion_out=0.05, width=0.14, alpha=16),
-    MuscleDef("corrugator_supercilii_R", {21: 1.0}, {18: 0.5, 19: 0.5}, origin_lift=-0.6, width=0.3,
-              origin_depth=0.1, alpha=24),
+    MuscleDef("corrugator_supercilii_R", {21: 1.0}, {18: 0.5, 19: 0.5}, origin_lift=-0.4, width=0.3,
+              origin_depth=0.1, alpha=18),
     MuscleDef("depressor_labii_inferioris_R", {7: 0.7, 6: 0.3}, {58: 0.6, 59: 0.4}, origin_lift=-0.05,
               width=0.12, alpha=10),
     MuscleDef("depressor_anguli_oris_R", {5: 0.6, 6: 0.4}, {48: 1.0}, origin_lift=-0.1, width=0.14, alpha=9),

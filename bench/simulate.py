@@ -1,0 +1,120 @@
+"""Benchmark: muscle-driven skin (issue 3) — modal system steps against the full-space solver.
+
+Run from the project root: .venv/bin/python bench/simulate.py
+Skin: the ICT-FaceKit face area (9,409 vertices); Kim's 8 muscles, one system per muscle.
+"""
+
+from __future__ import annotations
+
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+
+from mimica.data import ICT_FACE_AREA_VERTICES, ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel  # noqa: E402
+from mimica.physics import ShellEnergy, lumped_mass  # noqa: E402
+from mimica.physics.face import FaceSimulator  # noqa: E402
+from mimica.physics.modal import FullSolver, ModalBasis, ModalWarpingSolver  # noqa: E402
+from mimica.render import contact_sheet, render_mesh, save_png, shared_frame  # noqa: E402
+from mimica.rig import build_rig  # noqa: E402
+
+ANATOMY = [("zygomaticus_major", {"mouthSmile": 1.0}), ("depressor_anguli_oris", {"mouthFrown": 1.0}),
+           ("corrugator_supercilii", {"browDown": 1.0}), ("depressor_labii_inferioris", {"mouthLowerDown": 1.0}),
+           ("frontalis", {"browInnerUp": 1.0, "browOuterUp": 1.0})]
+
+
+def main():
+    print(f"machine: {platform.machine()}, python {platform.python_version()}")
+    face = ICTModel(ICT_FACE_AREA_VERTICES)
+    skin = face.mesh
+    lm = face.neutral[ICT_LANDMARKS_68]
+    t = time.perf_counter()
+    rig = build_rig(skin, lm)                                            # Kim's 8 muscles + gravity
+    pre = time.perf_counter() - t
+    print(f"rig precompute (8 muscles + gravity, modes included): {pre:.2f}s")
+
+    sim = FaceSimulator(rig)
+    act = np.full(len(rig.muscles), 0.6)
+    for _ in range(10):
+        sim.step(act)
+    n = 3000
+    t = time.perf_counter()
+    for _ in range(n):
+        sim.step(act)
+    steps = n / (time.perf_counter() - t)
+    t = time.perf_counter()
+    for _ in range(60):
+        sim.displacement()
+    out_fps = 60 / (time.perf_counter() - t)
+    print(f"modal: {steps:.0f} steps/s with {len(rig.muscles)} muscles (force decomposition); "
+          f"skin output {out_fps:.0f} frames/s")
+
+    # full-space implicit Euler + Newton against modal on a skin patch, small load
+    head = ICTModel(ICT_HEAD_VERTICES).mesh
+    c = head.vertices[ICT_LANDMARKS_68[48]]
+    cent = np.array([head.vertices[f].mean(0) for f in np.split(head.face_indices, head.face_starts[1:-1])[:9230]])
+    patch, _ = head.submesh(np.nonzero(np.linalg.norm(cent - c, axis=1) < 3.0)[0])
+    tt = patch.triangles
+    e = np.sort(np.concatenate([tt[:, [0, 1]], tt[:, [1, 2]], tt[:, [2, 0]]]), 1)
+    uq, cnt = np.unique(e, axis=0, return_counts=True)
+    border = np.zeros(patch.n_vertices, bool)
+    border[uq[cnt == 1].ravel()] = True
+    E = ShellEnergy.default(patch)
+    mass = lumped_mass(patch)
+    x = patch.vertices
+    w = np.exp(-(np.linalg.norm(x - c, axis=1) / 0.8) ** 2)
+    load = np.argsort(-w)[:36]
+    f = np.zeros_like(x)
+    f[load] = np.array([0.0, 0.02, 0.01]) * w[load, None] / w[load].sum() * 10
+    h = 1 / 60
+    ms = ModalWarpingSolver(ModalBasis.compute(E, mass, border, r=20, load_nodes=load), h)
+    fs = FullSolver(E, mass, border, h)
+    t = time.perf_counter()
+    for _ in range(120):
+        uf = fs.step(f)
+    full_steps = 120 / (time.perf_counter() - t)
+    t = time.perf_counter()
+    for _ in range(120):
+        um = ms.step(f)
+    modal_steps = 120 / (time.perf_counter() - t)
+    dev = float(np.linalg.norm(um - uf, axis=1).max() / np.linalg.norm(uf, axis=1).max())
+    print(f"patch of {patch.n_vertices} nodes, 120 steps: full solver {full_steps:.1f} steps/s, "
+          f"modal warping {modal_steps:.0f} steps/s, deviation {dev:.3f} (max |du| / max |u|)")
+
+    # anatomy check against ICT's sculpted shapes
+    rows, cos_all, tiles, labels = [], [], [], []
+    for base, shapes in ANATOMY:
+        for side in ("L", "R"):
+            name = f"{base}_{side}"
+            r1 = rig if any(m.name == name for m in rig.muscles) else build_rig(skin, lm, muscles=[name], gravity=False)
+            names = [m.name for m in r1.muscles]
+            a = np.array([1.0 if nm == name else 0.0 for nm in names])
+            u = FaceSimulator(r1).run(lambda t, a=a: a, 0.6)[-1] - skin.vertices
+            d = face.delta({f"{k}_{side}": v for k, v in shapes.items()})
+            mov = np.linalg.norm(d, axis=1) > 0.05 * np.linalg.norm(d, axis=1).max()
+            cos = float((u[mov] * d[mov]).sum() / (np.linalg.norm(u[mov]) * np.linalg.norm(d[mov])))
+            cos_all.append(cos)
+            rows.append((name, "+".join(f"{k}_{side}" for k in shapes), cos))
+            if side == "L":
+                fr = shared_frame([skin.vertices])
+                fr = (fr[0] + [0, 1.0, 0], fr[1] * 0.75)
+                tiles += [render_mesh(skin, skin.vertices + u, size=(280, 280), frame=fr),
+                          render_mesh(skin, skin.vertices + d, size=(280, 280), frame=fr)]
+                labels += [f"{base} (simulated)", f"{rows[-1][1]} (ICT)"]
+    out = Path("docs/figures")
+    save_png(out / "anatomy_check.png", contact_sheet(tiles, labels, columns=2,
+                                                      title="muscle activation vs ICT-FaceKit's sculpted shape"))
+    print("| muscle | ICT shape | cosine |")
+    print("|---|---|---|")
+    for r in rows:
+        print(f"| {r[0]} | {r[1]} | {r[2]:.3f} |")
+    print(f"steps_per_s={steps:.0f} precompute_s={pre:.2f} full_solver_steps_per_s={full_steps:.2f} "
+          f"modal_deviation={dev:.3f} anatomy_cosine_min={min(cos_all):.3f}")
+
+
+if __name__ == "__main__":
+    main()
