@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MimicaError
-from ..mesh import atomic_path
+from ..mesh import atomic_path, read_json
 
 FORMAT = "mimica-timeline/1"
 INTERPS = ("linear", "cubic", "step")
@@ -92,12 +92,7 @@ class Timeline:
     @classmethod
     def load(cls, path) -> "Timeline":
         path = Path(path)
-        try:
-            doc = json.loads(path.read_text())
-        except OSError as e:
-            raise MimicaError(f"{path}: cannot read the timeline ({e.strerror})") from None
-        except json.JSONDecodeError as e:
-            raise MimicaError(f"{path}: not valid JSON (line {e.lineno}: {e.msg})") from None
+        doc = read_json(path, "timeline")
         if not isinstance(doc, dict) or doc.get("format") != FORMAT:
             raise MimicaError(f"{path}: expected a timeline with 'format': '{FORMAT}'")
         chans = {}

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..data import ICT_LANDMARKS_68, is_ict_topology
 from ..errors import MimicaError
-from ..mesh import Mesh, atomic_path
+from ..mesh import Mesh, atomic_path, read_json
 from ..mesh.query import TriangleLocator
 
 SCHEME = "ibug68"
@@ -98,12 +98,7 @@ def ict_landmarks(mesh: Mesh) -> Landmarks:
 def read_landmarks(path, mesh: Mesh | None = None):
     """Read a landmark JSON file; returns (68,3) positions (NaN = missing), or Landmarks if mesh."""
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except OSError as e:
-        raise MimicaError(f"{path}: cannot read the landmark file ({e.strerror})") from None
-    except json.JSONDecodeError as e:
-        raise MimicaError(f"{path}: not valid JSON (line {e.lineno}: {e.msg})") from None
+    doc = read_json(path, "landmark file")
     if not isinstance(doc, dict) or doc.get("scheme") != SCHEME:
         raise MimicaError(f"{path}: expected {{\"scheme\": \"{SCHEME}\", \"points\": [...]}}")
     pts = doc.get("points")

@@ -38,6 +38,19 @@ def atomic_path(path):
             os.unlink(tmp)
 
 
+def read_json(path, what="file"):
+    """Parse a JSON file; a missing, unreadable or malformed one is a one-line MimicaError."""
+    import json
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except OSError as e:
+        raise MimicaError(f"{path}: cannot read the {what} ({e.strerror})") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        where = f" (line {e.lineno}: {e.msg})" if isinstance(e, json.JSONDecodeError) else ""
+        raise MimicaError(f"{path}: not valid JSON{where}") from None
+
+
 # ------------------------------------------------------------------- validation
 def validate(mesh: Mesh, source="mesh", allow_degenerate=False) -> Mesh:
     """Raise MimicaError (naming `source`) if the mesh cannot be used."""
