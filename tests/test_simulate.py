@@ -177,3 +177,21 @@ def test_cli_rig_and_simulate(tmp_path, face, capsys):
     tl.write_text(json.dumps({"format": "mimica-timeline/1", "channels": {"buccinator_R": {"keys": [[0, 1]]}}}))
     assert main(["simulate", str(rig_path), "--timeline", str(tl), "--out", str(tmp_path / "s2")]) == 2
     assert "not a muscle" in capsys.readouterr().err and not (tmp_path / "s2").exists()
+
+
+def test_sprung_engine_rests_moves_and_returns(rig, face):
+    from mimica.physics.sprung import FACIAL_ACTIONS, SprungFace, action_activations
+    assert len(FACIAL_ACTIONS) == 28
+    sf = SprungFace(rig)
+    for _ in range(20):
+        sf.step(np.zeros(len(rig.muscles)))
+    assert np.abs(sf.displacement()).max() < 1e-12                    # at rest stays at rest
+    a = action_activations("AU12_lip_corner_puller", [m.name for m in rig.muscles])
+    assert a.tolist() == [1.0, 0.0]
+    frames = sf.run(lambda t: a, 1.0)
+    u_on = frames[60] - face.neutral
+    d = face.delta({"mouthSmile_L": 1.0})
+    mov = np.linalg.norm(d, axis=1) > 0.05 * np.linalg.norm(d, axis=1).max()
+    assert (u_on[mov] * d[mov]).sum() / (np.linalg.norm(u_on[mov]) * np.linalg.norm(d[mov])) > 0.7
+    with pytest.raises(MimicaError, match="unknown facial action"):
+        action_activations("AU99", ["zygomaticus_major_L"])

@@ -155,7 +155,14 @@ def cmd_simulate(a):
     from .rig import Rig
     rig = Rig.load(a.rig)
     names = [m.name for m in rig.muscles]
-    if a.timeline:
+    if a.action:
+        from .anim import Channel
+        from .physics.sprung import action_activations
+        act = action_activations(a.action, names)
+        duration = a.duration or 2.0
+        tl = Timeline({n: Channel(np.array([[0.0, 0.0], [min(0.3, duration / 3), v]]), "cubic")
+                       for n, v in zip(names, act) if v}, duration)
+    elif a.timeline:
         tl = Timeline.load(a.timeline)
         unknown = sorted(set(tl.channels) - set(names) - {"age", "gravity"})
         if unknown:
@@ -165,9 +172,15 @@ def cmd_simulate(a):
     else:
         tl = Timeline.preset(a.expression, names, duration=a.duration or 2.0)
         duration = a.duration or 2.0
-    sim = FaceSimulator(rig, fps=a.fps, warp=a.warp)
-    if a.gravity:
-        sim.set_gravity(np.array([0.0, -a.gravity, 0.0]))
+    if a.engine == "sprung":
+        from .physics.sprung import SprungFace
+        sim = SprungFace(rig, fps=a.fps)
+        if a.gravity:
+            raise MimicaError("--gravity works with --engine shell only")
+    else:
+        sim = FaceSimulator(rig, fps=a.fps, warp=a.warp)
+        if a.gravity:
+            sim.set_gravity(np.array([0.0, -a.gravity, 0.0]))
     bar = _progress(range(1), int(duration * a.fps) + 1, "simulating")
     t0 = time.perf_counter()
     frames = sim.run(lambda t: tl.values(t, names), duration, progress=lambda f, n: bar.update(1))
@@ -177,11 +190,12 @@ def cmd_simulate(a):
     skin = rig.skin
     for i, v in enumerate(frames):
         write_mesh(out / f"frame_{i:04d}.obj", skin.with_vertices(v))
+    title = a.action or (Path(a.timeline).name if a.timeline else a.expression)
     pick = np.linspace(0, len(frames) - 1, min(6, len(frames))).round().astype(int)
     frame = shared_frame([frames[i] for i in pick])
     tiles = [render_mesh(skin, frames[i], size=(320, 320), frame=frame) for i in pick]
     save_png(out / "strip.png", contact_sheet(tiles, [f"t = {i / a.fps:.2f}s" for i in pick],
-                                              title=f"{a.expression if not a.timeline else Path(a.timeline).name}"))
+                                              title=f"{title} ({a.engine})"))
     steps = (len(frames) - 1) * sim.substeps
     _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, strip.png); {steps} steps in {el:.2f}s")
     return 0
@@ -234,10 +248,12 @@ def build_parser():
     g.add_argument("--expression", default="happiness", help="a preset: neutral, happiness, sadness, "
                    "surprise, anger, disgust, fear")
     g.add_argument("--timeline", help="timeline JSON of muscle activation curves")
+    g.add_argument("--action", help="one of the 28 facial actions, e.g. AU12_lip_corner_puller")
     s.add_argument("--duration", type=float, help="seconds (default: the timeline's, or 2)")
     s.add_argument("--fps", type=float, default=60.0)
     s.add_argument("--gravity", type=float, default=0.0, help="downward acceleration on the skin (0: off)")
-    s.add_argument("--engine", choices=["shell"], default="shell", help="shell: Kim 2020 shells in modal coordinates")
+    s.add_argument("--engine", choices=["shell", "sprung"], default="shell",
+                   help="shell: Kim 2020 shells in modal coordinates; sprung: Viaud & Yahia 1992 force fields")
     s.add_argument("--warp", action="store_true", help="apply modal warping rotations to the output (experimental)")
     s.add_argument("--out", required=True, help="output folder")
     s.set_defaults(func=cmd_simulate)

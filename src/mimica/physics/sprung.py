@@ -1,0 +1,153 @@
+"""The force-field engine of Viaud & Yahia 1992 (§4, eq. 9): a sprung mesh with rest-position
+feedback, driven by muscle force fields.
+
+    m_i a_i = sum_j k_ij (|P_iP_j| - |P0_iP0_j|) P_iP_j / |P_iP_j| - h v_i + F_ext + k (P0_i - P_i)
+
+Springs are the mesh's edges; F_ext is the sum of the muscle force fields, each pulling the
+skin over its region toward the muscle's origin with a smooth fall-off.  Integration is
+linearly implicit Euler with the stiffness taken at rest, factored once:
+(M + dt h + dt^2 K0) v' = M v + dt F(x), which is stable at the frame rates used here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..solver import SPDSolver
+from .shell import lumped_mass
+
+# The 28 facial actions (FACS units, Ekman & Friesen), each a group of the library's muscles
+# (Viaud & Yahia drive 28 actions with eight groups of forces; "_L"/"_R" both unless named).
+FACIAL_ACTIONS = {
+    "AU1_inner_brow_raiser": {"frontalis": 0.6, "corrugator_supercilii": -0.2},
+    "AU2_outer_brow_raiser": {"frontalis": 1.0},
+    "AU4_brow_lowerer": {"corrugator_supercilii": 1.0},
+    "AU5_upper_lid_raiser": {"frontalis": 0.3},
+    "AU6_cheek_raiser": {"orbicularis_oculi": 1.0, "zygomaticus_minor": 0.3},
+    "AU7_lid_tightener": {"orbicularis_oculi": 0.6},
+    "AU9_nose_wrinkler": {"levator_labii_superioris_alaeque_nasi": 1.0, "nasalis": 0.6},
+    "AU10_upper_lip_raiser": {"levator_labii_superioris": 1.0},
+    "AU11_nasolabial_deepener": {"zygomaticus_minor": 1.0},
+    "AU12_lip_corner_puller": {"zygomaticus_major": 1.0},
+    "AU13_cheek_puffer": {"levator_anguli_oris": 1.0},
+    "AU14_dimpler": {"orbicularis_oris": 0.4, "zygomaticus_major": 0.3},
+    "AU15_lip_corner_depressor": {"depressor_anguli_oris": 1.0},
+    "AU16_lower_lip_depressor": {"depressor_labii_inferioris": 1.0},
+    "AU17_chin_raiser": {"mentalis": 1.0},
+    "AU18_lip_pucker": {"orbicularis_oris": 1.0},
+    "AU20_lip_stretcher": {"depressor_anguli_oris": 0.4, "zygomaticus_major": 0.4, "orbicularis_oris": -0.5},
+    "AU22_lip_funneler": {"orbicularis_oris": 0.8, "mentalis": 0.2},
+    "AU23_lip_tightener": {"orbicularis_oris": 0.6},
+    "AU24_lip_pressor": {"orbicularis_oris": 0.7, "mentalis": 0.3},
+    "AU25_lips_part": {"depressor_labii_inferioris": 0.5},
+    "AU26_jaw_drop": {"masseter": -0.6, "depressor_labii_inferioris": 0.4},
+    "AU27_mouth_stretch": {"masseter": -1.0, "depressor_labii_inferioris": 0.6},
+    "AU28_lip_suck": {"orbicularis_oris": 1.0, "mentalis": 0.5},
+    "AU38_nostril_dilator": {"nasalis": -0.8},
+    "AU39_nostril_compressor": {"nasalis": 1.0},
+    "AU43_eyes_closed": {"orbicularis_oculi": 1.0},
+    "AU45_blink": {"orbicularis_oculi": 0.8},
+}
+
+
+def action_activations(action: str, muscle_names) -> np.ndarray:
+    """Activations (n_muscles,) of one facial action for the muscles a rig has."""
+    from ..errors import MimicaError
+    if action not in FACIAL_ACTIONS:
+        raise MimicaError(f"unknown facial action {action!r}; actions: {', '.join(FACIAL_ACTIONS)}")
+    w = FACIAL_ACTIONS[action]
+    return np.array([w.get(n.rsplit("_", 1)[0], w.get(n, 0.0)) for n in muscle_names])
+
+
+class SprungFace:
+    """Viaud & Yahia's sprung skin, with the rig's muscles as force fields."""
+
+    def __init__(self, rig, fps: float = 60.0, substeps: int = 2, k_spring: float = 1.0,
+                 k_rest: float = 0.05, damping: float = 8.0, falloff: float = 1.5, strength: float = 5.0):
+        """Stiffnesses are relative (k_rest and strength to a spring's k; unit mean mass);
+        damping is V&Y's h per unit mass (1/s)."""
+        skin = rig.skin
+        self.rig, self.fps, self.substeps = rig, fps, substeps
+        self.dt = 1.0 / (fps * substeps)
+        x0 = skin.vertices
+        self.x0, self.n = x0, len(x0)
+        e = skin.edges
+        self.e = e
+        d = x0[e[:, 1]] - x0[e[:, 0]]
+        self.l0 = np.linalg.norm(d, axis=1)
+        mean_edge = float(self.l0.mean())
+        mass = lumped_mass(skin)
+        self.m = mass / mass.mean()                            # unit mean mass: time scale from k
+        # scale-free stiffnesses: a spring's k is relative to the mean edge, the feedback k
+        # (V&Y's F_r) relative to one spring
+        self.k = k_spring / self.l0 * mean_edge
+        self.k_rest = k_rest * k_spring * self.m
+        self.h = damping
+        # stiffness at rest: springs along their directions, plus the feedback
+        dh = d / self.l0[:, None]
+        blocks = self.k[:, None, None] * dh[:, :, None] * dh[:, None, :]        # (E, 3, 3)
+        rows, cols, vals = [], [], []
+        for a, b, s in ((0, 0, 1), (1, 1, 1), (0, 1, -1), (1, 0, -1)):
+            r = 3 * e[:, a][:, None, None] + np.arange(3)[None, :, None]
+            c = 3 * e[:, b][:, None, None] + np.arange(3)[None, None, :]
+            rows.append(np.broadcast_to(r, blocks.shape).ravel())
+            cols.append(np.broadcast_to(c, blocks.shape).ravel())
+            vals.append((s * blocks).ravel())
+        K0 = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                           shape=(3 * self.n, 3 * self.n)) + sp.diags(np.repeat(self.k_rest, 3))
+        m3 = np.repeat(self.m, 3)
+        self.m3 = m3
+        self.solver = SPDSolver((sp.diags(m3 * (1 + self.dt * self.h)) + self.dt ** 2 * K0).tocsc())
+        # muscle force fields: over each muscle's spring nodes and their surroundings, toward
+        # the origin along the muscle's stretch direction, with a smooth fall-off
+        fields = []
+        for mu in rig.muscles:
+            pull = np.zeros((self.n, 3))
+            wsum = np.zeros(self.n)
+            ew = float(np.linalg.norm(rig.landmarks[45] - rig.landmarks[36]))
+            radius = falloff * 0.15 * ew
+            for node, s in zip(mu.nodes, mu.stretch):
+                dist = np.linalg.norm(x0 - node, axis=1)
+                w = np.clip(1 - dist / (2 * radius), 0, None) ** 2
+                pull += w[:, None] * s[None, :]
+                wsum += w
+            pull /= np.maximum(wsum, 1e-12)[:, None]
+            pull *= np.clip(wsum, 0, 1)[:, None]
+            # force per node: `strength` springs stretched by the muscle's own stretch
+            fields.append(pull * (strength * k_spring * self.m)[:, None])
+        self.fields = np.stack(fields) if fields else np.zeros((0, self.n, 3))
+        self.x = x0.copy()
+        self.v = np.zeros_like(x0)
+
+    def forces(self, x, activations):
+        d = x[self.e[:, 1]] - x[self.e[:, 0]]
+        ln = np.linalg.norm(d, axis=1)
+        fs = (self.k * (ln - self.l0) / np.maximum(ln, 1e-300))[:, None] * d         # eq. 9, springs
+        f = np.zeros_like(x)
+        np.add.at(f, self.e[:, 0], fs)
+        np.add.at(f, self.e[:, 1], -fs)
+        f += self.k_rest[:, None] * (self.x0 - x)                                    # F_r = k P_i P_0
+        f += np.einsum("m,mnc->nc", np.asarray(activations, float), self.fields)    # force fields
+        return f
+
+    def step(self, activations):
+        dt = self.dt
+        rhs = self.m3 * self.v.ravel() + dt * self.forces(self.x, activations).ravel()
+        self.v = self.solver.solve(rhs).reshape(-1, 3)
+        self.x = self.x + dt * self.v
+
+    def displacement(self):
+        return self.x - self.x0
+
+    def run(self, activation_at, duration, progress=None):
+        n_frames = int(round(duration * self.fps)) + 1
+        frames = np.empty((n_frames, self.n, 3))
+        frames[0] = self.x
+        for f in range(1, n_frames):
+            for k in range(self.substeps):
+                self.step(activation_at(((f - 1) * self.substeps + k + 1) * self.dt))
+            frames[f] = self.x
+            if progress:
+                progress(f, n_frames)
+        return frames
