@@ -173,6 +173,10 @@ def test_cli_rig_and_simulate(tmp_path, face, capsys):
     assert main(["simulate", str(rig_path), "--expression", "happiness", "--duration", "0.25", "--out", str(out)]) == 0
     frames = sorted(out.glob("frame_*.obj"))
     assert len(frames) == 16 and (out / "strip.png").is_file()
+    from pygltflib import GLTF2
+    g = GLTF2().load(str(out / "animation.glb"))
+    assert len(g.meshes[0].primitives[0].targets) == 16 and g.animations[0].channels[0].target.path == "weights"
+    assert g.accessors[g.animations[0].samplers[0].input].max == [pytest.approx(0.25)]
     tl = tmp_path / "t.json"
     tl.write_text(json.dumps({"format": "mimica-timeline/1", "channels": {"buccinator_R": {"keys": [[0, 1]]}}}))
     assert main(["simulate", str(rig_path), "--timeline", str(tl), "--out", str(tmp_path / "s2")]) == 2

@@ -188,8 +188,11 @@ def cmd_simulate(a):
     el = time.perf_counter() - t0
     out = Path(a.out)
     skin = rig.skin
+    from .mesh import atomic_path, write_glb
     for i, v in enumerate(frames):
         write_mesh(out / f"frame_{i:04d}.obj", skin.with_vertices(v))
+    with atomic_path(out / "animation.glb") as tmp:
+        write_glb(tmp, skin, {f"frame_{i:04d}": v for i, v in enumerate(frames)}, fps=a.fps)
     title = a.action or (Path(a.timeline).name if a.timeline else a.expression)
     pick = np.linspace(0, len(frames) - 1, min(6, len(frames))).round().astype(int)
     frame = shared_frame([frames[i] for i in pick])
@@ -197,7 +200,7 @@ def cmd_simulate(a):
     save_png(out / "strip.png", contact_sheet(tiles, [f"t = {i / a.fps:.2f}s" for i in pick],
                                               title=f"{title} ({a.engine})"))
     steps = (len(frames) - 1) * sim.substeps
-    _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, strip.png); {steps} steps in {el:.2f}s")
+    _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {steps} steps in {el:.2f}s")
     return 0
 
 

@@ -247,8 +247,12 @@ def _gltf_accessor(g, index) -> np.ndarray:
         np.ascontiguousarray(rows).view(dt).reshape(acc.count, nc)
 
 
-def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True) -> None:
-    """Write a triangulated mesh, optionally with named morph targets {name: (n,3) positions}."""
+def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None) -> None:
+    """Write a triangulated mesh, optionally with named morph targets {name: (n,3) positions}.
+
+    fps: also write an animation that plays the morph targets in order, one per frame at
+    this rate (weights interpolated linearly between frames), for frame sequences.
+    """
     import pygltflib as gl
     v = mesh.vertices.astype(np.float32)
     t = mesh.triangles.astype(np.uint32)
@@ -261,7 +265,7 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True) -> None:
         views.append(gl.BufferView(buffer=0, byteOffset=off, byteLength=arr.nbytes, target=target))
         a = gl.Accessor(bufferView=len(views) - 1, componentType=comp, count=len(arr), type=acc_type)
         if minmax:
-            a.min, a.max = arr.min(0).tolist(), arr.max(0).tolist()
+            a.min, a.max = np.atleast_1d(arr.min(0)).tolist(), np.atleast_1d(arr.max(0)).tolist()
         accs.append(a)
         return len(accs) - 1
 
@@ -279,9 +283,20 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True) -> None:
     if names:
         gmesh.extras = {"targetNames": names}
         gmesh.weights = [0.0] * len(names)
+    animations = []
+    if fps and names:
+        k = len(names)
+        times = (np.arange(k) / float(fps)).astype(np.float32)
+        itime = add(times, None, gl.SCALAR, gl.FLOAT, True)
+        iw = add(np.eye(k, dtype=np.float32).reshape(-1), None, gl.SCALAR, gl.FLOAT)
+        animations = [gl.Animation(name="frames", samplers=[gl.AnimationSampler(input=itime, output=iw,
+                                                                              interpolation="LINEAR")],
+                                   channels=[gl.AnimationChannel(sampler=0, target=gl.AnimationChannelTarget(
+                                       node=0, path="weights"))])]
     blob = b"".join(blobs)
     g = gl.GLTF2(scene=0, scenes=[gl.Scene(nodes=[0])], nodes=[gl.Node(mesh=0)], meshes=[gmesh],
-                 accessors=accs, bufferViews=views, buffers=[gl.Buffer(byteLength=len(blob))])
+                 accessors=accs, bufferViews=views, buffers=[gl.Buffer(byteLength=len(blob))],
+                 animations=animations)
     g.set_binary_blob(blob)
     if binary:
         g.save_binary(str(path))
