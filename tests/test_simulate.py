@@ -199,3 +199,14 @@ def test_sprung_engine_rests_moves_and_returns(rig, face):
     assert (u_on[mov] * d[mov]).sum() / (np.linalg.norm(u_on[mov]) * np.linalg.norm(d[mov])) > 0.7
     with pytest.raises(MimicaError, match="unknown facial action"):
         action_activations("AU99", ["zygomaticus_major_L"])
+
+
+def test_user_pull_moves_its_region_only(rig, face):
+    sim = FaceSimulator(rig)
+    nose = face.neutral[ICT_LANDMARKS_68[30]]
+    sim.add_pull(nose, 1.0, [0.0, 0.0, 5.0])
+    frames = sim.run(lambda t: np.zeros(len(rig.muscles)), 0.5)
+    u = frames[-1] - face.neutral
+    d = np.linalg.norm(face.neutral - nose, axis=1)
+    assert u[d < 0.5, 2].mean() > 0                                 # pulled forward
+    assert np.abs(u[d > 3.0]).max() == 0.0                           # outside its reach: still

@@ -96,6 +96,9 @@ class FaceSimulator:
         self.h = 1.0 / (fps * substeps)
         rho = skin_density(rig, frequency)
         xi = damping * 2 * np.pi * frequency                  # Rayleigh mass term: near-critical
+        self.rho, self._xi, self._zeta = rho, xi, zeta
+        self.pulls = []
+        self.pull_scale = 1.0
         self.systems = [_MuscleSystem(rig, m, self.h, spring, xi, zeta, rho) for m in rig.muscles]
         self.names = [m.name for m in rig.muscles]
         self.gravity = None
@@ -112,8 +115,24 @@ class FaceSimulator:
         f = (b.mass[b.free, None] * np.asarray(g, float)[None, :]).ravel()
         self._g_fq = b.phi.T @ f / self.gravity.density                # rotation of gravity ignored
 
+    def add_pull(self, center, radius: float, force, reach: float = 3.0):
+        """A user pull (Kim §VI): `force` (3,) spread over the skin within `radius` of
+        `center`, in its own system whose region of interest is `reach` x radius.
+
+        Its displacement field joins the sum (eq. 21); `pull_scale` scales all pulls.
+        """
+        from ..rig import build_region_system
+        basis, nodes, weights = build_region_system(self.rig, np.asarray(center, float), radius, reach)
+        solver = ModalWarpingSolver(basis, self.h, xi=self._xi, zeta=self._zeta, density=self.rho)
+        f = np.zeros((self.rig.skin.n_vertices, 3))
+        f[nodes] = weights[:, None] * np.asarray(force, float)[None, :]
+        self.pulls.append((solver, basis.phi.T @ f[basis.free].ravel() / self.rho))
+
     def step(self, activations: np.ndarray):
         """One time step with activations (n_muscles,)."""
+        for solver, fq in self.pulls:
+            solver.v = (solver.v + solver.h * (self.pull_scale * fq - solver.lam * solver.q)) / solver.denom
+            solver.q = solver.q + solver.h * solver.v
         for s, a in zip(self.systems, activations):
             s.step(float(a))
         if self._g_fq is not None:
@@ -126,6 +145,8 @@ class FaceSimulator:
         u = np.zeros_like(self.rig.skin.vertices)
         for s in self.systems:
             u += s.solver.displacement(self.warp)
+        for solver, _ in self.pulls:
+            u += solver.displacement(self.warp)
         if self._g_fq is not None:
             u += self.gravity.displacement(self.warp)
         return u

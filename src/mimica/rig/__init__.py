@@ -230,3 +230,23 @@ def build_rig(skin: Mesh, landmarks: np.ndarray, muscles=None, alpha: float = 10
               "mean_edge": mean_edge,
               "k_area": skin_e.k_area, "k_length": skin_e.k_length, "k_bend": skin_e.k_bend}
     return Rig(skin, lm, out, params, gb)
+
+
+def build_region_system(rig: Rig, center: np.ndarray, radius: float, reach: float = 3.0):
+    """A modal system for a force on the skin within `radius` of `center` (a user pull):
+    its ROI is the skin within reach x radius; returns (basis, loaded nodes, weights)."""
+    skin = rig.skin
+    d = np.linalg.norm(skin.vertices - center, axis=1)
+    nodes = np.nonzero(d < radius)[0]
+    if len(nodes) == 0:
+        raise MimicaError(f"pull: no skin within {radius:g} of {np.round(center, 3).tolist()}")
+    w = (1 - d[nodes] / radius) ** 2
+    energy = ShellEnergy.default(skin)
+    mass = lumped_mass(skin)
+    tether = rig.params.get("tether", 0.0)
+    k_node = tether * 2 * energy.k_length / rig.params["mean_edge"] * mass / mass.mean()
+    K = (energy.hessian(energy.rest) + sp.diags(np.repeat(k_node, 3))).tocsr()
+    W = rotation_operator(skin.vertices, skin.triangles, smooth=WARP_SMOOTH)
+    basis = ModalBasis.compute(energy, mass, d > reach * radius, r=rig.params.get("modes", 8),
+                               load_nodes=nodes[:: max(1, len(nodes) // 24)], stiffness=K, rotation=W)
+    return basis, nodes, w / w.sum()
