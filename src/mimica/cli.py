@@ -39,14 +39,14 @@ def _expand_frames(items):
 
 def read_frames(paths, source):
     """Read expression meshes of the source's topology, (F, n, 3)."""
-    from .mesh import read_mesh
+    from .mesh import read_vertices
     frames = np.empty((len(paths), source.n_vertices, 3))
     for i, p in enumerate(_progress(paths, len(paths), "reading")):
-        m = read_mesh(p, allow_degenerate=True)
-        if m.n_vertices != source.n_vertices:
-            raise MimicaError(f"{p}: has {m.n_vertices} vertices but the source neutral has "
+        v = read_vertices(p)
+        if len(v) != source.n_vertices:
+            raise MimicaError(f"{p}: has {len(v)} vertices but the source neutral has "
                               f"{source.n_vertices}; an expression must share the neutral's topology")
-        frames[i] = m.vertices
+        frames[i] = v
     return frames
 
 

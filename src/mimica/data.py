@@ -95,13 +95,6 @@ EXPRESSIONS = {
 }
 
 
-def read_vertices(path) -> np.ndarray:
-    """Only the 'v' lines of an OBJ, fast (for the ICT shapes, which share one topology)."""
-    text = Path(path).read_text()
-    rows = [ln[2:] for ln in text.splitlines() if ln.startswith("v ")]
-    return np.array(" ".join(rows).split(), dtype=np.float64).reshape(-1, 3)
-
-
 class ICTModel:
     """ICT-FaceKit's linear model: face = N + sum w_i (identity_i - N) + sum e_j (E_j - N).
 
@@ -128,6 +121,7 @@ class ICTModel:
 
     def shape(self, name: str) -> np.ndarray:
         if name not in self._shapes:
+            from .mesh import read_vertices
             self._shapes[name] = read_vertices(ict_path(name))[:self.n]
         return self._shapes[name]
 
