@@ -1,4 +1,10 @@
-"""Skin simulation (Kim 2020): discrete shells; more of issue 3 to come."""
+"""Skin simulation.
+
+shell    discrete shell energy (Kim 2020 eqs. 1-4) with exact derivatives, mass, damping
+modal    modal bases (eq. 8), modal warping integration (eq. 10), full-space reference solver
+face     the muscle-driven face: springs, ROIs, one system per force type (eqs. 11-21)
+sprung   Viaud & Yahia 1992's force-field engine (eq. 9) and the 28 facial actions
+"""
 
 from .shell import ShellEnergy, hinges_of, lumped_mass, rayleigh_damping
 
