@@ -210,3 +210,20 @@ def test_user_pull_moves_its_region_only(rig, face):
     d = np.linalg.norm(face.neutral - nose, axis=1)
     assert u[d < 0.5, 2].mean() > 0                                 # pulled forward
     assert np.abs(u[d > 3.0]).max() == 0.0                           # outside its reach: still
+
+
+def test_cli_pull_keyed_on_a_curve(tmp_path, rig, face, capsys):
+    from mimica.cli import main
+    rp = rig.save(tmp_path / "f.rig")
+    nose = face.neutral[ICT_LANDMARKS_68[30]]
+    tl = tmp_path / "t.json"
+    tl.write_text(json.dumps({"format": "mimica-timeline/1", "duration": 0.5,
+                              "channels": {"pull": {"interp": "linear", "keys": [[0, 0], [0.2, 1]]}}}))
+    spec = f"{nose[0]},{nose[1]},{nose[2]}:1.0:0,0,5"
+    out = tmp_path / "o"
+    assert main(["simulate", str(rp), "--timeline", str(tl), "--pull", spec, "--out", str(out)]) == 0
+    from mimica import read_mesh
+    last = read_mesh(sorted(out.glob("frame_*.obj"))[-1]).vertices
+    assert (last - face.neutral)[np.linalg.norm(face.neutral - nose, axis=1) < 0.5, 2].mean() > 0
+    assert main(["simulate", str(rp), "--pull", "1,2:3", "--out", str(tmp_path / "bad")]) == 2
+    assert "--pull" in capsys.readouterr().err

@@ -164,7 +164,7 @@ def cmd_simulate(a):
                        for n, v in zip(names, act) if v}, duration)
     elif a.timeline:
         tl = Timeline.load(a.timeline)
-        unknown = sorted(set(tl.channels) - set(names) - {"age", "gravity"})
+        unknown = sorted(set(tl.channels) - set(names) - {"age", "gravity", "pull"})
         if unknown:
             raise MimicaError(f"{a.timeline}: channel {unknown[0]!r} is not a muscle of {a.rig} "
                               f"(muscles: {', '.join(names)})")
@@ -175,15 +175,25 @@ def cmd_simulate(a):
     if a.engine == "sprung":
         from .physics.sprung import SprungFace
         sim = SprungFace(rig, fps=a.fps)
-        if a.gravity:
-            raise MimicaError("--gravity works with --engine shell only")
+        if a.gravity or a.pull:
+            raise MimicaError("--gravity and --pull work with --engine shell only")
     else:
         sim = FaceSimulator(rig, fps=a.fps, warp=a.warp)
-        if a.gravity:
-            sim.set_gravity(np.array([0.0, -a.gravity, 0.0]))
+        if a.gravity or "gravity" in tl.channels:
+            sim.set_gravity(np.array([0.0, -(a.gravity or 1.0), 0.0]))
+        for spec in a.pull or []:
+            center, radius, force = _parse_pull(spec)
+            sim.add_pull(center, radius, force)
     bar = _progress(range(1), int(duration * a.fps) + 1, "simulating")
     t0 = time.perf_counter()
-    frames = sim.run(lambda t: tl.values(t, names), duration, progress=lambda f, n: bar.update(1))
+    run_kw = {}
+    if a.engine == "shell" and ({"gravity", "pull"} & set(tl.channels)):
+        def scales(t):
+            g = float(tl.channels["gravity"](t)) if "gravity" in tl.channels else 1.0
+            p = float(tl.channels["pull"](t)) if "pull" in tl.channels else 1.0
+            return g, p
+        run_kw["scales_at"] = scales
+    frames = sim.run(lambda t: tl.values(t, names), duration, progress=lambda f, n: bar.update(1), **run_kw)
     bar.close()
     el = time.perf_counter() - t0
     out = Path(a.out)
@@ -202,6 +212,19 @@ def cmd_simulate(a):
     steps = (len(frames) - 1) * sim.substeps
     _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {steps} steps in {el:.2f}s")
     return 0
+
+
+def _parse_pull(spec):
+    """'x,y,z:radius:fx,fy,fz' -> (center (3,), radius, force (3,))."""
+    try:
+        c, r, f = spec.split(":")
+        center = np.array([float(v) for v in c.split(",")])
+        force = np.array([float(v) for v in f.split(",")])
+        radius = float(r)
+        assert center.shape == (3,) and force.shape == (3,) and radius > 0
+    except (ValueError, AssertionError):
+        raise MimicaError(f"--pull {spec!r}: expected x,y,z:radius:fx,fy,fz (skin units)") from None
+    return center, radius, force
 
 
 def cmd_demo(a):
@@ -254,7 +277,11 @@ def build_parser():
     g.add_argument("--action", help="one of the 28 facial actions, e.g. AU12_lip_corner_puller")
     s.add_argument("--duration", type=float, help="seconds (default: the timeline's, or 2)")
     s.add_argument("--fps", type=float, default=60.0)
-    s.add_argument("--gravity", type=float, default=0.0, help="downward acceleration on the skin (0: off)")
+    s.add_argument("--gravity", type=float, default=0.0, help="downward acceleration on the skin (0: off; "
+                   "a timeline's 'gravity' channel scales it)")
+    s.add_argument("--pull", action="append", metavar="X,Y,Z:R:FX,FY,FZ",
+                   help="pull the skin within R of a point with a force (repeatable; a timeline's "
+                        "'pull' channel scales all pulls)")
     s.add_argument("--engine", choices=["shell", "sprung"], default="shell",
                    help="shell: Kim 2020 shells in modal coordinates; sprung: Viaud & Yahia 1992 force fields")
     s.add_argument("--warp", action="store_true", help="apply modal warping rotations to the output (experimental)")

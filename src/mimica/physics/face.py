@@ -98,7 +98,8 @@ class FaceSimulator:
         xi = damping * 2 * np.pi * frequency                  # Rayleigh mass term: near-critical
         self.rho, self._xi, self._zeta = rho, xi, zeta
         self.pulls = []
-        self.pull_scale = 1.0
+        self.pull_scale = 1.0          # scales every user pull (a timeline's "pull" channel)
+        self.gravity_scale = 1.0       # scales gravity (a timeline's "gravity" channel)
         self.systems = [_MuscleSystem(rig, m, self.h, spring, xi, zeta, rho) for m in rig.muscles]
         self.names = [m.name for m in rig.muscles]
         self.gravity = None
@@ -137,7 +138,7 @@ class FaceSimulator:
             s.step(float(a))
         if self._g_fq is not None:
             g = self.gravity
-            g.v = (g.v + g.h * (self._g_fq - g.lam * g.q)) / g.denom
+            g.v = (g.v + g.h * (self.gravity_scale * self._g_fq - g.lam * g.q)) / g.denom
             g.q = g.q + g.h * g.v
 
     def displacement(self) -> np.ndarray:
@@ -158,14 +159,19 @@ class FaceSimulator:
             out["gravity"] = self.gravity.displacement(self.warp)
         return out
 
-    def run(self, activation_at, duration: float, progress=None) -> np.ndarray:
-        """Frames (F, n, 3) of skin positions; activation_at(t) -> (n_muscles,)."""
+    def run(self, activation_at, duration: float, progress=None, scales_at=None) -> np.ndarray:
+        """Frames (F, n, 3) of skin positions; activation_at(t) -> (n_muscles,).
+
+        scales_at(t) -> (gravity_scale, pull_scale), for forces keyed on curves.
+        """
         n_frames = int(round(duration * self.fps)) + 1
         frames = np.empty((n_frames, self.rig.skin.n_vertices, 3))
         frames[0] = self.rig.skin.vertices + self.displacement()
         for f in range(1, n_frames):
             for k in range(self.substeps):
                 t = ((f - 1) * self.substeps + k + 1) * self.h
+                if scales_at is not None:
+                    self.gravity_scale, self.pull_scale = scales_at(t)
                 self.step(activation_at(t))
             frames[f] = self.rig.skin.vertices + self.displacement()
             if progress:
