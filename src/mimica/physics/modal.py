@@ -21,7 +21,7 @@ from ..solver import SPDSolver
 from .shell import ShellEnergy
 
 
-def rotation_operator(rest: np.ndarray, triangles: np.ndarray, smooth: int = 0) -> sp.csr_matrix:
+def rotation_operator(rest: np.ndarray, triangles: np.ndarray, smooth: int = 0):
     """Sparse W (3n x 3n): displacements -> per-node infinitesimal rotation vectors.
 
     Per triangle, the displacement gradient on the tangent plane is completed by the
@@ -66,18 +66,31 @@ def rotation_operator(rest: np.ndarray, triangles: np.ndarray, smooth: int = 0) 
         cols.append(np.repeat(dof[:, None, :], 3, axis=1).ravel())
         vals.append((local * wgt[:, None, None]).ravel())
     W = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * nv, 3 * nv))
-    if smooth:
-        # average the rotation field over `smooth` rings: a node's frame turns with its
-        # neighbourhood, not with the spikes that point loads make in the strain field
-        e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-        adj = sp.csr_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(nv, nv))
-        adj = (adj + sp.identity(nv)).tocsr()
-        adj.data[:] = 1.0
-        avg = sp.diags(1.0 / np.asarray(adj.sum(1)).ravel()) @ adj
-        S = sp.kron(avg, sp.identity(3), format="csr")
-        for _ in range(smooth):
-            W = (S @ W).tocsr()
-    return W
+    if not smooth:
+        return W
+    # average the rotation field over `smooth` rings: a node's frame turns with its
+    # neighbourhood, not with the spikes that point loads make in the strain field.  The
+    # average is kept as a separate operator (applied to the few mode columns, not
+    # multiplied into W, whose fill-in would grow with every ring)
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    adj = sp.csr_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(nv, nv))
+    adj = (adj + sp.identity(nv)).tocsr()
+    adj.data[:] = 1.0
+    avg = sp.diags(1.0 / np.asarray(adj.sum(1)).ravel()) @ adj
+    return SmoothedRotation(W, sp.kron(avg, sp.identity(3), format="csr"), smooth)
+
+
+class SmoothedRotation:
+    """W followed by `rings` ring averages, as an operator: (S^rings W) @ X."""
+
+    def __init__(self, W, S, rings):
+        self.W, self.S, self.rings = W, S, rings
+
+    def __matmul__(self, x):
+        y = self.W @ x
+        for _ in range(self.rings):
+            y = self.S @ y
+        return y
 
 
 def rodrigues(w: np.ndarray) -> np.ndarray:
