@@ -62,3 +62,36 @@ def test_ict_face_fits_fast_and_flattens(head_model):
 def test_bad_points():
     with pytest.raises(MimicaError, match="at least 6"):
         fit_cylinder(np.zeros((3, 3)))
+
+
+def test_dilation_law():
+    from mimica.wrinkles.bulge import AGE_0, AGE_MAX, DIL_MAX, dilation
+    assert dilation(2.0, 20) == 2.0 and dilation(2.0, AGE_0) == 2.0              # none before AGE_0
+    assert dilation(2.0, AGE_MAX) == pytest.approx(2.0 * (1 + DIL_MAX))          # eq. 10 at AGE_MAX
+    ages = np.linspace(AGE_0, AGE_MAX, 5)
+    assert np.allclose(np.diff(dilation(1.0, ages), 2), 0)                      # linear after AGE_0
+
+
+def test_bulge_curve_is_symmetric_and_exact_at_rest():
+    from mimica.wrinkles.bulge import arc_length, curve
+    u = np.linspace(0, 1, 11)
+    c = curve(3.0, 1.2, 0.8, u)
+    np.testing.assert_allclose(c[::-1, 0], 3.0 - c[:, 0], atol=1e-12)           # mirror about d/2
+    np.testing.assert_allclose(c[::-1, 1], c[:, 1], atol=1e-12)
+    assert arc_length(3.0, 0.0, 0.0) == pytest.approx(3.0)                      # flat: the chord
+
+
+def test_table_lookup_and_inversion_within_one_percent():
+    from mimica.wrinkles.bulge import ArcLengthTable, arc_length, dilation
+    T = ArcLengthTable.build()
+    rng = np.random.default_rng(7)
+    d = rng.uniform(0.1, 20.1, 5000)
+    a = d * rng.uniform(0, 5, 5000)
+    al = rng.uniform(0, np.pi, 5000)
+    exact = arc_length(d, a, al)
+    assert np.max(np.abs(T.lookup(d, a, al) - exact) / exact) < 0.01
+    d_real = dilation(d, rng.uniform(20, 90, 5000))
+    aa, alf = T.solve(d, d_real, 0.1 * d)
+    assert np.max(np.abs(arc_length(d, aa, alf) - d_real) / d_real) < 0.01
+    assert ((alf < np.pi / 2) & np.isclose(aa, 0.1 * d)).any()                  # alpha first ...
+    assert ((alf == np.pi / 2) & (aa > 0.1 * d)).any()                          # ... then a
