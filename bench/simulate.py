@@ -127,6 +127,19 @@ def main():
         mov = np.linalg.norm(d, axis=1) > 0.05 * np.linalg.norm(d, axis=1).max()
         held.append((mu.name, float((u[mov] * d[mov]).sum() / (np.linalg.norm(u[mov]) * np.linalg.norm(d[mov])))))
     print("held-out identity: " + ", ".join(f"{n} {c:.3f}" for n, c in held))
+    # the expression presets on the whole muscle library (a picture for docs/)
+    from mimica.anim import PRESETS, Timeline
+    whole = build_rig(skin, lm, muscles="all", gravity=False)
+    names = [m.name for m in whole.muscles]
+    fr = shared_frame([skin.vertices])
+    fr = (fr[0] + [0, 1.0, 0], fr[1] * 0.75)
+    tiles = []
+    for e in PRESETS:
+        tl = Timeline.preset(e, names, duration=0.8, hold=10)
+        v = FaceSimulator(whole).run(lambda t, tl=tl: tl.values(t, names), 0.8)[-1]
+        tiles.append(render_mesh(skin, v, size=(280, 280), frame=fr))
+    save_png(out / "presets.png", contact_sheet(tiles, list(PRESETS), columns=4,
+                                                title=f"expression presets ({len(names)} muscles, Kim 2020 shells)"))
     print(f"steps_per_s={steps:.0f} precompute_s={pre:.2f} full_solver_steps_per_s={full_steps:.2f} "
           f"modal_deviation={dev:.3f} anatomy_cosine_min={min(cos_all):.3f}")
 
