@@ -27,3 +27,14 @@ def held_out_identity(model, seed):
     """Identities no parameter was tuned on (seeds >= 100; the benchmark uses 1000+)."""
     rng = np.random.default_rng(seed)
     return model.identity(rng.normal(0, 0.8, 20))
+
+
+def skin_patch(model, radius):
+    """A real piece of skin: the ICT face polygons within `radius` cm of the right mouth
+    corner, and its border nodes."""
+    from mimica.data import ICT_FACE_AREA_FACES, ICT_LANDMARKS_68
+    m = model.mesh
+    c = m.vertices[ICT_LANDMARKS_68[48]]
+    near = np.linalg.norm(m.face_centroids()[:ICT_FACE_AREA_FACES] - c, axis=1) < radius
+    sub, _ = m.submesh(np.nonzero(near)[0])
+    return sub, sub.boundary_vertices()

@@ -5,19 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import skin_patch
+
 from mimica import Mesh
-from mimica.data import ICT_LANDMARKS_68
 from mimica.physics import ShellEnergy, hinges_of, lumped_mass
 
 
 @pytest.fixture(scope="module")
 def patch(head_model):
     """A real piece of skin: the ICT face polygons within 3 cm of the mouth corner."""
-    m = head_model.mesh
-    c = m.vertices[ICT_LANDMARKS_68[48]]
-    cent = np.array([m.vertices[f].mean(0) for f in np.split(m.face_indices, m.face_starts[1:-1])[:9230]])
-    sub, _ = m.submesh(np.nonzero(np.linalg.norm(cent - c, axis=1) < 3.0)[0])
-    return sub
+    return skin_patch(head_model, 3.0)[0]
 
 
 @pytest.fixture(scope="module")

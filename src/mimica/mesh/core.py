@@ -122,17 +122,18 @@ class Mesh:
         _ = self.triangles
         return self.__dict__["tri_face"]
 
+    def _polygon_edges(self) -> np.ndarray:
+        """Every polygon's boundary edges as sorted pairs, one row per polygon side."""
+        fi, st = self.face_indices, self.face_starts
+        nxt = np.arange(fi.size) + 1
+        nxt[st[1:] - 1] = st[:-1]
+        e = np.sort(np.stack([fi, fi[nxt]], axis=1), axis=1)
+        return e[e[:, 0] != e[:, 1]]
+
     @cached_property
     def edges(self) -> np.ndarray:
         """(E, 2) unique undirected polygon edges (diagonals of the fan excluded), i < j."""
-        fi, st = self.face_indices, self.face_starts
-        nxt = np.arange(fi.size) + 1
-        ends = st[1:] - 1
-        nxt[ends] = st[:-1]
-        e = np.stack([fi, fi[nxt]], axis=1)
-        e.sort(axis=1)
-        e = e[e[:, 0] != e[:, 1]]
-        return np.unique(e, axis=0)
+        return np.unique(self._polygon_edges(), axis=0)
 
     @cached_property
     def adjacency(self) -> sp.csr_matrix:
@@ -150,6 +151,27 @@ class Mesh:
         v = self.vertices if vertices is None else vertices
         t = self.triangles
         return np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+
+    def triangle_areas(self, vertices=None) -> np.ndarray:
+        """Areas of the fan triangles, (T,)."""
+        return 0.5 * np.linalg.norm(self.face_normals(vertices), axis=1)
+
+    def mean_edge_length(self, vertices=None) -> float:
+        v = self.vertices if vertices is None else vertices
+        e = self.edges
+        return float(np.linalg.norm(v[e[:, 1]] - v[e[:, 0]], axis=1).mean())
+
+    def boundary_vertices(self) -> np.ndarray:
+        """bool (n,): vertices on an edge that only one polygon uses (outline and holes)."""
+        uq, cnt = np.unique(self._polygon_edges(), axis=0, return_counts=True)
+        out = np.zeros(self.n_vertices, bool)
+        out[uq[cnt == 1].ravel()] = True
+        return out
+
+    def face_centroids(self) -> np.ndarray:
+        """Mean of each polygon's corners, (F, 3)."""
+        sums = np.add.reduceat(self.vertices[self.face_indices], self.face_starts[:-1], axis=0)
+        return sums / self.face_sizes[:, None]
 
     def vertex_normals(self, vertices=None) -> np.ndarray:
         """Unit area-weighted vertex normals (n, 3); isolated vertices get (0, 0, 0)."""

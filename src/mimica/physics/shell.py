@@ -106,10 +106,8 @@ class ShellEnergy:
     @classmethod
     def default(cls, mesh: Mesh, k_area=1.0, k_length=1.0, k_bend=0.05) -> "ShellEnergy":
         """Stiffnesses relative to the mesh's scale (mean edge length l): k_A / l^2, k_L / l, k_B."""
-        x = mesh.vertices
-        e = mesh.edges
-        l = float(np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1).mean())
-        return cls(x.copy(), mesh.triangles, k_area / l ** 2, k_length / l, k_bend)
+        l = mesh.mean_edge_length()
+        return cls(mesh.vertices.copy(), mesh.triangles, k_area / l ** 2, k_length / l, k_bend)
 
     # ------------------------------------------------------------------ terms
     def _terms(self):
@@ -159,9 +157,9 @@ class ShellEnergy:
 
 def lumped_mass(mesh: Mesh, density: float = 1.0) -> np.ndarray:
     """Per-vertex mass: a third of the adjacent triangles' area times the areal density."""
-    x, t = mesh.vertices, mesh.triangles
-    a = 0.5 * np.linalg.norm(np.cross(x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]]), axis=1)
-    return density * np.bincount(t.ravel(), weights=np.repeat(a / 3, 3), minlength=len(x))
+    t = mesh.triangles
+    a = mesh.triangle_areas()
+    return density * np.bincount(t.ravel(), weights=np.repeat(a / 3, 3), minlength=mesh.n_vertices)
 
 
 def rayleigh_damping(mass: np.ndarray, stiffness: sp.spmatrix, xi: float, zeta: float) -> sp.csr_matrix:

@@ -76,7 +76,7 @@ class SprungFace:
         self.e = e
         d = x0[e[:, 1]] - x0[e[:, 0]]
         self.l0 = np.linalg.norm(d, axis=1)
-        mean_edge = float(self.l0.mean())
+        mean_edge = skin.mean_edge_length()
         mass = lumped_mass(skin)
         self.m = mass / mass.mean()                            # unit mean mass: time scale from k
         # scale-free stiffnesses: a spring's k is relative to the mean edge, the feedback k

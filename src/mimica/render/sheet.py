@@ -62,10 +62,7 @@ def colormap(t: np.ndarray) -> np.ndarray:
     return stops[i] * (1 - f) + stops[i + 1] * f
 
 
-def heat_colors(values: np.ndarray, bins=None, colors=None) -> np.ndarray:
-    """Per-vertex colours: discrete bins (Song Fig. 11 style) or a continuous ramp."""
+def heat_colors(values: np.ndarray) -> np.ndarray:
+    """Per-vertex colours on a continuous ramp scaled to the largest value."""
     v = np.asarray(values, float)
-    if bins is None:
-        return colormap(v / max(np.nanmax(v), 1e-12))
-    idx = np.digitize(v, bins)
-    return np.asarray(colors, float)[np.minimum(idx, len(colors) - 1)]
+    return colormap(v / max(np.nanmax(v), 1e-12))

@@ -131,13 +131,11 @@ def place_strip(mdef: MuscleDef, skin: Mesh, lm: np.ndarray, locator: TriangleLo
     s = np.linspace(0, 1, ROWS)[:, None, None]
     across = np.linspace(-0.5, 0.5, COLS)[None, :, None]
     axis = i - o
-    _, _, q_mid, _ = locator.closest(0.5 * (o + i)[None])
-    nmid = _vertex_normal_at(q_mid[0], skin, normals)
+    nmid = _normal_at(locator, skin, normals, 0.5 * (o + i)[None])[1][0]
     perp = np.cross(nmid, axis)
     perp /= np.linalg.norm(perp) + 1e-300
     pts = (o + s * axis + across * perp * mdef.width * ew).reshape(-1, 3)
-    _, _, on_skin, _ = locator.closest(pts)
-    nn = np.array([_vertex_normal_at(p, skin, normals) for p in on_skin])
+    on_skin, nn = _normal_at(locator, skin, normals, pts)
     depth = (mdef.origin_depth + (mdef.insertion_depth - mdef.origin_depth) * np.repeat(s.ravel(), COLS)) * ew
     nodes = on_skin - nn * depth[:, None]
     g = np.arange(ROWS * COLS).reshape(ROWS, COLS)
@@ -146,8 +144,11 @@ def place_strip(mdef: MuscleDef, skin: Mesh, lm: np.ndarray, locator: TriangleLo
     return nodes, tris
 
 
-def _vertex_normal_at(p, skin, normals):
-    return normals[int(np.argmin(np.linalg.norm(skin.vertices - p, axis=1)))]
+def _normal_at(locator, skin, normals, points):
+    """Closest skin points and the interpolated unit normals there."""
+    tri, bary, on_skin, _ = locator.closest(points)
+    n = np.einsum("ij,ijk->ik", bary, normals[skin.triangles[tri]])
+    return on_skin, n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
 
 def stretch_mode(nodes: np.ndarray) -> np.ndarray:
@@ -189,8 +190,7 @@ def build_rig(skin: Mesh, landmarks: np.ndarray, muscles=None, alpha: float = 10
             raise MimicaError(f"rig: unknown muscle {n!r}; known: {', '.join(MUSCLES)}")
     skin_e = ShellEnergy.default(skin)
     mass = lumped_mass(skin)
-    edge = skin.edges
-    mean_edge = float(np.linalg.norm(skin.vertices[edge[:, 1]] - skin.vertices[edge[:, 0]], axis=1).mean())
+    mean_edge = skin.mean_edge_length()
     # K + the tether springs (per node: tether x an edge's stiffness 2 k_L / l^2, by area)
     k_node = tether * 2 * skin_e.k_length / mean_edge * mass / mass.mean()
     K = (skin_e.hessian(skin_e.rest) + sp.diags(np.repeat(k_node, 3))).tocsr()
@@ -219,11 +219,7 @@ def build_rig(skin: Mesh, landmarks: np.ndarray, muscles=None, alpha: float = 10
     if gravity:
         # gravity: the skin hangs from its outline (the back of the head / scan border) and
         # from the landmarks (feature points held by the skull), Kim §VI
-        t = skin.triangles
-        e = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), 1)
-        uq, cnt = np.unique(e, axis=0, return_counts=True)
-        fixed = np.zeros(skin.n_vertices, bool)
-        fixed[uq[cnt == 1].ravel()] = True
+        fixed = skin.boundary_vertices()
         fixed[tree.query(lm)[1]] = True
         gb = ModalBasis.compute(skin_e, mass, fixed, r=modes, stiffness=K, rotation=W)
     params = {"alpha": alpha, "modes": modes, "contraction": contraction, "tether": tether,

@@ -91,8 +91,7 @@ class TransferSolver:
         A_c = A_t[:, self.fixed].tocsc()
         # rows weighted by the element's surface area, so that the energy is a surface
         # integral and does not depend on how densely each face is meshed
-        wts = np.repeat(self._element_areas(self.el_t, target.vertices) if weighting == "area"
-                        else np.ones(et), 3)
+        wts = np.repeat(self._element_areas(self.el_t, target) if weighting == "area" else np.ones(et), 3)
         AfW = (A_f.T @ sp.diags(wts)).tocsr()
         AtA = (AfW @ A_f).tocsr()
         eps = EPS_ANCHOR * float(AtA.diagonal().mean())
@@ -125,11 +124,10 @@ class TransferSolver:
         self.n_target, self.n_unknowns = nt, n_unk
 
     @staticmethod
-    def _element_areas(el: Elements, vertices) -> np.ndarray:
+    def _element_areas(el: Elements, mesh: Mesh) -> np.ndarray:
         """Area carried by each element (a third of the adjacent triangles for a vertex), mean 1."""
         t = el.triangles
-        a = 0.5 * np.linalg.norm(np.cross(vertices[t[:, 1]] - vertices[t[:, 0]],
-                                          vertices[t[:, 2]] - vertices[t[:, 0]]), axis=1)
+        a = mesh.triangle_areas()
         if el.kind == "vtc":
             a = np.bincount(t.reshape(-1), weights=np.repeat(a / 3, 3), minlength=el.n_vertices)
         a = np.maximum(a, 1e-6 * a.mean())
