@@ -17,7 +17,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel  # noqa: E402
 from mimica.physics import ShellEnergy, lumped_mass  # noqa: E402
-from mimica.physics.face import FaceSimulator  # noqa: E402
+from mimica.physics.face import FaceSimulator, displacement_cosine  # noqa: E402
 from mimica.physics.modal import FullSolver, ModalBasis, ModalWarpingSolver  # noqa: E402
 from mimica.render import contact_sheet, render_mesh, save_png, shared_frame  # noqa: E402
 from mimica.rig import build_rig  # noqa: E402
@@ -56,13 +56,9 @@ def main():
     # full-space implicit Euler + Newton against modal on a skin patch, small load
     head = ICTModel(ICT_HEAD_VERTICES).mesh
     c = head.vertices[ICT_LANDMARKS_68[48]]
-    cent = np.array([head.vertices[f].mean(0) for f in np.split(head.face_indices, head.face_starts[1:-1])[:9230]])
-    patch, _ = head.submesh(np.nonzero(np.linalg.norm(cent - c, axis=1) < 3.0)[0])
-    tt = patch.triangles
-    e = np.sort(np.concatenate([tt[:, [0, 1]], tt[:, [1, 2]], tt[:, [2, 0]]]), 1)
-    uq, cnt = np.unique(e, axis=0, return_counts=True)
-    border = np.zeros(patch.n_vertices, bool)
-    border[uq[cnt == 1].ravel()] = True
+    near = np.linalg.norm(head.face_centroids()[:9230] - c, axis=1) < 3.0
+    patch, _ = head.submesh(np.nonzero(near)[0])
+    border = patch.boundary_vertices()
     E = ShellEnergy.default(patch)
     mass = lumped_mass(patch)
     x = patch.vertices
@@ -95,8 +91,7 @@ def main():
             a = np.array([1.0 if nm == name else 0.0 for nm in names])
             u = FaceSimulator(r1).run(lambda t, a=a: a, 0.6)[-1] - skin.vertices
             d = face.delta({f"{k}_{side}": v for k, v in shapes.items()})
-            mov = np.linalg.norm(d, axis=1) > 0.05 * np.linalg.norm(d, axis=1).max()
-            cos = float((u[mov] * d[mov]).sum() / (np.linalg.norm(u[mov]) * np.linalg.norm(d[mov])))
+            cos = displacement_cosine(u, d)
             cos_all.append(cos)
             rows.append((name, "+".join(f"{k}_{side}" for k in shapes), cos))
             if side == "L":
@@ -124,8 +119,7 @@ def main():
         u = FaceSimulator(other).run(lambda t, a=a: a, 0.6)[-1] - tv
         base, side = mu.name.rsplit("_", 1)
         d = face.delta({f"{k}_{side}": v for k, v in dict(ANATOMY)[base].items()})
-        mov = np.linalg.norm(d, axis=1) > 0.05 * np.linalg.norm(d, axis=1).max()
-        held.append((mu.name, float((u[mov] * d[mov]).sum() / (np.linalg.norm(u[mov]) * np.linalg.norm(d[mov])))))
+        held.append((mu.name, displacement_cosine(u, d)))
     print("held-out identity: " + ", ".join(f"{n} {c:.3f}" for n, c in held))
     # the expression presets on the whole muscle library (a picture for docs/)
     from mimica.anim import PRESETS, Timeline

@@ -6,12 +6,13 @@ import json
 
 import numpy as np
 import pytest
+from conftest import skin_patch
 
 from mimica import MimicaError
 from mimica.anim import Channel, Timeline
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel
 from mimica.physics import ShellEnergy, lumped_mass
-from mimica.physics.face import FaceSimulator
+from mimica.physics.face import FaceSimulator, displacement_cosine
 from mimica.physics.modal import FullSolver, ModalBasis, ModalWarpingSolver, rotation_operator
 from mimica.rig import Rig, build_rig
 
@@ -30,21 +31,7 @@ def rig(face):
 
 @pytest.fixture(scope="module")
 def patch(head_model):
-    return _patch(head_model, 3.0)
-
-
-def _patch(head_model, radius):
-    """Skin within `radius` cm of the right mouth corner, and its border nodes."""
-    m = head_model.mesh
-    c = m.vertices[ICT_LANDMARKS_68[48]]
-    cent = np.array([m.vertices[f].mean(0) for f in np.split(m.face_indices, m.face_starts[1:-1])[:9230]])
-    sub, _ = m.submesh(np.nonzero(np.linalg.norm(cent - c, axis=1) < radius)[0])
-    t = sub.triangles
-    e = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), 1)
-    uq, cnt = np.unique(e, axis=0, return_counts=True)
-    border = np.zeros(sub.n_vertices, bool)
-    border[uq[cnt == 1].ravel()] = True
-    return sub, border
+    return skin_patch(head_model, 3.0)
 
 
 def test_rotation_field_exact_for_small_rotations(patch):
@@ -74,7 +61,7 @@ def test_load_nodes_get_the_exact_static_response(patch):
 
 
 def test_modal_warping_close_to_full_solver_for_small_loads(head_model):
-    m, border = _patch(head_model, 2.0)
+    m, border = skin_patch(head_model, 2.0)
     E = ShellEnergy.default(m)
     mass = lumped_mass(m)
     c = m.vertices.mean(0)
@@ -118,10 +105,7 @@ def test_zygomaticus_moves_the_skin_like_a_smile(rig, face):
     """The anatomy check for one muscle (the benchmark reports all of Kim's four)."""
     sim = FaceSimulator(rig)
     u = sim.run(lambda t: np.array([1.0, 0.0]), 0.6)[-1] - face.neutral
-    d = face.delta({"mouthSmile_L": 1.0})
-    mov = np.linalg.norm(d, axis=1) > 0.05 * np.linalg.norm(d, axis=1).max()
-    cos = (u[mov] * d[mov]).sum() / (np.linalg.norm(u[mov]) * np.linalg.norm(d[mov]))
-    assert cos > 0.6
+    assert displacement_cosine(u, face.delta({"mouthSmile_L": 1.0})) > 0.6
 
 
 def test_rig_file_round_trip_and_errors(rig, tmp_path):
@@ -194,9 +178,7 @@ def test_sprung_engine_rests_moves_and_returns(rig, face):
     assert a.tolist() == [1.0, 0.0]
     frames = sf.run(lambda t: a, 1.0)
     u_on = frames[60] - face.neutral
-    d = face.delta({"mouthSmile_L": 1.0})
-    mov = np.linalg.norm(d, axis=1) > 0.05 * np.linalg.norm(d, axis=1).max()
-    assert (u_on[mov] * d[mov]).sum() / (np.linalg.norm(u_on[mov]) * np.linalg.norm(d[mov])) > 0.7
+    assert displacement_cosine(u_on, face.delta({"mouthSmile_L": 1.0})) > 0.7
     with pytest.raises(MimicaError, match="unknown facial action"):
         action_activations("AU99", ["zygomaticus_major_L"])
 

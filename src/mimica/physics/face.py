@@ -23,35 +23,27 @@ class _MuscleSystem:
     The springs are integrated implicitly with the skin: in modal coordinates the spring
     stiffness is the small dense matrix Phi_a^T K_s Phi_a (Phi_a: the mode rows at the
     spring nodes), so a step is one r x r matrix-vector product, stable at any spring
-    stiffness.  The spring force is linear in the stretch of the layer, k (u_m - u_s) with
-    k = k_spring / |S_init|: Kim's eq. 15 (relative elongation) for motions large against
-    the layer's thickness, eq. 16's direction S_d - S_ud = u_m - u_s.
+    stiffness.  The spring force is linear in the stretch of the layer, k (u_m - u_s), each
+    spring as stiff as `spring` skin edges: Kim's eq. 15 (relative elongation) for motions
+    large against the layer's thickness, along eq. 16's S_d - S_ud = u_m - u_s.  The pull
+    k u_m is linear in the muscle's stretch amplitude, so its modal force is precomputed.
     """
 
     def __init__(self, rig, muscle, h, spring, xi, zeta, rho):
-        self.m = muscle
         b = muscle.basis
         self.solver = sv = ModalWarpingSolver(b, h, xi=xi, zeta=zeta, density=rho)
-        self.uniq, inv = np.unique(muscle.attach, return_inverse=True)
-        self.phi, self.psi, _ = sv.rows(self.uniq)                   # (u, 3, r)
-        k_springs = len(muscle.attach)
-        self.gather = sp.csr_matrix((np.ones(k_springs), (inv, np.arange(k_springs))),
-                                    shape=(len(self.uniq), k_springs))
-        l_init = np.maximum(np.linalg.norm(muscle.nodes - rig.skin.vertices[muscle.attach], axis=1), 1e-12)
-        edge = rig.params["mean_edge"]
-        # each spring about as stiff as `spring` skin edges (k_L / l per edge energy)
-        k = spring * 2.0 * rig.params["k_length"] / edge * np.ones(k_springs)
-        self.k_spring = k
-        k_node = self.gather @ k                                      # (u,)
-        pr = self.phi.reshape(-1, self.phi.shape[2])
-        ks = pr.T @ (np.repeat(k_node, 3)[:, None] * pr) / rho        # Phi_a^T K_s Phi_a
-        r = len(b.lam)
-        stiff = np.diag(sv.lam) + ks
-        self.stiff = stiff
-        self.step_inv = np.linalg.inv(np.eye(r) + h * np.diag(sv.c) + h * h * stiff)
-        self.pull = self.gather @ (k[:, None] * muscle.stretch) / rho  # (u, 3) per unit activation
+        uniq, inv = np.unique(muscle.attach, return_inverse=True)
+        phi = sv.rows(uniq)                                           # (u, 3, r)
+        k = spring * 2.0 * rig.params["k_length"] / rig.params["mean_edge"]
+        springs_at = np.bincount(inv, minlength=len(uniq)).astype(float)
+        pr = phi.reshape(-1, phi.shape[2])
+        ks = k * pr.T @ (np.repeat(springs_at, 3)[:, None] * pr) / rho   # Phi_a^T K_s Phi_a
+        self.stiff = np.diag(sv.lam) + ks
+        self.step_inv = np.linalg.inv(np.eye(len(b.lam)) + h * np.diag(sv.c) + h * h * self.stiff)
+        pull = np.zeros((len(uniq), 3))
+        np.add.at(pull, inv, k * muscle.stretch / rho)               # K_s u_m per unit stretch
+        self.fq_unit = np.einsum("kcr,kc->r", phi, pull)
         self.h, self.w = h, muscle.omega
-        self.l_init = l_init
         self.q = self.v = 0.0
 
     def step(self, a):
@@ -63,8 +55,7 @@ class _MuscleSystem:
         # the spring pull in the modes' frame; the rotation is applied to the displacement
         # (modal warping, see displacement()); rotating the forces too would feed the
         # rotation back into the stiff spring layer and is left out
-        fq = np.einsum("kcr,kc->r", self.phi, self.q * self.pull)
-        sv.v = self.step_inv @ (sv.v + h * (fq - self.stiff @ sv.q))
+        sv.v = self.step_inv @ (sv.v + h * (self.q * self.fq_unit - self.stiff @ sv.q))
         sv.q = sv.q + h * sv.v
 
 
@@ -177,3 +168,12 @@ class FaceSimulator:
             if progress:
                 progress(f, n_frames)
         return frames
+
+
+def displacement_cosine(u: np.ndarray, reference: np.ndarray, moving: float = 0.05) -> float:
+    """Cosine between two displacement fields (n, 3) over the reference's moving region
+    (nodes moving more than `moving` of its largest motion): the anatomy check of issue 3."""
+    m = np.linalg.norm(reference, axis=1)
+    sel = m > moving * m.max()
+    a, b = u[sel], reference[sel]
+    return float((a * b).sum() / (np.linalg.norm(a) * np.linalg.norm(b) + 1e-300))

@@ -207,17 +207,15 @@ class ModalWarpingSolver:
         self.q = self.q + self.h * self.v
         return self.displacement()
 
-    def rows(self, nodes: np.ndarray):
-        """Mode shapes and rotation fields restricted to some nodes: ((k,3,r), (k,3,r), valid)."""
+    def rows(self, nodes: np.ndarray) -> np.ndarray:
+        """Mode shapes at some nodes, (k, 3, r); zero at fixed nodes."""
         b = self.b
         pos = np.full(b.n, -1)
         pos[b.free] = np.arange(len(b.free))
         p = pos[np.asarray(nodes)]
         ok = p >= 0
         dof = (3 * np.maximum(p, 0)[:, None] + np.arange(3))
-        phi = b.phi[dof] * ok[:, None, None]
-        psi = b.psi[dof] * ok[:, None, None]
-        return phi, psi, ok
+        return b.phi[dof] * ok[:, None, None]
 
     def displacement(self, warp: bool = True) -> np.ndarray:
         """u = R (Phi q) node by node (modal warping), or the linear Phi q."""
@@ -241,20 +239,20 @@ class FullSolver:
     def __init__(self, energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, h: float,
                  xi: float = 2.0, zeta: float = 0.01, newton_iters: int = 8, tol: float = 1e-9):
         self.E, self.h = energy, h
-        self.free = np.nonzero(~np.asarray(fixed, bool))[0]
+        self.fixed = np.asarray(fixed, bool)
+        self.free = np.nonzero(~self.fixed)[0]
         self.dof = (3 * self.free[:, None] + np.arange(3)).ravel()
         self.m = np.repeat(mass, 3)
         self.K0 = energy.hessian(energy.rest)
-        self.xi, self.zeta = xi, zeta
+        self.C = (xi * sp.diags(self.m) + zeta * self.K0).tocsr()       # Rayleigh damping
         self.iters, self.tol = newton_iters, tol
         self.u = np.zeros((energy.n, 3))
         self.v = np.zeros((energy.n, 3))
 
     def step(self, force: np.ndarray) -> np.ndarray:
-        h, d = self.h, self.dof
+        h, d, C = self.h, self.dof, self.C
         x0 = self.E.rest + self.u
         v = self.v.ravel().copy()
-        C = self.xi * sp.diags(self.m) + self.zeta * self.K0
         f = force.ravel()
         for _ in range(self.iters):
             x = x0.ravel() + h * v
@@ -266,6 +264,6 @@ class FullSolver:
             dv = spla.spsolve(J[d][:, d].tocsc(), -res[d])
             v[d] += dv
         self.v = v.reshape(-1, 3)
-        self.v[~np.isin(np.arange(self.E.n), self.free)] = 0
+        self.v[self.fixed] = 0
         self.u = self.u + h * self.v
         return self.u.copy()
