@@ -198,19 +198,180 @@ def cmd_simulate(a):
     el = time.perf_counter() - t0
     out = Path(a.out)
     skin = rig.skin
+    wrinkle_note = ""
+    if a.wrinkles:
+        frames, skin, wrinkle_note = _wrinkle_frames(a, rig, tl, frames, out)
     from .mesh import atomic_path, write_glb
     for i, v in enumerate(frames):
         write_mesh(out / f"frame_{i:04d}.obj", skin.with_vertices(v))
     with atomic_path(out / "animation.glb") as tmp:
         write_glb(tmp, skin, {f"frame_{i:04d}": v for i, v in enumerate(frames)}, fps=a.fps)
     title = a.action or (Path(a.timeline).name if a.timeline else a.expression)
+    if a.wrinkles:
+        title += f", wrinkles, age {a.age:g}" if "age" not in tl.channels else ", wrinkles, age curve"
     pick = np.linspace(0, len(frames) - 1, min(6, len(frames))).round().astype(int)
     frame = shared_frame([frames[i] for i in pick])
     tiles = [render_mesh(skin, frames[i], size=(320, 320), frame=frame) for i in pick]
     save_png(out / "strip.png", contact_sheet(tiles, [f"t = {i / a.fps:.2f}s" for i in pick],
                                               title=f"{title} ({a.engine})"))
     steps = (len(frames) - 1) * sim.substeps
-    _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {steps} steps in {el:.2f}s")
+    _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {steps} steps in {el:.2f}s"
+         + wrinkle_note)
+    return 0
+
+
+def _wrinkle_frames(a, rig, tl, frames, out):
+    """The wrinkle layer on simulated frames (V&Y §5.3): refined skin, age per frame."""
+    from .wrinkles import WrinkledSkin, WrinkleMask
+    mask = WrinkleMask.load(a.wrinkles)
+    _check_mask_fits(mask, rig.skin, a.wrinkles, a.rig)
+    t0 = time.perf_counter()
+    ws = WrinkledSkin.build(rig.skin, mask, refine=not a.no_refine)
+    build_s = time.perf_counter() - t0
+    times = np.arange(len(frames)) / a.fps
+    ages = tl.channels["age"](times) if "age" in tl.channels else np.full(len(frames), a.age)
+    t0 = time.perf_counter()
+    fine = np.stack([ws.frame(v, float(g)) for v, g in zip(frames, ages)])
+    per = (time.perf_counter() - t0) / len(frames)
+    comp = np.stack([ws.layer.compression(ws.refined.carry(v) if ws.refined else v) for v in frames])
+    peak = int(np.argmin(np.minimum(comp, 1.0).mean(1)))         # the frame with the most compression
+    if a.maps:
+        from .wrinkles.maps import bake, save_maps
+        if rig.skin.uv is None:
+            raise MimicaError(f"--maps: the rig's skin has no texture coordinates ({a.rig}); rebuild the rig "
+                              "from a mesh with uv")
+        Xp = ws.refined.carry(frames[peak]) if ws.refined else frames[peak]
+        h, n = bake(ws.layer, rig.skin, Xp, float(ages[peak]), a.maps)
+        save_maps(out / f"wrinkles_frame_{peak:04d}", h, n)
+    most = np.argsort(comp[peak])[:3]
+    names = ws.layer.mask.names()
+    note = (f"; wrinkles: {len(names)} on {ws.mesh.n_vertices} nodes (built in {build_s:.1f}s), "
+            f"{1000 * per:.2f} ms/frame; most compressed at t={peak / a.fps:.2f}s: "
+            + ", ".join(f"{names[i]} {comp[peak, i]:.2f}" for i in most)
+            + (f"; maps of that frame -> {out}/wrinkles_frame_{peak:04d}_*" if a.maps else ""))
+    return fine, ws.mesh, note
+
+
+def _check_mask_fits(mask, skin, mask_path, face_path):
+    from .mesh.query import TriangleLocator
+    pts = np.vstack([w.points for w in mask.wrinkles])
+    d = TriangleLocator(skin.vertices, skin.triangles).closest(pts)[3]
+    size = float(np.linalg.norm(np.ptp(skin.vertices, axis=0)))
+    if np.median(d) > 0.02 * size:
+        raise MimicaError(f"{mask_path}: the mask does not lie on {face_path} (median distance "
+                          f"{np.median(d):.3g}); make one for this face with `mimica wrinkle-mask`")
+
+
+def _mask_for(face, lm, path_anchors=None, reference=None):
+    """The reference mask on a face: carried exactly on ICT-FaceKit topology, else by V&Y §3.2."""
+    from .data import ICT_HEAD_VERTICES, ICTModel, is_ict_topology
+    from .wrinkles import WrinkleMask, reference_mask, transfer_mask
+    from .wrinkles.mask import BOUNDARY
+    ref_mesh = ICTModel(ICT_HEAD_VERTICES).mesh
+    mask = reference_mask() if reference is None else WrinkleMask.load(reference)
+    anchors = None
+    if path_anchors:
+        edited = WrinkleMask.load(path_anchors)
+        _check_mask_fits(edited, face, path_anchors, face.name)
+        from .wrinkles import snap_mask
+        anchors = snap_mask(edited, face).anchors
+    if anchors is None and reference is None and is_ict_topology(face):
+        from .data import ICT_FACE_AREA_VERTICES
+        from .mesh.query import TriangleLocator
+        from .wrinkles.mask import Wrinkle
+        if face.n_vertices < ICT_HEAD_VERTICES:                    # the face area alone
+            ref_mesh = ICTModel(ICT_FACE_AREA_VERTICES).mesh
+        loc = TriangleLocator(ref_mesh.vertices, ref_mesh.triangles)
+        fv = face.vertices
+
+        def carry(p):
+            t, b, _, _ = loc.closest(p)
+            return np.einsum("ij,ijk->ik", b, fv[ref_mesh.triangles[t]])
+        ws = [Wrinkle(w.name, carry(w.points), w.muscles, w.emphasis, w.width, w.profile, w.fold)
+              for w in mask.wrinkles]
+        return WrinkleMask(ws, carry(mask.anchors), face.name), "carried on the ICT-FaceKit topology"
+    assert mask.anchors.shape[0] == 68 + len(BOUNDARY)
+    new, info = transfer_mask(mask, ref_mesh, face, lm, target_anchors=anchors)
+    return new, (f"spring mesh relaxed in {info.iterations} steps (residual {info.residual:.1e}), "
+                 f"{info.seconds:.2f}s")
+
+
+def cmd_wrinkle_mask(a):
+    from .landmarks import landmarks_for
+    from .mesh import read_mesh
+    face = read_mesh(a.face)
+    lm = landmarks_for(face, a.landmarks, "--landmarks", str(a.face)).positions(face)
+    mask, how = _mask_for(face, lm, a.anchors, a.reference)
+    mask.face = Path(a.face).name
+    if a.show:
+        from .render import contact_sheet, save_png
+        from .wrinkles.show import mask_image
+        save_png(a.show, contact_sheet([mask_image(face, mask, size=560), mask_image(face, mask, size=560, yaw=35)],
+                                       title=f"wrinkle mask on {Path(a.face).name}"))
+    mask.save(a.out)
+    _say(f"{len(mask)} wrinkles -> {a.out} ({how})" + (f"; picture -> {a.show}" if a.show else ""))
+    return 0
+
+
+def face_frame(lm, margin=0.95):
+    """A render framing around the face (from its landmarks), forehead included."""
+    c = np.nanmean(lm, 0)
+    top = np.nanmean(lm[17:27], 0)
+    c = c + 0.45 * (top - c)
+    half = margin * 0.5 * max(np.ptp(lm[:, 0]), np.ptp(lm[:, 1]) * 1.6)
+    return c, half
+
+
+def cmd_age(a):
+    from .anim import Timeline
+    from .landmarks import landmarks_for
+    from .mesh import read_mesh
+    from .physics.face import FaceSimulator
+    from .render import contact_sheet, render_mesh, save_png
+    from .rig import Rig, build_rig
+    from .wrinkles import WrinkledSkin, WrinkleMask
+    try:
+        ages = [float(x) for x in a.ages.split(",")]
+        assert ages and all(0 <= x <= 150 for x in ages)
+    except (ValueError, AssertionError):
+        raise MimicaError(f"--ages {a.ages!r}: expected ages in years, e.g. 25,45,65,85") from None
+    if not str(a.out).lower().endswith(".png"):
+        raise MimicaError(f"--out {a.out}: the age sheet is a PNG picture; name it *.png")
+    face = read_mesh(a.face)
+    lm = landmarks_for(face, a.landmarks, "--landmarks", str(a.face)).positions(face)
+    t0 = time.perf_counter()
+    if a.rig:
+        rig = Rig.load(a.rig)
+        if rig.skin.n_vertices != face.n_vertices:
+            raise MimicaError(f"{a.rig}: the rig's skin has {rig.skin.n_vertices} nodes, {a.face} has "
+                              f"{face.n_vertices}; build the rig from this face")
+    else:
+        bar = _progress(range(1), 1, "rig (all muscles)")
+
+        def progress(k, n, name):
+            bar.total = n
+            bar.set_postfix_str(name)
+            bar.update(1 if k else 0)
+        rig = build_rig(face, lm, muscles="all", progress=progress)
+        bar.close()
+    names = [m.name for m in rig.muscles]
+    tl = Timeline.preset(a.expression, names, duration=1.2)
+    expr = FaceSimulator(rig).run(lambda t: tl.values(t, names), 1.2)[-1]
+    if a.wrinkles:
+        mask = WrinkleMask.load(a.wrinkles)
+        _check_mask_fits(mask, face, a.wrinkles, a.face)
+    else:
+        mask, _ = _mask_for(face, lm)
+    ws = WrinkledSkin.build(face, mask)
+    frame = face_frame(lm)
+    tiles, labels = [], []
+    for name, X in (("neutral", face.vertices), (a.expression, expr)):
+        for g in ages:
+            tiles.append(render_mesh(ws.mesh, ws.frame(X, g), size=(a.size, a.size), frame=frame))
+            labels.append(f"{name}, age {g:g}")
+    save_png(a.out, contact_sheet(tiles, labels, columns=len(ages),
+                                  title=f"{Path(a.face).name}: wrinkles by age (Viaud & Yahia 1992)"))
+    _say(f"{len(tiles)} renders -> {a.out} ({time.perf_counter() - t0:.1f}s)")
     return 0
 
 
@@ -285,8 +446,37 @@ def build_parser():
     s.add_argument("--engine", choices=["shell", "sprung"], default="shell",
                    help="shell: Kim 2020 shells in modal coordinates; sprung: Viaud & Yahia 1992 force fields")
     s.add_argument("--warp", action="store_true", help="apply modal warping rotations to the output (experimental)")
+    s.add_argument("--wrinkles", metavar="MASK", help="wrinkle mask of this face (`mimica wrinkle-mask`): "
+                   "bulges follow the skin's compression and the age")
+    s.add_argument("--age", type=float, default=50.0, help="age in years for the wrinkles (a timeline's "
+                   "'age' channel overrides it)")
+    s.add_argument("--no-refine", action="store_true", help="keep the rig's mesh (no refinement along wrinkles)")
+    s.add_argument("--maps", type=int, nargs="?", const=1024, metavar="SIZE",
+                   help="also write displacement and normal maps (SIZE px, default 1024) of the most "
+                        "compressed frame")
     s.add_argument("--out", required=True, help="output folder")
     s.set_defaults(func=cmd_simulate)
+
+    w = sub.add_parser("wrinkle-mask", help="carry the reference wrinkle mask onto a face (Viaud & Yahia §3.2)")
+    w.add_argument("face", help="face mesh (OBJ/PLY/glTF), any topology")
+    w.add_argument("--landmarks", help="68-point landmark JSON (built in for ICT-FaceKit)")
+    w.add_argument("--anchors", metavar="MASK", help="a mask of this face whose anchors you moved: relax again "
+                   "with those characteristic points")
+    w.add_argument("--reference", metavar="MASK", help="another reference mask on the ICT-FaceKit generic face")
+    w.add_argument("--show", metavar="PNG", help="also draw the mask on the face")
+    w.add_argument("--out", required=True, help="mask file to write (.wrinkles, JSON)")
+    w.set_defaults(func=cmd_wrinkle_mask)
+
+    ag = sub.add_parser("age", help="a face with its wrinkles at several ages, neutral and with an expression")
+    ag.add_argument("face", help="face mesh (OBJ/PLY/glTF)")
+    ag.add_argument("--ages", default="25,45,65,85", help="ages in years, comma-separated")
+    ag.add_argument("--expression", default="happiness", help="expression preset (see `simulate`)")
+    ag.add_argument("--landmarks", help="68-point landmark JSON (built in for ICT-FaceKit)")
+    ag.add_argument("--rig", help="a rig of this face (default: built with all muscles, about a minute)")
+    ag.add_argument("--wrinkles", metavar="MASK", help="wrinkle mask of this face (default: the reference, carried)")
+    ag.add_argument("--size", type=int, default=360, help="pixels per picture")
+    ag.add_argument("--out", required=True, help="PNG contact sheet")
+    ag.set_defaults(func=cmd_age)
 
     d = sub.add_parser("demo", help="transfer bundled ICT-FaceKit expressions; write meshes and a contact sheet")
     d.add_argument("--out", default="out/demo")

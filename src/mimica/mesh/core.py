@@ -117,6 +117,18 @@ class Mesh:
         return t
 
     @cached_property
+    def uv_triangles(self) -> np.ndarray | None:
+        """(T, 3) texture-coordinate indices of the corners of `triangles` (None without uv)."""
+        if self.uv is None or self.face_uv_indices is None:
+            return None
+        s = self.face_sizes
+        ntri = np.maximum(s - 2, 0)
+        first = np.repeat(self.face_starts[:-1], ntri)
+        k = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri) + 1
+        fu = self.face_uv_indices
+        return np.stack([fu[first], fu[first + k], fu[first + k + 1]], axis=1)
+
+    @cached_property
     def tri_face(self) -> np.ndarray:
         """For each triangle of `triangles`, the polygon it came from."""
         _ = self.triangles

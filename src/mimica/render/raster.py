@@ -104,10 +104,8 @@ def render_mesh(mesh: Mesh, vertices=None, size=(512, 512), yaw=0.0, pitch=0.0, 
     v = mesh.vertices if vertices is None else np.asarray(vertices)
     w, h = size
     rot = view_matrix(yaw, pitch)
-    cam = (v - (frame[0] if frame else 0.5 * (v.min(0) + v.max(0)))) @ rot.T
-    half = frame[1] if frame else 0.5 * max(np.ptp(cam[:, 0]), np.ptp(cam[:, 1])) * 1.05
-    s = 0.5 * min(w, h) / half
-    xy = np.stack([w / 2 + cam[:, 0] * s, h / 2 - cam[:, 1] * s], 1)
+    frame = frame or framing(v, yaw, pitch)
+    xy, cam = project(v, frame, size, yaw, pitch)
     tris = mesh.triangles
     tri_id, bary = rasterize(xy, cam[:, 2], tris, w, h)
     img = np.empty((h, w, 3))
@@ -131,9 +129,22 @@ def render_mesh(mesh: Mesh, vertices=None, size=(512, 512), yaw=0.0, pitch=0.0, 
     return (img * 255 + 0.5).astype(np.uint8)
 
 
+def framing(v, yaw=0.0, pitch=0.0, margin=1.05):
+    """The framing render_mesh uses for one mesh: its bounding box centre, half extent."""
+    c = 0.5 * (v.min(0) + v.max(0))
+    cam = (v - c) @ view_matrix(yaw, pitch).T
+    return c, 0.5 * max(np.ptp(cam[:, 0]), np.ptp(cam[:, 1])) * margin
+
+
+def project(points, frame, size, yaw=0.0, pitch=0.0):
+    """Pixel coordinates (m, 2) and camera-space points (m, 3) of 3D points, as render_mesh
+    draws them with this framing (center, half extent) and image size (w, h)."""
+    w, h = size
+    cam = (np.asarray(points) - frame[0]) @ view_matrix(yaw, pitch).T
+    s = 0.5 * min(w, h) / frame[1]
+    return np.stack([w / 2 + cam[:, 0] * s, h / 2 - cam[:, 1] * s], 1), cam
+
+
 def shared_frame(vertex_sets, yaw=0.0, pitch=0.0, margin=1.05):
     """A framing (center, half extent) that fits every given (n, 3) array in the view."""
-    allv = np.concatenate([np.asarray(v) for v in vertex_sets])
-    c = 0.5 * (allv.min(0) + allv.max(0))
-    cam = (allv - c) @ view_matrix(yaw, pitch).T
-    return c, 0.5 * max(np.ptp(cam[:, 0]), np.ptp(cam[:, 1])) * margin
+    return framing(np.concatenate([np.asarray(v) for v in vertex_sets]), yaw, pitch, margin)

@@ -60,6 +60,8 @@ class Rig:
         path = Path(path)
         arrays = {"skin_v": self.skin.vertices, "skin_fi": self.skin.face_indices,
                   "skin_fs": self.skin.face_starts, "landmarks": self.landmarks}
+        if self.skin.uv is not None and self.skin.face_uv_indices is not None:
+            arrays.update(skin_uv=self.skin.uv, skin_fuv=self.skin.face_uv_indices)   # for texture maps
         meta = {"format": FORMAT, "params": self.params, "muscles": []}
         for i, m in enumerate(self.muscles):
             meta["muscles"].append({"name": m.name, "omega": m.omega})
@@ -86,7 +88,8 @@ class Rig:
         if meta.get("format") != FORMAT:
             raise MimicaError(f"{path}: rig format {meta.get('format')!r}, expected {FORMAT!r}; rebuild it with `mimica rig`")
         try:
-            skin = Mesh(z["skin_v"], z["skin_fi"], z["skin_fs"])
+            uv = (z["skin_uv"], z["skin_fuv"]) if "skin_uv" in z.files else (None, None)
+            skin = Mesh(z["skin_v"], z["skin_fi"], z["skin_fs"], *uv)
             W = rotation_operator(skin.vertices, skin.triangles, smooth=WARP_SMOOTH)
             muscles = [Muscle(d["name"], z[f"m{i}_nodes"], z[f"m{i}_stretch"], float(d["omega"]),
                               z[f"m{i}_attach"], z[f"m{i}_roi"], _get_basis(z, f"m{i}_b", W))

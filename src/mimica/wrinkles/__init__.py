@@ -1,7 +1,44 @@
-"""Wrinkles (Viaud & Yahia 1992): so far the cylinder fit and flattening (§3.1) and the
-bulge model (§5: dilation law, arc-length table, its inversion)."""
+"""Wrinkles (Viaud & Yahia 1992): the wrinkle mask and its transfer to any face (§3), the
+bulge model (§5) driven by the skin's compression and by age, refinement along wrinkle
+lines, and displacement/normal maps."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
 
 from .bulge import ArcLengthTable, arc_length, dilation
 from .cylinder import CylinderFit, fit_cylinder, flatten
+from .layer import WrinkleLayer
+from .mask import Wrinkle, WrinkleMask, reference_mask
+from .refine import Refined, refine_along
+from .transfer import snap_mask, transfer_mask
 
-__all__ = ["ArcLengthTable", "arc_length", "dilation", "CylinderFit", "fit_cylinder", "flatten"]
+
+@dataclass
+class WrinkledSkin:
+    """A skin mesh refined along the mask's lines and its wrinkle layer: `frame(X, age)` takes
+    positions of the coarse skin (a simulated frame) to the wrinkled fine skin."""
+    coarse: object
+    refined: Refined | None
+    layer: WrinkleLayer
+
+    @classmethod
+    def build(cls, skin, mask: WrinkleMask, refine: bool = True) -> "WrinkledSkin":
+        mask = snap_mask(mask, skin)
+        r = refine_along(skin, mask) if refine else None
+        return cls(skin, r, WrinkleLayer(r.mesh if r else skin, mask))
+
+    @property
+    def mesh(self):
+        return self.layer.mesh
+
+    def frame(self, X, age: float) -> np.ndarray:
+        Xf = self.refined.carry(X) if self.refined is not None else X
+        return self.layer.apply(Xf, age)
+
+
+__all__ = ["ArcLengthTable", "arc_length", "dilation", "CylinderFit", "fit_cylinder", "flatten",
+           "WrinkleLayer", "Wrinkle", "WrinkleMask", "reference_mask", "Refined", "refine_along",
+           "snap_mask", "transfer_mask", "WrinkledSkin"]

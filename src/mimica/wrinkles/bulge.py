@@ -31,28 +31,32 @@ def dilation(d_init, age, age0=AGE_0, age_max=AGE_MAX, dil_max=DIL_MAX):
     return np.asarray(d_init) * np.maximum(1.0, 1.0 + (np.asarray(age) - age0) * dil_max / (age_max - age0))
 
 
-def control_points(d, a, alpha):
-    """Eqs. 11-12 for arrays d, a, alpha (broadcast): P0, P0', P1', P1 as (..., 2) each."""
+def control_points(d, a, alpha, skew=1.0):
+    """Eqs. 11-12 for arrays d, a, alpha (broadcast): P0, P0', P1', P1 as (..., 2) each.
+
+    skew < 1 gives the asymmetric section (V&Y §5.2, nasolabial folds): the tangent at P1
+    has `skew` times the norm and the angle of the one at P0, so the fuller side is P0's.
+    """
     d, a, alpha = np.broadcast_arrays(np.asarray(d, float), np.asarray(a, float), np.asarray(alpha, float))
     z = np.zeros_like(d)
     p0 = np.stack([z, z], -1)
     p0p = np.stack([a * np.cos(alpha), a * np.sin(alpha)], -1)
-    p1p = np.stack([d - a * np.cos(alpha), a * np.sin(alpha)], -1)
+    p1p = np.stack([d - skew * a * np.cos(skew * alpha), skew * a * np.sin(skew * alpha)], -1)
     p1 = np.stack([d, z], -1)
     return p0, p0p, p1p, p1
 
 
-def curve(d, a, alpha, u):
+def curve(d, a, alpha, u, skew=1.0):
     """Points of the cross-section C(u), (..., len(u), 2)."""
-    p0, p0p, p1p, p1 = (p[..., None, :] for p in control_points(d, a, alpha))
+    p0, p0p, p1p, p1 = (p[..., None, :] for p in control_points(d, a, alpha, skew))
     u = np.asarray(u)[:, None]
     b = [(1 - u) ** 3, 3 * u * (1 - u) ** 2, 3 * u ** 2 * (1 - u), u ** 3]
     return b[0] * p0 + b[1] * p0p + b[2] * p1p + b[3] * p1
 
 
-def arc_length(d, a, alpha):
+def arc_length(d, a, alpha, skew=1.0):
     """Eq. 13 by 48-point Gauss-Legendre quadrature (the reference the table stands in for)."""
-    p0, p0p, p1p, p1 = (p[..., None, :] for p in control_points(d, a, alpha))
+    p0, p0p, p1p, p1 = (p[..., None, :] for p in control_points(d, a, alpha, skew))
     u = _GL_U[:, None]
     dc = 3 * ((1 - u) ** 2 * (p0p - p0) + 2 * u * (1 - u) * (p1p - p0p) + u ** 2 * (p1 - p1p))
     return np.einsum("...k,k->...", np.linalg.norm(dc, axis=-1), _GL_W)
@@ -72,12 +76,13 @@ class ArcLengthTable:
     rho: np.ndarray
     alpha: np.ndarray
     s: np.ndarray             # (len(rho), len(alpha)): S(1, rho, alpha)
+    skew: float = 1.0
 
     @classmethod
-    def build(cls, rho_max=5.0, rho_steps=200, alpha_max=np.pi, alpha_steps=160):
+    def build(cls, rho_max=5.0, rho_steps=200, alpha_max=np.pi, alpha_steps=160, skew=1.0):
         rho = np.linspace(0.0, rho_max, rho_steps + 1)
         al = np.linspace(0.0, alpha_max, alpha_steps + 1)
-        return cls(rho, al, arc_length(1.0, rho[:, None], al[None, :]))
+        return cls(rho, al, arc_length(1.0, rho[:, None], al[None, :], skew), skew)
 
     @staticmethod
     def _cell(grid, x):
@@ -114,3 +119,13 @@ class ArcLengthTable:
         a = np.where(enough, a0, 0.5 * (rlo + rhi) * d)
         alpha = np.where(enough, 0.5 * (lo + hi), alpha_max)
         return a, alpha
+
+    def inverse(self, rho0=1.0 / 3.0, alpha_max=np.pi / 2, steps=4096):
+        """The inversion for one starting tangent norm a0 = rho0 d, tabulated once: for a length
+        ratio q = d_real / d, (alpha(q), rho(q)) with S(d, rho d, alpha) = q d.  Returns
+        (q grid, alpha, rho); read it with np.interp (the per-frame path of the wrinkle layer)."""
+        q_lo = float(self._s(np.array(rho0), np.array(0.0)))
+        q_hi = float(self._s(np.array(self.rho[-1]), np.array(alpha_max)))
+        q = q_lo + (q_hi - q_lo) * np.linspace(0.0, 1.0, steps) ** 2   # dense near q = 1 (alpha ~ sqrt)
+        a, al = self.solve(np.ones_like(q), q, np.full_like(q, rho0), alpha_max=alpha_max, iterations=50)
+        return q, al, a

@@ -92,12 +92,16 @@ def fit_cylinder(points, axis_guess=(0.0, 1.0, 0.0), origin_guess=None, radius_g
     return CylinderFit(center + scale * g, axis, abs(r) * scale, float(res.fun), int(res.nit))
 
 
-def flatten(points, cyl: CylinderFit, up=None) -> np.ndarray:
-    """Cylindrical projection unrolled to the plane: (arc length r*theta, height), (n, 2)."""
+def flatten(points, cyl: CylinderFit, forward=None) -> np.ndarray:
+    """Cylindrical projection unrolled to the plane: (arc length r*theta, height), (n, 2).
+
+    theta = 0 faces `forward` (default: the points' mean direction from the axis), so two
+    faces flattened with the same forward direction line up.
+    """
     v = np.asarray(points) - cyl.origin
     h = v @ cyl.axis
     radial = v - np.outer(h, cyl.axis)
-    ref = radial.mean(0)
+    ref = radial.mean(0) if forward is None else np.asarray(forward, float).copy()
     ref -= cyl.axis * (ref @ cyl.axis)
     if np.linalg.norm(ref) < 1e-12:
         ref = np.cross(cyl.axis, [1.0, 0, 0] if abs(cyl.axis[0]) < 0.9 else [0, 1.0, 0])
@@ -105,3 +109,8 @@ def flatten(points, cyl: CylinderFit, up=None) -> np.ndarray:
     e2 = np.cross(cyl.axis, e1)
     theta = np.arctan2(radial @ e2, radial @ e1)
     return np.stack([cyl.radius * theta, h], axis=1)
+
+
+def radial_distance(points, cyl: CylinderFit) -> np.ndarray:
+    v = np.asarray(points) - cyl.origin
+    return np.linalg.norm(v - np.outer(v @ cyl.axis, cyl.axis), axis=1)

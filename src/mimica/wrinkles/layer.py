@@ -1,0 +1,312 @@
+"""Wrinkles on a moving face (Viaud & Yahia 1992, §5.2-5.3): every frame, the compression
+across each wrinkle and the age set the bulge of its cross-section.
+
+Each wrinkle's line is cut into cross-sections a fraction of its width apart.  A section
+has a centre C on the line and two ends P0, P1 on the surface, `width` apart across the
+line, all three bound to the skin by barycentric coordinates so they move with it.  At a
+frame, with d = |P0 P1| now and d0 at rest:
+
+* the rest cross-section spans the arc length S0 = S(d0, d0/3, beta) (eq. 13), beta the
+  angle between the chord and the surface at the ends (the 3D case, §5.2: alpha runs from
+  alpha_min = beta);
+* the skin keeps its length, grown by age: d_real = dil(S0, age) (eq. 10);
+* the section over the current chord d must reach d_real: (a, alpha) from the table's
+  inversion (eq. 14, §5.1), tabulated once for the starting tangent a0 = d/3;
+* the skin near the line is moved along the surface normal by the section's height above
+  its rest shape, y(alpha) - y(beta), times the wrinkle's emphasis; "in" folds it inward
+  (a furrow), "out" outward.
+
+A young face at rest (age <= AGE_0, d = d0) has alpha = beta and no wrinkle; compression
+(d < d0) or age (d_real > S0) raise it.  The heights are exact functions of a point's place
+across the line, so the same state also bakes into a displacement map (`maps.py`) at any
+resolution.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..errors import MimicaError
+from ..mesh import Mesh
+from ..mesh.query import TriangleLocator
+from .bulge import AGE_0, AGE_MAX, DIL_MAX, ArcLengthTable, dilation
+from .mask import WrinkleMask
+from .surface import cardinal_spline, resample_polyline
+
+SKEW = {"symmetric": 1.0, "asymmetric": 0.5}
+RHO0 = 1.0 / 3.0             # a0 = d / 3: at alpha = 0 the section is the straight chord
+Q_MAX = 4.0                  # sections compressed to a quarter of their length and beyond: capped
+_TABLES, _PROFILES = {}, {}
+
+
+def _inverse(skew):
+    if skew not in _TABLES:
+        _TABLES[skew] = ArcLengthTable.build(skew=skew).inverse(RHO0)
+    return _TABLES[skew]
+
+
+class ProfileTable:
+    """The unit-chord section height y(q, t) for the length ratio q = d_real / d and the place
+    t across: alpha and a follow from q alone (a0 = d/3), so the whole bulge is a function of
+    two variables, tabulated once and read bilinearly per point and frame."""
+
+    def __init__(self, skew: float, nq: int = 256, nt: int = 65):
+        qq, al, rr = _inverse(skew)
+        self.nq, self.nt = nq, nt
+        x = np.linspace(0.0, 1.0, nq)
+        q = 1.0 + (Q_MAX - 1.0) * x * x              # alpha ~ sqrt(q - 1): uniform in x
+        t = np.linspace(0.0, 1.0, nt)
+        alpha, rho = np.interp(q, qq, al), np.interp(q, qq, rr)
+        self.y = profile(t[None, :], rho[:, None], alpha[:, None], skew, 12).ravel()
+
+    def __call__(self, q, t):
+        x = np.sqrt(np.clip((q - 1.0) / (Q_MAX - 1.0), 0.0, 1.0)) * (self.nq - 1)
+        i = np.minimum(x.astype(np.intp), self.nq - 2)
+        fx = x - i
+        tt = t * (self.nt - 1)
+        j = np.minimum(tt.astype(np.intp), self.nt - 2)
+        ft = tt - j
+        k = i * self.nt + j
+        y = self.y
+        lo = y[k] + ft * (y[k + 1] - y[k])
+        hi = y[k + self.nt] + ft * (y[k + self.nt + 1] - y[k + self.nt])
+        return lo + fx * (hi - lo)
+
+
+def _profiles(skew):
+    if skew not in _PROFILES:
+        _PROFILES[skew] = ProfileTable(skew)
+    return _PROFILES[skew]
+
+
+def profile(t, rho, alpha, skew, iterations=4):
+    """Height of the unit-chord section (eqs. 11-12, d = 1) at x = t across it, t in [0, 1]."""
+    c0, s0 = rho * np.cos(alpha), rho * np.sin(alpha)
+    if np.isscalar(skew) and skew == 1.0:
+        c1, s1 = c0, s0
+    else:
+        sa = skew * alpha
+        c1, s1 = skew * rho * np.cos(sa), skew * rho * np.sin(sa)
+    # Bezier x(u) = A u^3 + B u^2 + C u (x0 = 0, x3 = 1); Newton on x(u) = t from u = t
+    C = 3.0 * c0
+    B = 3.0 * (1.0 - c1) - 6.0 * c0
+    A = 1.0 - 3.0 * (1.0 - c1) + 3.0 * c0
+    u = np.array(np.broadcast_to(t, np.broadcast_shapes(np.shape(t), np.shape(c0))), float)
+    for _ in range(iterations):                 # x is monotone (a cos alpha <= d/3)
+        x = ((A * u + B) * u + C) * u
+        dx = (3.0 * A * u + 2.0 * B) * u + C
+        u -= (x - t) / np.maximum(dx, 1e-3)
+        np.clip(u, 0.0, 1.0, out=u)
+    v = 1.0 - u
+    return 3.0 * u * v * (v * s0 + u * s1)
+
+
+@dataclass
+class Binding:
+    """Points tied to the wrinkle sections: which point, which two sections, where across."""
+    point: np.ndarray         # (m,) index into the bound point set
+    k0: np.ndarray            # (m,) section before, (m,) after, and the weight of the after
+    k1: np.ndarray
+    f: np.ndarray
+    t: np.ndarray             # across the line, 0 at P0 .. 1 at P1
+    gain: np.ndarray          # emphasis x taper x fold sign
+    rest: np.ndarray          # the rest section's height at t (unit chord), subtracted
+    kn: np.ndarray            # the nearer of the two sections (its normal is used)
+    groups: list              # [(skew, slice)]: points sorted by section profile
+    n_points: int
+
+
+class WrinkleLayer:
+    """The mask's wrinkles on one skin mesh; `apply(X, age)` adds the bulges to positions X."""
+
+    def __init__(self, mesh: Mesh, mask: WrinkleMask, spacing: float = 0.6, taper: float = 0.3,
+                 vertices=None):
+        self.mesh = mesh
+        X0 = mesh.vertices if vertices is None else np.asarray(vertices)
+        self.rest = X0
+        tris = mesh.triangles
+        loc = TriangleLocator(X0, tris)
+        normals = mesh.vertex_normals(X0)
+        self.mask = mask
+        sec_tri, sec_bary, wid, starts = [], [], [], [0]
+        self.lines = []                                 # dense centre lines, for binding
+        for i, w in enumerate(mask.wrinkles):
+            _, _, pts, _ = loc.closest(cardinal_spline(w.points, 16))
+            _, _, pts, _ = loc.closest(resample_polyline(pts, spacing * w.width, min_points=4))
+            t = np.gradient(pts, axis=0)
+            t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
+            tc, bc, cq, _ = loc.closest(pts)
+            n = np.einsum("ij,ijk->ik", bc, normals[tris[tc]])
+            b = np.cross(n, t)
+            b /= np.maximum(np.linalg.norm(b, axis=1, keepdims=True), 1e-12)
+            t0, b0, _, _ = loc.closest(cq - 0.5 * w.width * b)
+            t1, b1, _, _ = loc.closest(cq + 0.5 * w.width * b)
+            sec_tri.append(np.stack([t0, t1, tc], 1))
+            sec_bary.append(np.stack([b0, b1, bc], 1))
+            wid.append(np.full(len(pts), i))
+            starts.append(starts[-1] + len(pts))
+        self.sec_vid = tris[np.concatenate(sec_tri)]            # (K, 3 points, 3 vertices)
+        self.sec_bary = np.concatenate(sec_bary)                 # (K, 3, 3)
+        self.sec_wrinkle = np.concatenate(wid)
+        self.starts = np.array(starts)
+        K = len(self.sec_wrinkle)
+        idx = np.arange(K)
+        first = self.starts[self.sec_wrinkle]
+        last = self.starts[self.sec_wrinkle + 1] - 1
+        self.prev, self.next = np.maximum(idx - 1, first), np.minimum(idx + 1, last)
+        self.skew = np.array([SKEW[mask.wrinkles[i].profile] for i in self.sec_wrinkle])
+        P0, P1, C = self._points(X0)
+        chord = P1 - P0
+        self.d0 = np.linalg.norm(chord, axis=1)
+        if (self.d0 <= 0).any():
+            raise MimicaError("wrinkle mask: a cross-section has zero width on this face")
+        c = chord / self.d0[:, None]
+        n_end = [np.einsum("ij,ijk->ik", self.sec_bary[:, e], normals[self.sec_vid[:, e]]) for e in (0, 1)]
+        beta = 0.5 * (np.arcsin(np.clip(-(c * n_end[0]).sum(1), -1, 1)) + np.arcsin(np.clip((c * n_end[1]).sum(1), -1, 1)))
+        self.beta = np.clip(np.abs(beta), 0.0, 1.2)
+        self.s0 = np.empty(K)                                     # rest arc length ratio S0 / d0
+        for sk in np.unique(self.skew):
+            q, al, _ = _inverse(sk)
+            m = self.skew == sk
+            self.s0[m] = np.interp(self.beta[m], al, q)          # invert alpha(q) (monotone)
+        nrm = self._normals(P0, P1, C)
+        n_rest = np.einsum("ij,ijk->ik", self.sec_bary[:, 2], normals[self.sec_vid[:, 2]])
+        self.orient = np.sign((nrm * n_rest).sum(1) + 1e-12)
+        # dense centre lines, for binding points to sections
+        sub = 8
+        fr = np.linspace(0, 1, sub, endpoint=False)
+        ks = np.concatenate([np.arange(self.starts[i], self.starts[i + 1] - 1) for i in range(len(mask.wrinkles))])
+        self._dense_k = np.r_[np.repeat(ks, sub), self.starts[1:] - 1]
+        self._dense_f = np.r_[np.tile(fr, len(ks)), np.zeros(len(mask.wrinkles))]
+        nk = np.minimum(self._dense_k + 1, last[self._dense_k])
+        self._dense_p = (C[self._dense_k] * (1 - self._dense_f[:, None]) + C[nk] * self._dense_f[:, None])
+        self._tree = cKDTree(self._dense_p)
+        seg = np.linalg.norm(C[self.next] - C[idx], axis=1) * (self.next > idx)
+        arc = np.zeros(K)
+        for i in range(len(mask.wrinkles)):
+            s, e = self.starts[i], self.starts[i + 1]
+            arc[s:e] = np.r_[0.0, np.cumsum(seg[s:e - 1])]
+        self._arc = arc
+        self._length = np.array([arc[self.starts[i + 1] - 1] for i in range(len(mask.wrinkles))])
+        self.taper = taper
+        self.width = np.array([w.width for w in mask.wrinkles])
+        self.gain = np.array([w.emphasis * (-1.0 if w.fold == "in" else 1.0) for w in mask.wrinkles])
+        self.vertex_binding = self.bind(X0)
+
+    # ------------------------------------------------------------------ geometry
+    def _points(self, X):
+        Q = np.einsum("kpj,kpjc->kpc", self.sec_bary, X[self.sec_vid])
+        return Q[:, 0], Q[:, 1], Q[:, 2]
+
+    def _normals(self, P0, P1, C):
+        n = -np.cross(P1 - P0, C[self.next] - C[self.prev])
+        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+
+    def bind(self, points, rest_vertices=None) -> Binding:
+        """Tie points (m, 3) on the rest surface to the sections whose band holds them."""
+        X0 = self.rest if rest_vertices is None else rest_vertices
+        P0, P1, C = self._points(X0)
+        p = np.asarray(points, float)
+        reach = 0.6 * float(self.width.max())
+        dist, j = self._tree.query(p, distance_upper_bound=reach)
+        cand = np.nonzero(np.isfinite(dist))[0]
+        j = j[cand]
+        k0, f = self._dense_k[j], self._dense_f[j]
+        w = self.sec_wrinkle[k0]
+        k1 = np.minimum(k0 + 1, self.starts[w + 1] - 1)
+        lerp = lambda a: a[k0] * (1 - f[:, None]) + a[k1] * f[:, None]  # noqa: E731
+        c, a0, a1 = lerp(C), lerp(P0), lerp(P1)
+        across = a1 - a0
+        dd = np.linalg.norm(across, axis=1)
+        rel = p[cand] - c
+        t = 0.5 + (rel * across).sum(1) / np.maximum(dd * dd, 1e-30)
+        tang = C[self.next[k0]] - C[self.prev[k0]]
+        tang /= np.maximum(np.linalg.norm(tang, axis=1, keepdims=True), 1e-30)
+        ta = (rel * tang).sum(1)
+        along = np.abs(ta)
+        height = np.linalg.norm(rel - ta[:, None] * tang - (t - 0.5)[:, None] * across, axis=1)
+        step = np.linalg.norm(C[k1] - C[k0], axis=1) / 8 + 1e-12
+        ok = (t > 0) & (t < 1) & (along <= step + 0.05 * self.width[w]) & (height < 0.5 * self.width[w])
+        cand, k0, k1, f, t, w = cand[ok], k0[ok], k1[ok], f[ok], t[ok], w[ok]
+        # taper the ends of the line (smoothstep over `taper` of its length)
+        s = self._arc[k0] * (1 - f) + self._arc[k1] * f
+        L = self._length[w]
+        e = np.clip(np.minimum(s, L - s) / np.maximum(self.taper * L, 1e-12), 0, 1)
+        taper = e * e * (3 - 2 * e)
+        skew = self.skew[k0]
+        o = np.argsort(skew, kind="stable")
+        cand, k0, k1, f, t, w, taper, skew = (a[o] for a in (cand, k0, k1, f, t, w, taper, skew))
+        s0 = self.s0[k0] + f * (self.s0[k1] - self.s0[k0])
+        groups, rest = [], np.empty(len(t))
+        for sk in np.unique(skew):
+            idx = np.nonzero(skew == sk)[0]
+            sl = slice(int(idx[0]), int(idx[-1]) + 1)
+            groups.append((float(sk), sl))
+            rest[sl] = _profiles(float(sk))(s0[sl], t[sl])
+        return Binding(cand, k0, k1, f, t, self.gain[w] * taper, rest, np.where(f < 0.5, k0, k1), groups, len(p))
+
+    # ------------------------------------------------------------------ per frame
+    def state(self, X, age: float):
+        """Per section at positions X: the chord d, the length ratio q = d_real / d the bulge
+        must reach (never below the rest section's: a stretched section stays flat), and the
+        unit normal."""
+        P0, P1, C = self._points(X)
+        d = np.linalg.norm(P1 - P0, axis=1)
+        s_real = dilation(self.s0 * self.d0, age)                  # eq. 10 on the rest arc length
+        r = s_real / np.maximum(d * self.s0, 1e-30)        # length over the rest section's
+        for _ in range(2):                  # smooth along the line: a fold is even along its length
+            r = 0.5 * r + 0.25 * (r[self.prev] + r[self.next])
+        q = np.maximum(r, 1.0) * self.s0
+        return d, q, self._normals(P0, P1, C) * self.orient[:, None]
+
+    def bulge(self, X, age: float):
+        """Per section: (d, a, alpha) of the cubic whose arc length is d_real (eqs. 10-14)."""
+        d, q, _ = self.state(X, age)
+        a, alpha = np.empty_like(q), np.empty_like(q)
+        for sk in np.unique(self.skew):
+            m = self.skew == sk
+            qq, al, rr = _inverse(sk)
+            alpha[m] = np.interp(q[m], qq, al)                     # alpha first, then a (§5.1)
+            a[m] = np.interp(q[m], qq, rr) * d[m]
+        return d, a, alpha
+
+    def heights(self, binding: Binding, state) -> np.ndarray:
+        """Signed height (along the normal) of every bound point, (len(binding.point),)."""
+        d, q, _ = state
+        b = binding
+        qv = q[b.k0] + b.f * (q[b.k1] - q[b.k0])
+        y = np.empty_like(qv)
+        for sk, sl in b.groups:
+            y[sl] = _profiles(sk)(qv[sl], b.t[sl])
+        y -= b.rest
+        return b.gain * (d[b.k0] + b.f * (d[b.k1] - d[b.k0])) * y
+
+    def _offsets(self, X, age, b):
+        st = self.state(X, age)
+        return self.heights(b, st)[:, None] * st[2][b.kn]
+
+    def displacement(self, X, age: float, binding: Binding | None = None) -> np.ndarray:
+        """(n, 3) displacement of the bound points at positions X (the mesh's vertices)."""
+        b = self.vertex_binding if binding is None else binding
+        out = np.zeros((b.n_points, 3))
+        out[b.point] = self._offsets(X, age, b)
+        return out
+
+    def apply(self, X, age: float, out=None) -> np.ndarray:
+        """Positions X with the wrinkles' bulges added (into `out` when given)."""
+        b = self.vertex_binding
+        Y = np.copyto(out, X) or out if out is not None else X.copy()
+        Y[b.point] += self._offsets(X, age, b)
+        return Y
+
+    def compression(self, X) -> np.ndarray:
+        """Per wrinkle, the mean of d / d0 over its sections (< 1: compressed)."""
+        P0, P1, _ = self._points(X)
+        r = np.linalg.norm(P1 - P0, axis=1) / self.d0
+        return np.bincount(self.sec_wrinkle, r) / np.bincount(self.sec_wrinkle)
+
+
+__all__ = ["WrinkleLayer", "Binding", "profile", "AGE_0", "AGE_MAX", "DIL_MAX"]

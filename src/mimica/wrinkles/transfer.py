@@ -1,0 +1,160 @@
+"""Carrying a wrinkle mask onto another face (Viaud & Yahia 1992, §3.2).
+
+1. The new face is placed on the reference by a similarity from the landmarks.
+2. Each face gets its own cylinder (§3.1, conjugate gradient on the skin near the mask),
+   and the mask's nodes (characteristic points = anchors, and the wrinkles' control points)
+   are flattened on the reference's, the new face's anchors on the new face's.
+3. A sprung mesh joins the reference's nodes (Delaunay edges of the flattened nodes and the
+   wrinkle lines); its anchors are moved onto the new face's and held, and it relaxes by
+       m_i a_i = sum_j k_ij (|P_i P_j| - |P0_i P0_j|) P_i P_j / |P_i P_j| - h v_i       (eq. 8)
+   with k_ij inversely proportional to the rest length (short springs are stiffer).
+4. The relaxed nodes are projected back onto the new face's surface (outermost skin under
+   each flattened point), in the new face's own coordinates and topology.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import Delaunay, cKDTree
+
+from ..align import fit_similarity
+from ..errors import MimicaError
+from ..mesh import Mesh
+from .cylinder import fit_cylinder, flatten, radial_distance
+from .mask import Wrinkle, WrinkleMask, boundary_anchors
+from .surface import FaceFrame, SurfaceMap
+
+
+@dataclass
+class MaskTransferInfo:
+    iterations: int
+    residual: float           # largest spring force left, relative to the mean rest length
+    seconds: float
+    cylinder_radius: float
+
+
+def _region(vertices, anchors, reach):
+    ok = np.isfinite(anchors).all(1)
+    d, _ = cKDTree(anchors[ok]).query(vertices)
+    return vertices[d < reach]
+
+
+def _cylinder(vertices, anchors, frame: FaceFrame):
+    cyl0 = frame.cylinder
+    pts = _region(vertices, anchors, 0.3 * frame.unit)
+    return fit_cylinder(pts, axis_guess=cyl0.axes[1], origin_guess=cyl0.origin, radius_guess=cyl0.radius)
+
+
+def relax(rest2d, start2d, fixed, edges, damping=0.9, tol=1e-7, max_iter=20000):
+    """Eq. 8 by semi-implicit Euler with velocity damping until the nodes stop moving.
+
+    rest2d: (n, 2) reference positions (rest lengths); start2d: (n, 2) with the fixed nodes
+    already at their new places.  Returns (positions, iterations, residual)."""
+    i, j = edges[:, 0], edges[:, 1]
+    L0 = np.linalg.norm(rest2d[i] - rest2d[j], axis=1)
+    if (L0 <= 0).any():
+        raise MimicaError("wrinkle mask: two mask nodes coincide on the reference")
+    scale = float(L0.mean())
+    k = scale / L0                                            # variable stiffness k_ij
+    deg = np.bincount(np.r_[i, j], np.r_[k, k], len(rest2d))
+    dt = 0.5 / np.sqrt(deg.max())                             # stable for unit masses
+    x = start2d.copy()
+    v = np.zeros_like(x)
+    free = ~fixed
+    n = len(x)
+    it = 0
+    for it in range(1, max_iter + 1):
+        e = x[j] - x[i]
+        ln = np.maximum(np.linalg.norm(e, axis=1), 1e-12)
+        f = (k * (ln - L0) / ln)[:, None] * e                 # pulls i toward j when stretched
+        F = np.stack([np.bincount(i, f[:, c], n) - np.bincount(j, f[:, c], n) for c in (0, 1)], 1)
+        F -= damping * v                                      # - h v
+        v[free] += dt * F[free]
+        x[free] += dt * v[free]
+        if it % 50 == 0 and np.abs(v[free]).max() * dt < tol * scale:
+            break
+    e = x[j] - x[i]
+    ln = np.maximum(np.linalg.norm(e, axis=1), 1e-12)
+    f = (k * (ln - L0) / ln)[:, None] * e
+    F = np.stack([np.bincount(i, f[:, c], n) - np.bincount(j, f[:, c], n) for c in (0, 1)], 1)
+    return x, it, float(np.abs(F[free]).max() / scale) if free.any() else 0.0
+
+
+def transfer_mask(mask: WrinkleMask, reference: Mesh, target: Mesh, target_landmarks: np.ndarray,
+                  target_anchors: np.ndarray | None = None, name: str = "") -> tuple[WrinkleMask, MaskTransferInfo]:
+    """The mask (lying on `reference`) carried onto `target` (any topology) by V&Y §3.2."""
+    t0 = time.perf_counter()
+    ref_anchors = mask.anchors
+    if not np.isfinite(ref_anchors[:68]).all(1).sum() >= 20:
+        raise MimicaError("wrinkle mask: its anchors need at least 20 of the 68 landmarks")
+    tl = np.asarray(target_landmarks, float)
+    if target_anchors is None:
+        target_anchors = np.vstack([tl, boundary_anchors(target, tl)])
+    sim = fit_similarity(target_anchors[:68], ref_anchors[:68], "landmarks")
+    Vt = sim.apply(target.vertices)
+    At = sim.apply(target_anchors)
+    frame_r, frame_t = FaceFrame(ref_anchors[:68]), FaceFrame(At[:68])
+    cyl_r = _cylinder(reference.vertices, ref_anchors, frame_r)
+    cyl_t = _cylinder(Vt, At, frame_t)
+    fwd = frame_r.axes[2]
+    ctrl = [w.points for w in mask.wrinkles]
+    sizes = [len(c) for c in ctrl]
+    nodes_r = np.vstack([ref_anchors] + ctrl)
+    ok_anchor = np.isfinite(ref_anchors).all(1) & np.isfinite(At).all(1)
+    keep = np.r_[ok_anchor, np.ones(sum(sizes), bool)]
+    rest2d = flatten(nodes_r[keep], cyl_r, forward=fwd)
+    na = int(ok_anchor.sum())
+    start = rest2d.copy()
+    start[:na] = flatten(At[ok_anchor], cyl_t, forward=fwd)
+    # free nodes start where the anchors' piecewise-affine warp puts them, so the relaxation
+    # settles in the unfolded equilibrium next to it (a spring net alone may flip a node
+    # across a nearby anchor)
+    dt_a = Delaunay(rest2d[:na])
+    simplex = dt_a.find_simplex(rest2d[na:])
+    inside = simplex >= 0
+    T = dt_a.transform[simplex[inside]]
+    bc = np.einsum("ijk,ik->ij", T[:, :2], rest2d[na:][inside] - T[:, 2])
+    bary = np.c_[bc, 1 - bc.sum(1)]
+    corners = dt_a.simplices[simplex[inside]]
+    moved = np.einsum("ij,ijk->ik", bary, start[:na][corners])
+    start[na:][inside] = moved
+    fixed = np.zeros(len(rest2d), bool)
+    fixed[:na] = True
+    tri = Delaunay(rest2d).simplices
+    edges = np.vstack([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    off = na
+    for s in sizes:                                         # the wrinkle lines themselves
+        idx = np.arange(off, off + s)
+        edges = np.vstack([edges, np.stack([idx[:-1], idx[1:]], 1)])
+        off += s
+    edges = np.unique(np.sort(edges, 1), axis=0)
+    x, iters, resid = relax(rest2d, start, fixed, edges)
+    # back onto the new surface: the outermost skin under each flattened point
+    flat_t = flatten(Vt, cyl_t, forward=fwd)
+    smap = SurfaceMap(target, flat_t, radial_distance(Vt, cyl_t), vertices=target.vertices,
+                      max_span=np.pi * cyl_t.radius)
+    p3, found = smap.points(x[na:])
+    wrinkles, off = [], 0
+    for w, s in zip(mask.wrinkles, sizes):
+        if not found[off:off + s].any():
+            raise MimicaError(f"wrinkle {w.name!r} falls off the target face; give it landmarks that cover the face")
+        wrinkles.append(Wrinkle(w.name, p3[off:off + s], w.muscles, w.emphasis, w.width / sim.scale,
+                                w.profile, w.fold))
+        off += s
+    out = WrinkleMask(wrinkles, np.asarray(target_anchors, float), name or target.name)
+    return out, MaskTransferInfo(iters, resid, time.perf_counter() - t0, cyl_t.radius / sim.scale)
+
+
+def snap_mask(mask: WrinkleMask, mesh: Mesh) -> WrinkleMask:
+    """The mask's points moved onto the closest points of the mesh's surface (after edits)."""
+    from ..mesh.query import TriangleLocator
+    loc = TriangleLocator(mesh.vertices, mesh.triangles)
+    ws = [Wrinkle(w.name, loc.closest(w.points)[2], w.muscles, w.emphasis, w.width, w.profile, w.fold)
+          for w in mask.wrinkles]
+    A = mask.anchors.copy()
+    ok = np.isfinite(A).all(1)
+    A[ok] = loc.closest(A[ok])[2]
+    return WrinkleMask(ws, A, mask.face, dict(mask.extra))
