@@ -135,12 +135,17 @@ class FaceSimulator:
     def displacement(self) -> np.ndarray:
         """The skin's displacement: the sum over force types (Kim eq. 21), (n, 3)."""
         u = np.zeros_like(self.rig.skin.vertices)
-        for s in self.systems:
-            u += s.solver.displacement(self.warp)
-        for solver, _ in self.pulls:
-            u += solver.displacement(self.warp)
+        solvers = [s.solver for s in self.systems] + [sv for sv, _ in self.pulls]
         if self._g_fq is not None:
-            u += self.gravity.displacement(self.warp)
+            solvers.append(self.gravity)
+        for sv in solvers:
+            if self.warp:
+                u += sv.displacement(True)
+            else:                     # linear: accumulate Phi q on the ROI's nodes, in single
+                b = sv.b              # precision (half the memory traffic of the dense modes)
+                if not hasattr(sv, "_phi32"):
+                    sv._phi32 = np.ascontiguousarray(b.phi, dtype=np.float32)
+                u[b.free] += (sv._phi32 @ sv.q.astype(np.float32)).reshape(-1, 3)
         return u
 
     def fields(self) -> dict:
