@@ -78,10 +78,9 @@ def mask_transfer():
     from mimica.data import ICT_LANDMARKS_68
     from mimica.mesh.query import TriangleLocator
     from mimica.mesh.remesh import resample_face
-    from mimica.wrinkles import reference_mask, transfer_mask
+    from mimica.wrinkles import carry_mask, reference_mask, transfer_mask
     m = ICTModel(ICT_HEAD_VERTICES)
     ref, mask = m.mesh, reference_mask()
-    loc = TriangleLocator(ref.vertices, ref.triangles)
     ours, base, secs = [], [], []
     for seed in (1001, 1002, 1003, 1004):
         V = m.identity(np.random.default_rng(seed).normal(0, 0.8, 20))
@@ -92,9 +91,9 @@ def mask_transfer():
         eye = np.linalg.norm(lm[45] - lm[36])
         sim = fit_similarity(ref.vertices[ICT_LANDMARKS_68], lm)
         ls = TriangleLocator(scan.vertices, scan.triangles)
-        for w, nw in zip(mask.wrinkles, new.wrinkles):
-            t, b, _, _ = loc.closest(w.points)
-            truth = np.einsum("ij,ijk->ik", b, V[ref.triangles[t]])
+        true = carry_mask(mask, ref, V)
+        for w, nw, tw in zip(mask.wrinkles, new.wrinkles, true.wrinkles):
+            truth = tw.points
             ours.append(np.linalg.norm(nw.points - truth, axis=1) / eye)
             base.append(np.linalg.norm(ls.closest(sim.apply(w.points))[2] - truth, axis=1) / eye)
     ours, base = np.concatenate(ours), np.concatenate(base)
@@ -156,9 +155,8 @@ def animate():
 
 def pictures():
     """docs/figures: the reference mask, an age sweep and the paper's expressions (Figs. 10-16)."""
-    from mimica.cli import face_frame
     from mimica.data import ICT_LANDMARKS_68
-    from mimica.render import contact_sheet, render_mesh, save_png
+    from mimica.render import contact_sheet, face_framing, render_mesh, save_png
     from mimica.wrinkles import WrinkledSkin, reference_mask
     from mimica.wrinkles.show import mask_image
     out = Path(__file__).resolve().parents[1] / "docs" / "figures"
@@ -168,7 +166,7 @@ def pictures():
                                                       mask_image(m.mesh, mask, size=520, yaw=35)],
                                                      title="reference wrinkle mask (21 wrinkles, 76 anchors)"))
     ws = WrinkledSkin.build(m.mesh, mask)
-    frame = face_frame(m.neutral[ICT_LANDMARKS_68])
+    frame = face_framing(m.neutral[ICT_LANDMARKS_68])
     ages = (25, 45, 65, 85)
     tiles, labels = [], []
     for name in ("neutral", "surprise", "happiness"):

@@ -222,26 +222,25 @@ def cmd_simulate(a):
 
 def _wrinkle_frames(a, rig, tl, frames, out):
     """The wrinkle layer on simulated frames (V&Y §5.3): refined skin, age per frame."""
-    from .wrinkles import WrinkledSkin, WrinkleMask
-    mask = WrinkleMask.load(a.wrinkles)
-    _check_mask_fits(mask, rig.skin, a.wrinkles, a.rig)
+    from .wrinkles import WrinkledSkin
+    if a.maps and rig.skin.uv is None:
+        raise MimicaError(f"--maps: the rig's skin has no texture coordinates ({a.rig}); rebuild the rig "
+                          "from a mesh with uv")
+    mask = _mask_on(a.wrinkles, rig.skin, a.rig)
     t0 = time.perf_counter()
     ws = WrinkledSkin.build(rig.skin, mask, refine=not a.no_refine)
     build_s = time.perf_counter() - t0
     times = np.arange(len(frames)) / a.fps
     ages = tl.channels["age"](times) if "age" in tl.channels else np.full(len(frames), a.age)
     t0 = time.perf_counter()
-    fine = np.stack([ws.frame(v, float(g)) for v, g in zip(frames, ages)])
+    carried = [ws.carry(v) for v in frames]
+    fine = np.stack([ws.layer.apply(X, float(g)) for X, g in zip(carried, ages)])
     per = (time.perf_counter() - t0) / len(frames)
-    comp = np.stack([ws.layer.compression(ws.refined.carry(v) if ws.refined else v) for v in frames])
+    comp = np.stack([ws.layer.compression(X) for X in carried])
     peak = int(np.argmin(np.minimum(comp, 1.0).mean(1)))         # the frame with the most compression
     if a.maps:
         from .wrinkles.maps import bake, save_maps
-        if rig.skin.uv is None:
-            raise MimicaError(f"--maps: the rig's skin has no texture coordinates ({a.rig}); rebuild the rig "
-                              "from a mesh with uv")
-        Xp = ws.refined.carry(frames[peak]) if ws.refined else frames[peak]
-        h, n = bake(ws.layer, rig.skin, Xp, float(ages[peak]), a.maps)
+        h, n = bake(ws.layer, rig.skin, carried[peak], float(ages[peak]), a.maps)
         save_maps(out / f"wrinkles_frame_{peak:04d}", h, n)
     most = np.argsort(comp[peak])[:3]
     names = ws.layer.mask.names()
@@ -252,46 +251,28 @@ def _wrinkle_frames(a, rig, tl, frames, out):
     return fine, ws.mesh, note
 
 
-def _check_mask_fits(mask, skin, mask_path, face_path):
-    from .mesh.query import TriangleLocator
-    pts = np.vstack([w.points for w in mask.wrinkles])
-    d = TriangleLocator(skin.vertices, skin.triangles).closest(pts)[3]
+def _mask_on(mask_path, skin, face_path):
+    """A mask file read and snapped onto the skin; an error if it was made for another face."""
+    from .wrinkles import WrinkleMask, snap_mask
+    mask, d = snap_mask(WrinkleMask.load(mask_path), skin)
     size = float(np.linalg.norm(np.ptp(skin.vertices, axis=0)))
     if np.median(d) > 0.02 * size:
         raise MimicaError(f"{mask_path}: the mask does not lie on {face_path} (median distance "
                           f"{np.median(d):.3g}); make one for this face with `mimica wrinkle-mask`")
+    return mask
 
 
 def _mask_for(face, lm, path_anchors=None, reference=None):
     """The reference mask on a face: carried exactly on ICT-FaceKit topology, else by V&Y §3.2."""
-    from .data import ICT_HEAD_VERTICES, ICTModel, is_ict_topology
-    from .wrinkles import WrinkleMask, reference_mask, transfer_mask
-    from .wrinkles.mask import BOUNDARY
-    ref_mesh = ICTModel(ICT_HEAD_VERTICES).mesh
+    from .data import ICT_FACE_AREA_VERTICES, ICT_HEAD_VERTICES, ICTModel, is_ict_topology
+    from .wrinkles import WrinkleMask, carry_mask, reference_mask, transfer_mask
     mask = reference_mask() if reference is None else WrinkleMask.load(reference)
-    anchors = None
-    if path_anchors:
-        edited = WrinkleMask.load(path_anchors)
-        _check_mask_fits(edited, face, path_anchors, face.name)
-        from .wrinkles import snap_mask
-        anchors = snap_mask(edited, face).anchors
+    anchors = _mask_on(path_anchors, face, face.name).anchors if path_anchors else None
     if anchors is None and reference is None and is_ict_topology(face):
-        from .data import ICT_FACE_AREA_VERTICES
-        from .mesh.query import TriangleLocator
-        from .wrinkles.mask import Wrinkle
-        if face.n_vertices < ICT_HEAD_VERTICES:                    # the face area alone
-            ref_mesh = ICTModel(ICT_FACE_AREA_VERTICES).mesh
-        loc = TriangleLocator(ref_mesh.vertices, ref_mesh.triangles)
-        fv = face.vertices
-
-        def carry(p):
-            t, b, _, _ = loc.closest(p)
-            return np.einsum("ij,ijk->ik", b, fv[ref_mesh.triangles[t]])
-        ws = [Wrinkle(w.name, carry(w.points), w.muscles, w.emphasis, w.width, w.profile, w.fold)
-              for w in mask.wrinkles]
-        return WrinkleMask(ws, carry(mask.anchors), face.name), "carried on the ICT-FaceKit topology"
-    assert mask.anchors.shape[0] == 68 + len(BOUNDARY)
-    new, info = transfer_mask(mask, ref_mesh, face, lm, target_anchors=anchors)
+        # the face area alone, or with head and neck: the reference of the same vertex count
+        ref = ICTModel(ICT_FACE_AREA_VERTICES if face.n_vertices < ICT_HEAD_VERTICES else ICT_HEAD_VERTICES)
+        return carry_mask(mask, ref.mesh, face.vertices, face.name), "carried on the ICT-FaceKit topology"
+    new, info = transfer_mask(mask, ICTModel(ICT_HEAD_VERTICES).mesh, face, lm, target_anchors=anchors)
     return new, (f"spring mesh relaxed in {info.iterations} steps (residual {info.residual:.1e}), "
                  f"{info.seconds:.2f}s")
 
@@ -313,23 +294,14 @@ def cmd_wrinkle_mask(a):
     return 0
 
 
-def face_frame(lm, margin=0.95):
-    """A render framing around the face (from its landmarks), forehead included."""
-    c = np.nanmean(lm, 0)
-    top = np.nanmean(lm[17:27], 0)
-    c = c + 0.45 * (top - c)
-    half = margin * 0.5 * max(np.ptp(lm[:, 0]), np.ptp(lm[:, 1]) * 1.6)
-    return c, half
-
-
 def cmd_age(a):
     from .anim import Timeline
     from .landmarks import landmarks_for
     from .mesh import read_mesh
     from .physics.face import FaceSimulator
-    from .render import contact_sheet, render_mesh, save_png
+    from .render import contact_sheet, face_framing, render_mesh, save_png
     from .rig import Rig, build_rig
-    from .wrinkles import WrinkledSkin, WrinkleMask
+    from .wrinkles import WrinkledSkin
     try:
         ages = [float(x) for x in a.ages.split(",")]
         assert ages and all(0 <= x <= 150 for x in ages)
@@ -358,12 +330,11 @@ def cmd_age(a):
     tl = Timeline.preset(a.expression, names, duration=1.2)
     expr = FaceSimulator(rig).run(lambda t: tl.values(t, names), 1.2)[-1]
     if a.wrinkles:
-        mask = WrinkleMask.load(a.wrinkles)
-        _check_mask_fits(mask, face, a.wrinkles, a.face)
+        mask = _mask_on(a.wrinkles, face, a.face)
     else:
         mask, _ = _mask_for(face, lm)
     ws = WrinkledSkin.build(face, mask)
-    frame = face_frame(lm)
+    frame = face_framing(lm)
     tiles, labels = [], []
     for name, X in (("neutral", face.vertices), (a.expression, expr)):
         for g in ages:

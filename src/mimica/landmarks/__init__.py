@@ -32,6 +32,22 @@ NAMES = ([f"jaw.{i}" for i in range(17)] + [f"brow.right.{i}" for i in range(5)]
          + [f"mouth.inner.{i}" for i in range(8)])
 
 
+
+def _mirror_pairs() -> np.ndarray:
+    pair = {i: 16 - i for i in range(17)}                                      # jaw
+    pair.update({17 + i: 26 - i for i in range(5)})                            # brows
+    pair.update({27: 27, 28: 28, 29: 29, 30: 30, 31: 35, 32: 34, 33: 33})      # nose
+    pair.update({36: 45, 37: 44, 38: 43, 39: 42, 40: 47, 41: 46})              # eyes
+    pair.update({48: 54, 49: 53, 50: 52, 51: 51, 55: 59, 56: 58, 57: 57,       # mouth
+                 60: 64, 61: 63, 62: 62, 65: 67, 66: 66})
+    pair.update({v: k for k, v in list(pair.items())})
+    return np.array([pair[i] for i in range(68)])
+
+
+# MIRROR[i]: the landmark that is i's mirror image across the face's mid-plane
+MIRROR = _mirror_pairs()
+
+
 def index(name: str) -> int:
     """Index of a canonical landmark name, e.g. 'eye.left.0' -> 42."""
     try:

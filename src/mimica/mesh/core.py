@@ -87,7 +87,7 @@ class Mesh:
             raise ValueError(f"expected vertices of shape {self.vertices.shape}, got {v.shape}")
         m = Mesh(v, self.face_indices, self.face_starts, self.uv, self.face_uv_indices,
                  self.name if name is None else name)
-        for k in ("triangles", "tri_face", "edges", "adjacency", "face_sizes"):
+        for k in ("triangles", "tri_face", "_fan_corners", "uv_triangles", "edges", "adjacency", "face_sizes"):
             if k in self.__dict__:
                 m.__dict__[k] = self.__dict__[k]
         return m
@@ -98,41 +98,32 @@ class Mesh:
                 and np.array_equal(self.face_indices, other.face_indices))
 
     # ---------------------------------------------------------------- derived
-    def _fan(self):
+    @cached_property
+    def _fan_corners(self) -> np.ndarray:
+        """(T, 3) positions in face_indices of the corners of the fan triangles."""
         s = self.face_sizes
         ntri = np.maximum(s - 2, 0)
-        face_of_tri = np.repeat(np.arange(self.n_faces), ntri)
         # corner k of the fan in its face: 1..size-2
         first = np.repeat(self.face_starts[:-1], ntri)
         k = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri) + 1
-        fi = self.face_indices
-        tris = np.stack([fi[first], fi[first + k], fi[first + k + 1]], axis=1)
-        return tris, face_of_tri
+        return np.stack([first, first + k, first + k + 1], axis=1)
 
     @cached_property
     def triangles(self) -> np.ndarray:
         """(T, 3) fan triangulation of the polygons."""
-        t, f = self._fan()
-        self.__dict__["tri_face"] = f
-        return t
+        return self.face_indices[self._fan_corners]
 
     @cached_property
     def uv_triangles(self) -> np.ndarray | None:
         """(T, 3) texture-coordinate indices of the corners of `triangles` (None without uv)."""
         if self.uv is None or self.face_uv_indices is None:
             return None
-        s = self.face_sizes
-        ntri = np.maximum(s - 2, 0)
-        first = np.repeat(self.face_starts[:-1], ntri)
-        k = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri) + 1
-        fu = self.face_uv_indices
-        return np.stack([fu[first], fu[first + k], fu[first + k + 1]], axis=1)
+        return self.face_uv_indices[self._fan_corners]
 
     @cached_property
     def tri_face(self) -> np.ndarray:
         """For each triangle of `triangles`, the polygon it came from."""
-        _ = self.triangles
-        return self.__dict__["tri_face"]
+        return np.repeat(np.arange(self.n_faces), np.maximum(self.face_sizes - 2, 0))
 
     def _polygon_edges(self) -> np.ndarray:
         """Every polygon's boundary edges as sorted pairs, one row per polygon side."""

@@ -104,3 +104,55 @@ def barycentric_2d(p, a, b, c):
         v = (v2[:, 0] * v1[:, 1] - v1[:, 0] * v2[:, 1]) / den
         w = (v0[:, 0] * v2[:, 1] - v2[:, 0] * v0[:, 1]) / den
     return np.stack([1 - v - w, v, w], axis=1)
+
+
+class SurfaceMap:
+    """A triangle mesh seen through a 2D map of its vertices (a front view, a flattened
+    cylinder); 2D points -> surface points.
+
+    Where several layers of the surface lie under a point (nostrils, lips, ears), the one
+    with the largest `score` (depth toward the viewer, or distance from the cylinder axis)
+    wins: the outermost skin, as a ray from outside would hit it.
+    """
+
+    def __init__(self, triangles: np.ndarray, uv: np.ndarray, score: np.ndarray, vertices: np.ndarray,
+                 max_span=None):
+        self.tri = tri = np.asarray(triangles)
+        self.v = np.asarray(vertices)
+        self.uv = np.asarray(uv, float)
+        self.score = np.asarray(score, float)
+        tuv = self.uv[tri]
+        ok = np.isfinite(tuv).all((1, 2))
+        if max_span is not None:                          # triangles across a cylinder seam
+            ok &= np.ptp(tuv[:, :, 0], axis=1) < max_span
+        self.usable = np.nonzero(ok)[0]
+        self.tree = cKDTree(tuv[self.usable].mean(1))
+
+    def locate(self, q, k=32):
+        """(triangle, barycentric, found) of the outermost surface under each 2D point."""
+        q = np.atleast_2d(np.asarray(q, float))
+        k = min(k, len(self.usable))
+        _, cand = self.tree.query(q, k=k)
+        cand = self.usable[cand.reshape(len(q), k)]
+        ct = self.tri[cand.reshape(-1)]
+        uv = self.uv
+        bc = barycentric_2d(np.repeat(q, k, 0), uv[ct[:, 0]], uv[ct[:, 1]], uv[ct[:, 2]]).reshape(len(q), k, 3)
+        bc = np.nan_to_num(bc, nan=-1.0)
+        depth = np.einsum("ijk,ijk->ij", bc, self.score[self.tri[cand]])
+        inside = (bc >= -1e-9).all(2)
+        rows = np.arange(len(q))
+        best = np.argmax(np.where(inside, depth, -np.inf), 1)
+        found = inside[rows, best]
+        # a point just off the surface's edge: the nearest candidate, clamped onto it
+        cl = np.clip(bc, 0, None)
+        cl /= np.maximum(cl.sum(2, keepdims=True), 1e-12)
+        pc = np.einsum("ijk,ijkl->ijl", cl, uv[self.tri[cand]])
+        near = np.argmin(np.linalg.norm(pc - q[:, None], axis=2), 1)
+        pick = np.where(found, best, near)
+        b = np.where(found[:, None], bc[rows, pick], cl[rows, pick])
+        return cand[rows, pick], b, found
+
+    def points(self, q):
+        """3D surface points under 2D points, and whether each was inside the surface."""
+        t, b, found = self.locate(q)
+        return np.einsum("ij,ijk->ik", b, self.v[self.tri[t]]), found

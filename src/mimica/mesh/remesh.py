@@ -13,10 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import Delaunay, cKDTree
+from scipy.spatial import Delaunay
 
 from ..mesh.core import Mesh
-from ..mesh.query import barycentric_2d
+from ..mesh.query import SurfaceMap
 
 
 @dataclass
@@ -39,10 +39,8 @@ def resample_face(mesh: Mesh, landmarks: np.ndarray, n_vertices: int = 12000, se
     cyl = face_cylinder(landmarks)
     uv, r = cyl.project(mesh.vertices)
     tri = mesh.triangles
-    tuv = uv[tri]
-    span = tuv[:, :, 0].max(1) - tuv[:, :, 0].min(1)
-    usable = np.nonzero(span < np.pi * cyl.radius)[0]
-    a = tuv[usable]
+    smap = SurfaceMap(tri, uv, r, mesh.vertices, max_span=np.pi * cyl.radius)
+    a = uv[tri[smap.usable]]
     area2d = 0.5 * np.abs((a[:, 1, 0] - a[:, 0, 0]) * (a[:, 2, 1] - a[:, 0, 1])
                           - (a[:, 2, 0] - a[:, 0, 0]) * (a[:, 1, 1] - a[:, 0, 1]))
     h = np.sqrt(area2d.sum() / n_vertices)
@@ -50,20 +48,10 @@ def resample_face(mesh: Mesh, landmarks: np.ndarray, n_vertices: int = 12000, se
     gx, gy = np.meshgrid(np.arange(lo[0], hi[0], h), np.arange(lo[1], hi[1], h * np.sqrt(3) / 2))
     gx = gx + (np.arange(gx.shape[0])[:, None] % 2) * h / 2          # hexagonal grid
     pts = np.stack([gx.ravel(), gy.ravel()], 1) + rng.uniform(-0.2, 0.2, (gx.size, 2)) * h
-    cent = a.mean(1)
-    tree = cKDTree(cent)
 
-    def outermost(q, k=24):
+    def outermost(q):
         """Outermost original triangle under 2D points q: (triangle, bary, found)."""
-        _, cand = tree.query(q, k=k)
-        ct = tri[usable[cand.reshape(-1)]]
-        bc = barycentric_2d(np.repeat(q, k, 0), uv[ct[:, 0]], uv[ct[:, 1]], uv[ct[:, 2]]).reshape(len(q), k, 3)
-        bc = np.nan_to_num(bc, nan=-1)
-        rr = np.einsum("ijk,ijk->ij", bc, r[tri[usable[cand]]])
-        score = np.where((bc >= 0).all(2), rr, -np.inf)
-        best = np.argmax(score, 1)
-        rows = np.arange(len(q))
-        return usable[cand[rows, best]], bc[rows, best], np.isfinite(score[rows, best])
+        return smap.locate(q, k=24)
 
     t_of, b_of, keep = outermost(pts)
     pts, t_of, b_of = pts[keep], t_of[keep], b_of[keep]

@@ -1,7 +1,7 @@
 """Pictures: shaded renders, heat maps, contact sheets (software rasterizer, no GPU)."""
 
-from .raster import framing, project, rasterize, render_mesh, shared_frame, view_matrix
+from .raster import face_framing, framing, project, rasterize, render_mesh, shared_frame, view_matrix
 from .sheet import colormap, contact_sheet, heat_colors, save_png
 
-__all__ = ["framing", "project", "rasterize", "render_mesh", "shared_frame", "view_matrix", "contact_sheet",
+__all__ = ["face_framing", "framing", "project", "rasterize", "render_mesh", "shared_frame", "view_matrix", "contact_sheet",
            "save_png", "heat_colors", "colormap"]

@@ -136,6 +136,14 @@ def framing(v, yaw=0.0, pitch=0.0, margin=1.05):
     return c, 0.5 * max(np.ptp(cam[:, 0]), np.ptp(cam[:, 1])) * margin
 
 
+def face_framing(landmarks, margin=0.95):
+    """A framing of the face alone, forehead included, from its 68 landmarks (front view)."""
+    lm = np.asarray(landmarks)
+    c = np.nanmean(lm, 0)
+    c = c + 0.45 * (np.nanmean(lm[17:27], 0) - c)                  # toward the brows
+    return c, margin * 0.5 * max(np.ptp(lm[:, 0]), np.ptp(lm[:, 1]) * 1.6)
+
+
 def project(points, frame, size, yaw=0.0, pitch=0.0):
     """Pixel coordinates (m, 2) and camera-space points (m, 3) of 3D points, as render_mesh
     draws them with this framing (center, half extent) and image size (w, h)."""

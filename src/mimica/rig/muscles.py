@@ -30,14 +30,8 @@ class MuscleDef:
 
 def _mirror(d: MuscleDef) -> MuscleDef:
     """Left-side twin of a right-side muscle (iBUG left/right landmark pairs)."""
-    pair = {i: 16 - i for i in range(17)}
-    pair.update({17 + i: 26 - i for i in range(5)})
-    pair.update({27: 27, 28: 28, 29: 29, 30: 30, 31: 35, 32: 34, 33: 33, 34: 32, 35: 31})
-    pair.update({36: 45, 37: 44, 38: 43, 39: 42, 40: 47, 41: 46})
-    pair.update({45: 36, 44: 37, 43: 38, 42: 39, 47: 40, 46: 41})
-    pair.update({48: 54, 49: 53, 50: 52, 51: 51, 52: 50, 53: 49, 54: 48, 55: 59, 56: 58, 57: 57,
-                 58: 56, 59: 55, 60: 64, 61: 63, 62: 62, 63: 61, 64: 60, 65: 67, 66: 66, 67: 65})
-    mir = lambda w: {pair[k]: v for k, v in w.items()}  # noqa: E731
+    from ..landmarks import MIRROR
+    mir = lambda w: {int(MIRROR[k]): v for k, v in w.items()}  # noqa: E731
     return MuscleDef(d.name[:-2] + "_L", mir(d.origin), mir(d.insertion), d.origin_lift, d.insertion_lift,
                      d.origin_out, d.insertion_out, d.width, d.origin_depth, d.insertion_depth, d.alpha)
 

@@ -13,32 +13,33 @@ from .cylinder import CylinderFit, fit_cylinder, flatten
 from .layer import WrinkleLayer
 from .mask import Wrinkle, WrinkleMask, reference_mask
 from .refine import Refined, refine_along
-from .transfer import snap_mask, transfer_mask
+from .transfer import carry_mask, snap_mask, transfer_mask
 
 
 @dataclass
 class WrinkledSkin:
     """A skin mesh refined along the mask's lines and its wrinkle layer: `frame(X, age)` takes
     positions of the coarse skin (a simulated frame) to the wrinkled fine skin."""
-    coarse: object
     refined: Refined | None
     layer: WrinkleLayer
 
     @classmethod
     def build(cls, skin, mask: WrinkleMask, refine: bool = True) -> "WrinkledSkin":
-        mask = snap_mask(mask, skin)
         r = refine_along(skin, mask) if refine else None
-        return cls(skin, r, WrinkleLayer(r.mesh if r else skin, mask))
+        return cls(r, WrinkleLayer(r.mesh if r else skin, mask))
 
     @property
     def mesh(self):
         return self.layer.mesh
 
+    def carry(self, X) -> np.ndarray:
+        """Coarse skin positions -> the layer's (refined) mesh, before the bulges."""
+        return self.refined.carry(X) if self.refined is not None else X
+
     def frame(self, X, age: float) -> np.ndarray:
-        Xf = self.refined.carry(X) if self.refined is not None else X
-        return self.layer.apply(Xf, age)
+        return self.layer.apply(self.carry(X), age)
 
 
 __all__ = ["ArcLengthTable", "arc_length", "dilation", "CylinderFit", "fit_cylinder", "flatten",
            "WrinkleLayer", "Wrinkle", "WrinkleMask", "reference_mask", "Refined", "refine_along",
-           "snap_mask", "transfer_mask", "WrinkledSkin"]
+           "snap_mask", "carry_mask", "transfer_mask", "WrinkledSkin"]

@@ -25,6 +25,7 @@ resolution.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -32,20 +33,18 @@ from scipy.spatial import cKDTree
 from ..errors import MimicaError
 from ..mesh import Mesh
 from ..mesh.query import TriangleLocator
-from .bulge import AGE_0, AGE_MAX, DIL_MAX, ArcLengthTable, dilation
+from .bulge import ArcLengthTable, dilation
 from .mask import WrinkleMask
 from .surface import cardinal_spline, resample_polyline
 
 SKEW = {"symmetric": 1.0, "asymmetric": 0.5}
 RHO0 = 1.0 / 3.0             # a0 = d / 3: at alpha = 0 the section is the straight chord
 Q_MAX = 4.0                  # sections compressed to a quarter of their length and beyond: capped
-_TABLES, _PROFILES = {}, {}
 
 
+@cache
 def _inverse(skew):
-    if skew not in _TABLES:
-        _TABLES[skew] = ArcLengthTable.build(skew=skew).inverse(RHO0)
-    return _TABLES[skew]
+    return ArcLengthTable.build(skew=skew).inverse(RHO0)
 
 
 class ProfileTable:
@@ -76,10 +75,9 @@ class ProfileTable:
         return lo + fx * (hi - lo)
 
 
+@cache
 def _profiles(skew):
-    if skew not in _PROFILES:
-        _PROFILES[skew] = ProfileTable(skew)
-    return _PROFILES[skew]
+    return ProfileTable(skew)
 
 
 def profile(t, rho, alpha, skew, iterations=4):
@@ -122,32 +120,29 @@ class Binding:
 class WrinkleLayer:
     """The mask's wrinkles on one skin mesh; `apply(X, age)` adds the bulges to positions X."""
 
-    def __init__(self, mesh: Mesh, mask: WrinkleMask, spacing: float = 0.6, taper: float = 0.3,
-                 vertices=None):
+    def __init__(self, mesh: Mesh, mask: WrinkleMask, spacing: float = 0.6, taper: float = 0.3):
         self.mesh = mesh
-        X0 = mesh.vertices if vertices is None else np.asarray(vertices)
-        self.rest = X0
+        X0 = mesh.vertices
         tris = mesh.triangles
         loc = TriangleLocator(X0, tris)
         normals = mesh.vertex_normals(X0)
         self.mask = mask
-        sec_tri, sec_bary, wid, starts = [], [], [], [0]
-        self.lines = []                                 # dense centre lines, for binding
+        sec_tri, sec_bary, wid, starts, n_centre = [], [], [], [0], []
         for i, w in enumerate(mask.wrinkles):
             _, _, pts, _ = loc.closest(cardinal_spline(w.points, 16))
-            _, _, pts, _ = loc.closest(resample_polyline(pts, spacing * w.width, min_points=4))
+            tc, bc, pts, _ = loc.closest(resample_polyline(pts, spacing * w.width, min_points=4))
             t = np.gradient(pts, axis=0)
             t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
-            tc, bc, cq, _ = loc.closest(pts)
             n = np.einsum("ij,ijk->ik", bc, normals[tris[tc]])
             b = np.cross(n, t)
             b /= np.maximum(np.linalg.norm(b, axis=1, keepdims=True), 1e-12)
-            t0, b0, _, _ = loc.closest(cq - 0.5 * w.width * b)
-            t1, b1, _, _ = loc.closest(cq + 0.5 * w.width * b)
+            t0, b0, _, _ = loc.closest(pts - 0.5 * w.width * b)
+            t1, b1, _, _ = loc.closest(pts + 0.5 * w.width * b)
             sec_tri.append(np.stack([t0, t1, tc], 1))
             sec_bary.append(np.stack([b0, b1, bc], 1))
             wid.append(np.full(len(pts), i))
             starts.append(starts[-1] + len(pts))
+            n_centre.append(n)
         self.sec_vid = tris[np.concatenate(sec_tri)]            # (K, 3 points, 3 vertices)
         self.sec_bary = np.concatenate(sec_bary)                 # (K, 3, 3)
         self.sec_wrinkle = np.concatenate(wid)
@@ -172,9 +167,8 @@ class WrinkleLayer:
             q, al, _ = _inverse(sk)
             m = self.skew == sk
             self.s0[m] = np.interp(self.beta[m], al, q)          # invert alpha(q) (monotone)
-        nrm = self._normals(P0, P1, C)
-        n_rest = np.einsum("ij,ijk->ik", self.sec_bary[:, 2], normals[self.sec_vid[:, 2]])
-        self.orient = np.sign((nrm * n_rest).sum(1) + 1e-12)
+        self.orient = np.sign((self._normals(P0, P1, C) * np.concatenate(n_centre)).sum(1) + 1e-12)
+        self._rest_points = P0, P1, C
         # dense centre lines, for binding points to sections
         sub = 8
         fr = np.linspace(0, 1, sub, endpoint=False)
@@ -182,15 +176,11 @@ class WrinkleLayer:
         self._dense_k = np.r_[np.repeat(ks, sub), self.starts[1:] - 1]
         self._dense_f = np.r_[np.tile(fr, len(ks)), np.zeros(len(mask.wrinkles))]
         nk = np.minimum(self._dense_k + 1, last[self._dense_k])
-        self._dense_p = (C[self._dense_k] * (1 - self._dense_f[:, None]) + C[nk] * self._dense_f[:, None])
-        self._tree = cKDTree(self._dense_p)
+        self._tree = cKDTree(C[self._dense_k] * (1 - self._dense_f[:, None]) + C[nk] * self._dense_f[:, None])
         seg = np.linalg.norm(C[self.next] - C[idx], axis=1) * (self.next > idx)
-        arc = np.zeros(K)
-        for i in range(len(mask.wrinkles)):
-            s, e = self.starts[i], self.starts[i + 1]
-            arc[s:e] = np.r_[0.0, np.cumsum(seg[s:e - 1])]
-        self._arc = arc
-        self._length = np.array([arc[self.starts[i + 1] - 1] for i in range(len(mask.wrinkles))])
+        cs = np.r_[0.0, np.cumsum(seg)][:K]
+        self._arc = cs - cs[first]                                 # arc length from the line's start
+        self._length = self._arc[self.starts[1:] - 1]
         self.taper = taper
         self.width = np.array([w.width for w in mask.wrinkles])
         self.gain = np.array([w.emphasis * (-1.0 if w.fold == "in" else 1.0) for w in mask.wrinkles])
@@ -205,10 +195,9 @@ class WrinkleLayer:
         n = -np.cross(P1 - P0, C[self.next] - C[self.prev])
         return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
 
-    def bind(self, points, rest_vertices=None) -> Binding:
+    def bind(self, points) -> Binding:
         """Tie points (m, 3) on the rest surface to the sections whose band holds them."""
-        X0 = self.rest if rest_vertices is None else rest_vertices
-        P0, P1, C = self._points(X0)
+        P0, P1, C = self._rest_points
         p = np.asarray(points, float)
         reach = 0.6 * float(self.width.max())
         dist, j = self._tree.query(p, distance_upper_bound=reach)
@@ -295,10 +284,10 @@ class WrinkleLayer:
         out[b.point] = self._offsets(X, age, b)
         return out
 
-    def apply(self, X, age: float, out=None) -> np.ndarray:
-        """Positions X with the wrinkles' bulges added (into `out` when given)."""
+    def apply(self, X, age: float) -> np.ndarray:
+        """Positions X with the wrinkles' bulges added."""
         b = self.vertex_binding
-        Y = np.copyto(out, X) or out if out is not None else X.copy()
+        Y = X.copy()
         Y[b.point] += self._offsets(X, age, b)
         return Y
 
@@ -309,4 +298,4 @@ class WrinkleLayer:
         return np.bincount(self.sec_wrinkle, r) / np.bincount(self.sec_wrinkle)
 
 
-__all__ = ["WrinkleLayer", "Binding", "profile", "AGE_0", "AGE_MAX", "DIL_MAX"]
+__all__ = ["WrinkleLayer", "Binding", "profile"]

@@ -19,7 +19,7 @@ from ..mesh import Mesh, atomic_path
 from ..render import rasterize
 
 
-def texel_points(mesh: Mesh, size: int, vertices=None):
+def texel_points(mesh: Mesh, size: int):
     """Rest-surface points under the texels: (rows, cols, points (m, 3))."""
     tuv = mesh.uv_triangles
     if tuv is None:
@@ -28,8 +28,7 @@ def texel_points(mesh: Mesh, size: int, vertices=None):
     xy = np.stack([uv[:, 0] * size, (1.0 - uv[:, 1]) * size], 1)
     tri_id, bary = rasterize(xy, np.zeros(len(uv)), tuv, size, size)
     rows, cols = np.nonzero(tri_id >= 0)
-    v = mesh.vertices if vertices is None else vertices
-    pts = np.einsum("ij,ijk->ik", bary[rows, cols], v[mesh.triangles[tri_id[rows, cols]]])
+    pts = np.einsum("ij,ijk->ik", bary[rows, cols], mesh.vertices[mesh.triangles[tri_id[rows, cols]]])
     return rows, cols, pts
 
 

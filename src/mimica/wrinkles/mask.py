@@ -6,7 +6,7 @@ File format (JSON, ``.wrinkles``; lengths in the face mesh's own units)::
      "face": "ict-generic-neutral",              # what the mask lies on (informative)
      "anchors": [[x, y, z], ...],                 # characteristic points (V&Y §3.2):
                                                   # the 68 iBUG landmarks, then the mask's
-                                                  # boundary (ANCHOR_NAMES lists them)
+                                                  # boundary (anchor_names() lists them)
      "wrinkles": [
        {"name": "forehead_1",
         "muscles": ["frontalis_L", "frontalis_R"],  # the muscles that fold it
@@ -240,14 +240,9 @@ def _centre(L):
 
 
 def _mirror_landmarks(L):
-    pair = {i: 16 - i for i in range(17)}
-    pair.update({17 + i: 26 - i for i in range(5)})
-    pair.update({27: 27, 28: 28, 29: 29, 30: 30, 31: 35, 32: 34, 33: 33, 34: 32, 35: 31})
-    pair.update({36: 45, 37: 44, 38: 43, 39: 42, 40: 47, 41: 46, 45: 36, 44: 37, 43: 38, 42: 39, 47: 40, 46: 41})
-    pair.update({48: 54, 49: 53, 50: 52, 51: 51, 52: 50, 53: 49, 54: 48, 55: 59, 56: 58, 57: 57,
-                 58: 56, 59: 55, 60: 64, 61: 63, 62: 62, 63: 61, 64: 60, 65: 67, 66: 66, 67: 65})
-    pair.update({v: k for k, v in list(pair.items())})
-    M = L[[pair[i] for i in range(68)]].copy()
+    """Local 2D landmarks of the face's mirror image (left and right swapped)."""
+    from ..landmarks import MIRROR
+    M = L[MIRROR].copy()
     M[:, 0] *= -1
     return M
 

@@ -19,7 +19,7 @@ def color_of(name: str):
     return GROUP_COLORS.get(name.split("_")[0], (40, 40, 40))
 
 
-def mask_image(mesh: Mesh, mask, vertices=None, size=480, yaw=0.0, anchors=True, labels=False) -> np.ndarray:
+def mask_image(mesh: Mesh, mask, vertices=None, size=480, yaw=0.0, anchors=True) -> np.ndarray:
     """A shaded render of the face with the mask's wrinkles (and anchors) drawn on it."""
     v = mesh.vertices if vertices is None else vertices
     frame = framing(v, yaw)
@@ -38,8 +38,6 @@ def mask_image(mesh: Mesh, mask, vertices=None, size=480, yaw=0.0, anchors=True,
         pts = [tuple(p) for p, f in zip(xy, front) if f]
         if len(pts) > 1:
             draw.line(pts, fill=color_of(w.name), width=max(2, size // 200))
-        if labels and pts:
-            draw.text(pts[0], w.name, fill=(0, 0, 0))
     if anchors:
         ok = np.isfinite(mask.anchors).all(1)
         xy, _ = project(mask.anchors[ok], frame, (size, size), yaw)

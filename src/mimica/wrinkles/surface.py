@@ -1,66 +1,13 @@
-"""Placing points on a face surface through a 2D map of it (a front view or a flattened
-cylinder), and Cardinal-spline curves through control points (V&Y §3: the mask is a
-Cardinal spline surface)."""
+"""The face's own frame (front view onto its surface) and Cardinal-spline curves through
+control points (V&Y §3: the mask is a Cardinal spline surface)."""
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..correspond import face_cylinder
 from ..mesh import Mesh
-from ..mesh.query import barycentric_2d
-
-
-class SurfaceMap:
-    """A mesh seen through a 2D map of its vertices; 2D points -> surface points.
-
-    Where several layers of the surface lie under a point (nostrils, lips, ears), the one
-    with the largest `score` (depth toward the viewer, or distance from the cylinder axis)
-    wins: the outermost skin, as a ray from outside would hit it.
-    """
-
-    def __init__(self, mesh: Mesh, uv: np.ndarray, score: np.ndarray, vertices=None, max_span=None):
-        self.mesh = mesh
-        self.v = mesh.vertices if vertices is None else np.asarray(vertices)
-        self.uv = np.asarray(uv, float)
-        self.score = np.asarray(score, float)
-        tri = mesh.triangles
-        tuv = self.uv[tri]
-        ok = np.isfinite(tuv).all((1, 2))
-        if max_span is not None:                          # triangles across a cylinder seam
-            ok &= np.ptp(tuv[:, :, 0], axis=1) < max_span
-        self.usable = np.nonzero(ok)[0]
-        self.tree = cKDTree(tuv[self.usable].mean(1))
-
-    def locate(self, q, k=32):
-        """(triangle, barycentric, found) of the outermost surface under each 2D point."""
-        q = np.atleast_2d(np.asarray(q, float))
-        k = min(k, len(self.usable))
-        _, cand = self.tree.query(q, k=k)
-        cand = self.usable[cand.reshape(len(q), k)]
-        ct = self.mesh.triangles[cand.reshape(-1)]
-        uv = self.uv
-        bc = barycentric_2d(np.repeat(q, k, 0), uv[ct[:, 0]], uv[ct[:, 1]], uv[ct[:, 2]]).reshape(len(q), k, 3)
-        bc = np.nan_to_num(bc, nan=-1.0)
-        depth = np.einsum("ijk,ijk->ij", bc, self.score[self.mesh.triangles[cand]])
-        inside = (bc >= -1e-9).all(2)
-        rows = np.arange(len(q))
-        best = np.argmax(np.where(inside, depth, -np.inf), 1)
-        found = inside[rows, best]
-        # a point just off the surface's edge: the nearest candidate, clamped onto it
-        cl = np.clip(bc, 0, None)
-        cl /= np.maximum(cl.sum(2, keepdims=True), 1e-12)
-        pc = np.einsum("ijk,ijkl->ijl", cl, uv[self.mesh.triangles[cand]])
-        near = np.argmin(np.linalg.norm(pc - q[:, None], axis=2), 1)
-        pick = np.where(found, best, near)
-        b = np.where(found[:, None], bc[rows, pick], cl[rows, pick])
-        return cand[rows, pick], b, found
-
-    def points(self, q):
-        """3D surface points under 2D points, and whether each was inside the surface."""
-        t, b, found = self.locate(q)
-        return np.einsum("ij,ijk->ik", b, self.v[self.mesh.triangles[t]]), found
+from ..mesh.query import SurfaceMap
 
 
 class FaceFrame:
@@ -83,8 +30,9 @@ class FaceFrame:
         return self.origin + self.unit * np.asarray(p) @ self.axes
 
     def front_map(self, mesh: Mesh, vertices=None) -> SurfaceMap:
-        loc = self.to_local(mesh.vertices if vertices is None else vertices)
-        return SurfaceMap(mesh, loc[:, :2], loc[:, 2], vertices)
+        v = mesh.vertices if vertices is None else np.asarray(vertices)
+        loc = self.to_local(v)
+        return SurfaceMap(mesh.triangles, loc[:, :2], loc[:, 2], v)
 
 
 def cardinal_spline(points: np.ndarray, samples_per_segment: int = 8, tension: float = 0.0) -> np.ndarray:

@@ -25,7 +25,8 @@ from ..errors import MimicaError
 from ..mesh import Mesh
 from .cylinder import fit_cylinder, flatten, radial_distance
 from .mask import Wrinkle, WrinkleMask, boundary_anchors
-from .surface import FaceFrame, SurfaceMap
+from ..mesh.query import SurfaceMap, TriangleLocator
+from .surface import FaceFrame
 
 
 @dataclass
@@ -65,22 +66,20 @@ def relax(rest2d, start2d, fixed, edges, damping=0.9, tol=1e-7, max_iter=20000):
     v = np.zeros_like(x)
     free = ~fixed
     n = len(x)
-    it = 0
-    for it in range(1, max_iter + 1):
+
+    def forces(x):
         e = x[j] - x[i]
         ln = np.maximum(np.linalg.norm(e, axis=1), 1e-12)
         f = (k * (ln - L0) / ln)[:, None] * e                 # pulls i toward j when stretched
-        F = np.stack([np.bincount(i, f[:, c], n) - np.bincount(j, f[:, c], n) for c in (0, 1)], 1)
-        F -= damping * v                                      # - h v
+        return np.stack([np.bincount(i, f[:, c], n) - np.bincount(j, f[:, c], n) for c in (0, 1)], 1)
+    it = 0
+    for it in range(1, max_iter + 1):
+        F = forces(x) - damping * v                           # - h v
         v[free] += dt * F[free]
         x[free] += dt * v[free]
         if it % 50 == 0 and np.abs(v[free]).max() * dt < tol * scale:
             break
-    e = x[j] - x[i]
-    ln = np.maximum(np.linalg.norm(e, axis=1), 1e-12)
-    f = (k * (ln - L0) / ln)[:, None] * e
-    F = np.stack([np.bincount(i, f[:, c], n) - np.bincount(j, f[:, c], n) for c in (0, 1)], 1)
-    return x, it, float(np.abs(F[free]).max() / scale) if free.any() else 0.0
+    return x, it, float(np.abs(forces(x)[free]).max() / scale) if free.any() else 0.0
 
 
 def transfer_mask(mask: WrinkleMask, reference: Mesh, target: Mesh, target_landmarks: np.ndarray,
@@ -88,7 +87,7 @@ def transfer_mask(mask: WrinkleMask, reference: Mesh, target: Mesh, target_landm
     """The mask (lying on `reference`) carried onto `target` (any topology) by V&Y §3.2."""
     t0 = time.perf_counter()
     ref_anchors = mask.anchors
-    if not np.isfinite(ref_anchors[:68]).all(1).sum() >= 20:
+    if np.isfinite(ref_anchors[:68]).all(1).sum() < 20:
         raise MimicaError("wrinkle mask: its anchors need at least 20 of the 68 landmarks")
     tl = np.asarray(target_landmarks, float)
     if target_anchors is None:
@@ -134,7 +133,7 @@ def transfer_mask(mask: WrinkleMask, reference: Mesh, target: Mesh, target_landm
     x, iters, resid = relax(rest2d, start, fixed, edges)
     # back onto the new surface: the outermost skin under each flattened point
     flat_t = flatten(Vt, cyl_t, forward=fwd)
-    smap = SurfaceMap(target, flat_t, radial_distance(Vt, cyl_t), vertices=target.vertices,
+    smap = SurfaceMap(target.triangles, flat_t, radial_distance(Vt, cyl_t), target.vertices,
                       max_span=np.pi * cyl_t.radius)
     p3, found = smap.points(x[na:])
     wrinkles, off = [], 0
@@ -148,13 +147,31 @@ def transfer_mask(mask: WrinkleMask, reference: Mesh, target: Mesh, target_landm
     return out, MaskTransferInfo(iters, resid, time.perf_counter() - t0, cyl_t.radius / sim.scale)
 
 
-def snap_mask(mask: WrinkleMask, mesh: Mesh) -> WrinkleMask:
-    """The mask's points moved onto the closest points of the mesh's surface (after edits)."""
-    from ..mesh.query import TriangleLocator
-    loc = TriangleLocator(mesh.vertices, mesh.triangles)
-    ws = [Wrinkle(w.name, loc.closest(w.points)[2], w.muscles, w.emphasis, w.width, w.profile, w.fold)
+def _moved(mask: WrinkleMask, move, face="") -> WrinkleMask:
+    """The mask with every point (wrinkle control points, anchors) passed through `move`."""
+    ws = [Wrinkle(w.name, move(w.points), w.muscles, w.emphasis, w.width, w.profile, w.fold)
           for w in mask.wrinkles]
     A = mask.anchors.copy()
     ok = np.isfinite(A).all(1)
-    A[ok] = loc.closest(A[ok])[2]
-    return WrinkleMask(ws, A, mask.face, dict(mask.extra))
+    A[ok] = move(A[ok])
+    return WrinkleMask(ws, A, face or mask.face, dict(mask.extra))
+
+
+def snap_mask(mask: WrinkleMask, mesh: Mesh) -> tuple[WrinkleMask, np.ndarray]:
+    """The mask's points moved onto the closest points of the mesh's surface (after edits),
+    and how far each wrinkle control point was from it."""
+    loc = TriangleLocator(mesh.vertices, mesh.triangles)
+    dist = loc.closest(np.vstack([w.points for w in mask.wrinkles]))[3]
+    return _moved(mask, lambda p: loc.closest(p)[2]), dist
+
+
+def carry_mask(mask: WrinkleMask, reference: Mesh, vertices: np.ndarray, face="") -> WrinkleMask:
+    """The mask on another shape of the reference's own topology (an identity, an expression):
+    each point keeps its triangle and barycentric coordinates."""
+    loc = TriangleLocator(reference.vertices, reference.triangles)
+    tri = reference.triangles
+
+    def move(p):
+        t, b, _, _ = loc.closest(p)
+        return np.einsum("ij,ijk->ik", b, vertices[tri[t]])
+    return _moved(mask, move, face)
