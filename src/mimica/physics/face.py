@@ -139,25 +139,14 @@ class FaceSimulator:
         if self._g_fq is not None:
             solvers.append(self.gravity)
         for sv in solvers:
-            self._add_field(u, sv)
+            sv.add_displacement(u, self.warp)
         return u
-
-    def _add_field(self, u, sv):
-        if self.warp:
-            u += sv.displacement(True)
-            return
-        # linear: accumulate Phi q on the ROI's nodes, in single precision (half the memory
-        # traffic of the dense modes; the output is for display, the state stays double)
-        b = sv.b
-        if not hasattr(sv, "_phi32"):
-            sv._phi32 = np.ascontiguousarray(b.phi, dtype=np.float32)
-        u[b.free] += (sv._phi32 @ sv.q.astype(np.float32)).reshape(-1, 3)
 
     def fields(self) -> dict:
         """Each force type's own displacement field (Kim Fig. 14)."""
         def field(sv):
             u = np.zeros_like(self.rig.skin.vertices)
-            self._add_field(u, sv)
+            sv.add_displacement(u, self.warp)
             return u
         out = {n: field(s.solver) for n, s in zip(self.names, self.systems)}
         if self._g_fq is not None:

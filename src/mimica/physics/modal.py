@@ -11,6 +11,7 @@ rotation of the linearized rotation field w = Psi q (Psi = W Phi, W the per-node
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -116,6 +117,16 @@ class ModalBasis:
     mass: np.ndarray          # (n,) lumped masses
     n: int
 
+    @cached_property
+    def output32(self) -> tuple[np.ndarray, bool]:
+        """Phi in single precision for the skin output, and whether it is padded with zero rows
+        to every node (when the free nodes are most of the skin: no scatter needed)."""
+        if len(self.free) > 0.4 * self.n:
+            full = np.zeros((3 * self.n, self.phi.shape[1]), np.float32)
+            full[(3 * self.free[:, None] + np.arange(3)).ravel()] = self.phi
+            return full, True
+        return np.ascontiguousarray(self.phi, dtype=np.float32), False
+
     @classmethod
     def compute(cls, energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, r: int = 20,
                 load_nodes=None, stiffness=None, rotation=None) -> "ModalBasis":
@@ -216,6 +227,21 @@ class ModalWarpingSolver:
         ok = p >= 0
         dof = (3 * np.maximum(p, 0)[:, None] + np.arange(3))
         return b.phi[dof] * ok[:, None, None]
+
+    def add_displacement(self, u: np.ndarray, warp: bool = False):
+        """u += this system's displacement, u (n, 3) C-contiguous.  The linear one (Phi q) is
+        computed in single precision, the output being for display (the state stays double):
+        half the memory traffic of the dense modes."""
+        if warp:
+            u += self.displacement(True)
+            return
+        phi, padded = self.b.output32
+        y = phi @ self.q.astype(np.float32)
+        if padded:                       # a plain add beats a scatter over most of the skin
+            flat = u.reshape(-1)
+            flat += y
+        else:
+            u[self.b.free] += y.reshape(-1, 3)
 
     def displacement(self, warp: bool = True) -> np.ndarray:
         """u = R (Phi q) node by node (modal warping), or the linear Phi q."""
