@@ -33,7 +33,7 @@ def mask_image(mesh: Mesh, mask, vertices=None, size=480, yaw=0.0, anchors=True)
         return normals[tree.query(p)[1]] @ view > 0.05
     for w in mask.wrinkles:
         curve = cardinal_spline(w.points, 8)
-        xy, cam = project(curve, frame, (size, size), yaw)
+        xy, _ = project(curve, frame, (size, size), yaw)
         front = facing(curve)
         pts = [tuple(p) for p, f in zip(xy, front) if f]
         if len(pts) > 1:
