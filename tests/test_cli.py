@@ -43,16 +43,39 @@ def test_transfer_folder_same_topology_keeps_quads(files, tmp_path, capsys):
     assert "frames/s" in capsys.readouterr().err
 
 
-def test_transfer_onto_other_topology_needs_landmarks(files, tmp_path, capsys):
-    out = tmp_path / "o"
+def test_transfer_onto_other_topology_finds_landmarks(files, tmp_path):
+    """No landmark file for a scan-like face: they are found automatically (render, detect,
+    cast back) and the result is close to the one with the landmark file."""
+    out, out2 = tmp_path / "o", tmp_path / "o2"
     args = ["transfer", str(files / "S.obj"), str(files / "seq" / "f000_jawOpen.obj"),
-            "--target", str(files / "scan.ply"), "--out", str(out)]
-    assert main(args) == 2
+            "--target", str(files / "scan.ply"), "--method", "dt"]
+    assert main(args + ["--out", str(out)]) == 0
+    assert main(args + ["--out", str(out2), "--target-landmarks", str(files / "scan.json")]) == 0
+    auto, given = read_mesh(out / "f000_jawOpen.obj"), read_mesh(out2 / "f000_jawOpen.obj")
+    assert auto.same_topology(read_mesh(files / "scan.ply"))
+    rest = read_mesh(files / "scan.ply").vertices
+    size = np.ptp(rest, 0).max()
+    moved = np.linalg.norm(given.vertices - rest, axis=1).max()
+    assert moved > 0.01 * size
+    assert np.abs(auto.vertices - given.vertices).max() < 0.25 * moved
+
+
+def test_landmarks_not_found_is_one_line(tmp_path, capsys):
+    """A mesh with no face on it: one line naming the file, exit 2, nothing written."""
+    from mimica.mesh import Mesh, write_mesh
+    g = np.mgrid[0:20, 0:20].reshape(2, -1).T.astype(float)
+    v = np.c_[g, np.zeros(len(g))]
+    f = [[i * 20 + j, i * 20 + j + 1, (i + 1) * 20 + j] for i in range(19) for j in range(19)]
+    write_mesh(tmp_path / "plane.obj", Mesh.from_faces(v, f))
+    out = tmp_path / "o"
+    assert main(["transfer", str(tmp_path / "plane.obj"), str(tmp_path / "plane.obj"),
+                 "--target", str(tmp_path / "plane.obj"), "--source-landmarks", str(tmp_path / "none.json"),
+                 "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
-    assert "--target-landmarks" in err and len(err.splitlines()) == 1 and not out.exists()
-    assert main(args + ["--target-landmarks", str(files / "scan.json"), "--method", "dt"]) == 0
-    r = read_mesh(out / "f000_jawOpen.obj")
-    assert r.same_topology(read_mesh(files / "scan.ply"))
+    assert len(err.splitlines()) == 1 and not out.exists()
+    assert main(["landmarks", str(tmp_path / "plane.obj"), "--out", str(tmp_path / "p.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "plane.obj" in err and "no face" in err and not (tmp_path / "p.json").exists()
 
 
 @pytest.mark.parametrize("case", ["bad_frame", "wrong_count", "missing_target", "bad_landmarks", "dup"])

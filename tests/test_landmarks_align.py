@@ -54,11 +54,25 @@ def test_bad_landmark_files(tmp_path, head_model, doc, needle):
         read_landmarks(p, head_model.mesh)
 
 
-def test_other_topology_without_landmarks_says_which_option(head_model):
+def test_other_topology_gets_landmarks_automatically(head_model):
+    """A coarse resampled face (3,000 vertices, another topology, jagged holes at the eyes,
+    nose and mouth): landmarks found by rendering and detection, median within 3% of the
+    face width of the true ones (measured 2.4%; on full ICT identities 0.6%, test_image)."""
     v = head_model.neutral
     rs = resample_face(head_model.mesh.submesh(np.arange(9230))[0], v[ICT_LANDMARKS_68], 3000, seed=1)
+    got = landmarks_for(rs.mesh, None, "--target-landmarks", "scan.obj").positions(rs.mesh)
+    tru = v[ICT_LANDMARKS_68]
+    err = np.linalg.norm(got - tru, axis=1) / np.linalg.norm(tru[0] - tru[16])
+    assert np.median(err) < 0.03
+
+
+def test_no_face_found_says_which_option():
+    from mimica.mesh import Mesh
+    g = np.mgrid[0:20, 0:20].reshape(2, -1).T.astype(float)
+    plane = Mesh.from_faces(np.c_[g, np.zeros(len(g))],
+                            [[i * 20 + j, i * 20 + j + 1, (i + 1) * 20 + j] for i in range(19) for j in range(19)])
     with pytest.raises(MimicaError, match="--target-landmarks"):
-        landmarks_for(rs.mesh, None, "--target-landmarks", "scan.obj")
+        landmarks_for(plane, None, "--target-landmarks", "plane.obj")
 
 
 def test_similarity_recovered_from_landmarks():

@@ -359,6 +359,112 @@ def _parse_pull(spec):
     return center, radius, force
 
 
+def _image_points(img, path, what):
+    """2D feature points: `--landmarks`-style sibling file PHOTO.landmarks.json if present, else dlib."""
+    from .image import landmarks2d
+    side = Path(path).with_suffix(".landmarks.json")
+    return landmarks2d.points_for(img, side if side.is_file() else None, str(path))
+
+
+def cmd_transfer_image(a):
+    from .image import ImageAnalogy, read_image, write_image
+    from .image.landmarks2d import Tracker
+    from .render import contact_sheet, save_png
+
+    if a.driving and a.source_expr:
+        raise MimicaError("give either source expression photos or --driving VIDEO, not both")
+    if not a.driving and not a.source_expr:
+        raise MimicaError("give source expression photos, or --driving VIDEO")
+    t0 = time.perf_counter()
+    src = read_image(a.source_neutral)
+    tgt = read_image(a.target)
+    sp = _image_points(src, a.source_neutral, "source neutral")
+    tp = _image_points(tgt, a.target, "target")
+    an = ImageAnalogy(tgt, tp)
+    out = Path(a.out)
+    if a.driving:
+        from .image.video import VideoWriter, frame_source
+        if out.suffix.lower() != ".mp4":
+            raise MimicaError(f"{out}: with --driving the output is a video; name it .mp4")
+        n, fps, frames = frame_source(a.driving)
+        track = Tracker(what=str(a.driving))
+        t1 = time.perf_counter()
+        with VideoWriter(out, fps) as vw:
+            for f in _progress(frames, n, "frames"):
+                vw.write(an.transfer(src, sp, f, track(f), method=a.method).image)
+        dt = time.perf_counter() - t1
+        _say(f"{vw.n} frames -> {out} ({vw.n / max(dt, 1e-9):.1f} frames/s, landmarks tracked)")
+        return 0
+    paths = [Path(p) for p in a.source_expr]
+    stems = [p.stem for p in paths]
+    if len(set(stems)) != len(stems):
+        raise MimicaError("two source expressions share a file name; outputs would overwrite each other")
+    exprs = [(p, read_image(p)) for p in paths]
+    pts = [_image_points(img, p, str(p)) for p, img in exprs]
+    t1 = time.perf_counter()
+    results = [an.transfer(src, sp, img, xp, method=a.method) for (_, img), xp in zip(exprs, pts)]
+    t2 = time.perf_counter()
+    for (p, _), r in zip(exprs, results):
+        write_image(out / f"{p.stem}.png", r.image)
+    cells = [[_tile(src, tgt), _tile(img, tgt), _tile(tgt, tgt), _tile(r.image, tgt)]
+             for (_, img), r in zip(exprs, results)]
+    sheet = contact_sheet([c for row in cells for c in row], columns=4,
+                          labels=[lab for (p, _) in exprs for lab in ("source", p.stem, "target", f"target: {p.stem}")])
+    save_png(out / "sheet.png", sheet)
+    _say(f"{len(results)} expression(s) -> {out}/ ({a.method}; points and setup {t1 - t0:.2f}s, "
+         f"transfer {1000 * (t2 - t1) / len(results):.0f} ms each); sheet: {out / 'sheet.png'}")
+    return 0
+
+
+def _tile(img, like):
+    """img as uint8 at the size of `like` (for contact sheets of photos of different sizes)."""
+    from PIL import Image
+    from .image.io import to_uint8
+    im = Image.fromarray(to_uint8(img))
+    h, w = like.shape[:2]
+    return np.asarray(im.resize((w, h), Image.BILINEAR)) if im.size != (w, h) else np.asarray(im)
+
+
+def cmd_landmarks(a):
+    from .image import landmarks2d, read_image, write_image
+    from .mesh import MESH_SUFFIXES
+    path = Path(a.face)
+    if path.suffix.lower() in MESH_SUFFIXES:
+        from .image.landmarks3d import detect_mesh
+        from .landmarks import write_landmarks
+        from .mesh import read_mesh
+        mesh = read_mesh(path)
+        pts, view = detect_mesh(mesh, what=str(path))
+        if a.show:
+            from .render import face_framing, project, render_mesh, save_png
+            fr = face_framing(pts)
+            img = render_mesh(mesh, size=(640, 640), frame=fr)
+            xy, _ = project(pts, fr, (640, 640))
+            save_png(Path(a.show), _draw_points(img, xy))
+        write_landmarks(a.out, pts)
+        _say(f"68 landmarks found from the view yaw {view[0]}, pitch {view[1]} -> {a.out}")
+        return 0
+    img = read_image(path)
+    pts = landmarks2d.detect(img, str(path))
+    if a.show:
+        write_image(Path(a.show), _draw_points((img * 255).astype(np.uint8), pts) / 255.0)
+    landmarks2d.write_points(a.out, pts, image=path.name, size=(img.shape[1], img.shape[0]))
+    _say(f"68 points -> {a.out} (pixel coordinates; edit and rerun `transfer-image`, which reads "
+         f"PHOTO.landmarks.json beside each photo)")
+    return 0
+
+
+def _draw_points(img, xy):
+    from PIL import Image, ImageDraw
+    im = Image.fromarray(np.asarray(img, np.uint8)).convert("RGB")
+    d = ImageDraw.Draw(im)
+    r = max(1.5, im.width / 250)
+    for i, (x, y) in enumerate(xy):
+        col = (255, 60, 40) if i < 17 else (40, 200, 255) if i < 27 else (255, 220, 0) if i < 36 else (80, 255, 80) if i < 48 else (255, 80, 255)
+        d.ellipse([x - r, y - r, x + r, y + r], fill=col)
+    return np.asarray(im)
+
+
 def cmd_demo(a):
     from .demo import run_demo
     return run_demo(Path(a.out), quick=a.quick)
@@ -448,6 +554,25 @@ def build_parser():
     ag.add_argument("--size", type=int, default=360, help="pixels per picture")
     ag.add_argument("--out", required=True, help="PNG contact sheet")
     ag.set_defaults(func=cmd_age)
+
+    ti = sub.add_parser("transfer-image", help="move the expression of one photo pair onto another photo (Song §VI)",
+                        description="Feature points come from PHOTO.landmarks.json beside a photo when present "
+                                    "(see `mimica landmarks`), else they are found automatically.")
+    ti.add_argument("source_neutral", help="photo of the source person, neutral")
+    ti.add_argument("source_expr", nargs="*", help="photos of the same person with expressions")
+    ti.add_argument("--driving", metavar="VIDEO", help="a video (MP4) or folder of frames of the source person")
+    ti.add_argument("--target", required=True, help="photo of the target person, neutral")
+    ti.add_argument("--method", choices=["vtc", "eri", "warp"], default="vtc",
+                    help="vtc: vertex-tent luminance transfer (Song); eri: expression ratio images (Liu 2001); "
+                         "warp: feature-point warp only")
+    ti.add_argument("--out", required=True, help="output folder (photos), or an .mp4 with --driving")
+    ti.set_defaults(func=cmd_transfer_image)
+
+    lm = sub.add_parser("landmarks", help="find the 68 feature points on a photo or a mesh")
+    lm.add_argument("face", help="photo (JPEG/PNG/GIF...) or mesh (OBJ/PLY/glTF)")
+    lm.add_argument("--out", required=True, help="landmark JSON to write (pixels for photos, 3D for meshes)")
+    lm.add_argument("--show", metavar="PNG", help="also draw the points")
+    lm.set_defaults(func=cmd_landmarks)
 
     d = sub.add_parser("demo", help="transfer bundled ICT-FaceKit expressions; write meshes and a contact sheet")
     d.add_argument("--out", default="out/demo")

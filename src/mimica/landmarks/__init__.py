@@ -149,5 +149,11 @@ def landmarks_for(mesh: Mesh, path=None, option="--landmarks", what="mesh") -> L
         return read_landmarks(path, mesh)
     if is_ict_topology(mesh):
         return ict_landmarks(mesh)
-    raise MimicaError(f"{what}: not an ICT-FaceKit topology, so its landmarks are not built in; "
+    from ..image.landmarks3d import detect_mesh
+    try:
+        pts, _ = detect_mesh(mesh, what=what)    # render, find the 68 points, cast them back
+        return Landmarks.snap(mesh, pts)
+    except MimicaError:
+        pass
+    raise MimicaError(f"{what}: not an ICT-FaceKit topology and no face was found in its renders; "
                       f"pass {option} FILE (JSON: {{\"scheme\": \"ibug68\", \"points\": [[x,y,z], ...]}})")

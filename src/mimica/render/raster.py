@@ -95,11 +95,13 @@ def rasterize(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, width: int, heigh
 
 
 def render_mesh(mesh: Mesh, vertices=None, size=(512, 512), yaw=0.0, pitch=0.0, colors=None,
-                background=(255, 255, 255), frame=None, base_color=(0.82, 0.72, 0.64)) -> np.ndarray:
+                background=(255, 255, 255), frame=None, base_color=(0.82, 0.72, 0.64), light=None) -> np.ndarray:
     """Shaded picture of a mesh, (h, w, 3) uint8.
 
     colors: optional (n, 3) per-vertex RGB in [0, 1] (heat maps); shading still applied.
     frame: optional (center (3,), half_extent) so several meshes share one framing.
+    light: optional camera-space direction (x right, y up, z to the viewer) of a single key
+    light with a little ambient, instead of the default key + fill.
     """
     v = mesh.vertices if vertices is None else np.asarray(vertices)
     w, h = size
@@ -118,9 +120,12 @@ def render_mesh(mesh: Mesh, vertices=None, size=(512, 512), yaw=0.0, pitch=0.0, 
     nn /= np.maximum(np.linalg.norm(nn, axis=1, keepdims=True), 1e-12)
     # two-sided lighting: a key light from the upper left front and a soft fill
     nn *= np.sign(nn[:, 2:3] + 1e-12)
-    key = np.clip(nn @ np.array([-0.35, 0.45, 0.82]) / np.linalg.norm([-0.35, 0.45, 0.82]), 0, 1)
-    fill = np.clip(nn @ np.array([0.5, 0.1, 0.86]) / np.linalg.norm([0.5, 0.1, 0.86]), 0, 1)
-    shade = 0.25 + 0.6 * key + 0.2 * fill
+    if light is None:
+        key = np.clip(nn @ np.array([-0.35, 0.45, 0.82]) / np.linalg.norm([-0.35, 0.45, 0.82]), 0, 1)
+        fill = np.clip(nn @ np.array([0.5, 0.1, 0.86]) / np.linalg.norm([0.5, 0.1, 0.86]), 0, 1)
+        shade = 0.25 + 0.6 * key + 0.2 * fill
+    else:
+        shade = 0.15 + 0.85 * np.clip(nn @ (np.asarray(light, float) / np.linalg.norm(light)), 0, 1)
     if colors is None:
         col = np.broadcast_to(np.asarray(base_color), (len(t), 3))
     else:

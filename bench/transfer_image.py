@@ -1,0 +1,273 @@
+"""Benchmark: 2D expression analogy (issue 6) — Song et al. §VI against expression ratio
+images (Liu et al. 2001, in-project) in the same run; video end to end; 3D landmarks.
+
+- image_s / eri_image_s: one 311x419 transfer after the per-size setup (best of 5).
+- psnr_self: S' onto S itself on the rendered ICT faces (exact truth; 3 identities x 6
+  expressions, face region, median); the same on the Yale photos is printed beside it.
+- psnr_gain_vs_eri: rendered ICT pairs, different target identity and different lighting,
+  truth = the target identity rendered with the expression under the target's light;
+  mean over pairs of PSNR(ours) - PSNR(ERI).
+- Yale A->B: A's expression onto B compared with B's own photo (aligned on stable points),
+  medians per expression for ours, ERI, the warp alone and the untouched neutral.
+- video_fps: a 640x480 MP4 of a rendered ICT face moving, decoded, landmarks tracked,
+  transferred onto the astronaut portrait, encoded to MP4.
+- landmarks3d_err: automatic 3D landmarks on the odd ICT identities (held out from the
+  calibration), median distance over the 68 as a fraction of the face width (jaw 0-16).
+
+Run from the project root: .venv/bin/python bench/transfer_image.py [--quick]
+Pictures: docs/figures/transfer_image_ict.png, transfer_image_astronaut.png; the Yale picture goes to
+out/figures/transfer_image_yale.png only (the Yale terms keep those faces out of the repository).
+"""
+
+from __future__ import annotations
+
+import itertools
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw
+from scipy.spatial import ConvexHull
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from mimica.data import ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel, data_dir  # noqa: E402
+from mimica.image import ImageAnalogy, psnr, read_image  # noqa: E402
+from mimica.image.ictphotos import LIGHT_LEFT, LIGHT_RIGHT, ICTPhotos  # noqa: E402
+from mimica.image.landmarks2d import Tracker, detect  # noqa: E402
+from mimica.image.landmarks3d import detect_mesh  # noqa: E402
+from mimica.image.video import VideoWriter, frame_source  # noqa: E402
+from mimica.image.warp import STABLE, Similarity2D, sample  # noqa: E402
+from mimica.render import contact_sheet, save_png  # noqa: E402
+
+FIG = ROOT / "docs" / "figures"
+LOCAL_FIG = ROOT / "out" / "figures"          # ignored by git
+YALE_EXPR = ["happy", "surprised", "sad", "sleepy", "wink"]
+
+
+def hull_mask(points, shape):
+    im = Image.new("L", (shape[1], shape[0]), 0)
+    h = ConvexHull(points)
+    ImageDraw.Draw(im).polygon([tuple(p) for p in points[h.vertices]], fill=1)
+    return np.asarray(im) > 0
+
+
+def aligned_to(img, pts, ref_pts):
+    """img resampled into the frame of ref_pts by a similarity on the stable points."""
+    b = Similarity2D.fit(pts[STABLE], ref_pts[STABLE]).inverse()
+    h, w = img.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w]
+    q = b(np.stack([xx.ravel(), yy.ravel()], 1))
+    return sample(img, q[:, 0].reshape(h, w), q[:, 1].reshape(h, w))
+
+
+def u8(img):
+    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
+class Yale:
+    def __init__(self):
+        self.dir = data_dir() / "yalefaces"
+        self.cache = {}
+
+    def __call__(self, name):
+        if name not in self.cache:
+            img = read_image(self.dir / f"{name}.gif")
+            self.cache[name] = (img, detect(img, name))
+        return self.cache[name]
+
+
+def timing(quick):
+    ph = ICTPhotos()
+    s, sp = ph.photo("identity001", None, LIGHT_LEFT)
+    x, xp = ph.photo("identity001", "happiness", LIGHT_LEFT)
+    t, tp = ph.photo("identity004", None, LIGHT_RIGHT)
+    t0 = time.perf_counter()
+    an = ImageAnalogy(t, tp, margin=1.0)
+    setup = time.perf_counter() - t0
+    out = {}
+    for m in ("vtc", "eri", "warp"):
+        an.transfer(s, sp, x, xp, method=m)
+        best = 1e9
+        for _ in range(3 if quick else 7):
+            t0 = time.perf_counter()
+            an.transfer(s, sp, x, xp, method=m)
+            best = min(best, time.perf_counter() - t0)
+        out[m] = best
+    print(f"311x419 transfer (solved box {an.w}x{an.h}, per-size setup {setup * 1000:.0f} ms): "
+          f"ours {out['vtc'] * 1000:.1f} ms, ERI {out['eri'] * 1000:.1f} ms, warp alone {out['warp'] * 1000:.1f} ms "
+          f"(paper: 1.3 s and 6.3 s on a Pentium IV)")
+    return out["vtc"], out["eri"]
+
+
+def self_transfer(yale, quick):
+    """S' onto S; the truth S' aligned to S by the stable points as the method aligns it."""
+    ph = ICTPhotos()
+    ict = []
+    for ident in ("identity001", "identity004", "identity009")[: 1 if quick else 3]:
+        s, sp = ph.photo(ident)
+        an = ImageAnalogy(s, sp)
+        for e in ("happiness", "surprise", "disgust", "anger", "sadness", "fear"):
+            x, xp = ph.photo(ident, e)
+            r = an.transfer(s, sp, x, xp)
+            ict.append(psnr(r.image, aligned_to(x, xp, sp), r.mask > 0.5))
+    vals = []
+    for i in range(1, 11 if not quick else 4):
+        s, sp = yale(f"subject{i:02d}.normal")
+        an = ImageAnalogy(s, sp)
+        for e in YALE_EXPR:
+            x, xp = yale(f"subject{i:02d}.{e}")
+            r = an.transfer(s, sp, x, xp)
+            vals.append(psnr(r.image, aligned_to(x, xp, sp), r.mask > 0.5))
+    print(f"self-transfer S' onto S, face region: rendered ICT ({len(ict)} pairs) median {np.median(ict):.2f} dB "
+          f"(min {np.min(ict):.2f}); Yale photos ({len(vals)} pairs) median {np.median(vals):.2f} dB "
+          f"(min {np.min(vals):.2f})")
+    return float(np.median(ict))
+
+
+def ict_pairs(quick):
+    ph = ICTPhotos()
+    pairs = [("identity001", "identity004"), ("identity007", "identity012"), ("identity013", "identity002")]
+    exprs = ["happiness", "surprise", "disgust", "anger", "sadness", "fear"]
+    if quick:
+        pairs, exprs = pairs[:1], exprs[:3]
+    gains, rows, res = [], [], {k: [] for k in ("vtc", "eri", "warp", "neutral")}
+    for a, b in pairs:
+        s, sp = ph.photo(a, None, LIGHT_LEFT)
+        t, tp = ph.photo(b, None, LIGHT_RIGHT)
+        an = ImageAnalogy(t, tp)
+        for e in exprs:
+            x, xp = ph.photo(a, e, LIGHT_LEFT)
+            truth, _ = ph.photo(b, e, LIGHT_RIGHT)
+            mask = hull_mask(tp, t.shape)
+            r = {m: an.transfer(s, sp, x, xp, method=m).image for m in ("vtc", "eri", "warp")}
+            for m in r:
+                res[m].append(psnr(r[m], truth, mask))
+            res["neutral"].append(psnr(t, truth, mask))
+            gains.append(res["vtc"][-1] - res["eri"][-1])
+            if len(rows) < 4 and e in ("happiness", "surprise", "disgust"):
+                rows.append([s, x, t, r["eri"], r["vtc"], truth])
+    print("rendered ICT pairs (source lit from the left, target from the right; truth rendered): mean PSNR "
+          + ", ".join(f"{k} {np.mean(v):.2f} dB" for k, v in res.items())
+          + f"; ours - ERI: mean {np.mean(gains):+.2f} dB, min {np.min(gains):+.2f} dB over {len(gains)} pairs")
+    FIG.mkdir(parents=True, exist_ok=True)
+    save_png(FIG / "transfer_image_ict.png", contact_sheet(
+        [u8(c) for row in rows for c in row], columns=6,
+        labels=["source", "source expr.", "target (other light)", "ERI", "ours (VTC)", "truth"] * len(rows),
+        title="ICT-FaceKit renders: expression onto another identity under another light"))
+    return float(np.mean(gains))
+
+
+def yale_pairs(yale, quick):
+    subs = [f"subject{i:02d}" for i in range(1, 11 if not quick else 5)]
+    tot = {k: [] for k in ("vtc", "eri", "warp", "neutral")}
+    rows = []
+    for e in YALE_EXPR if not quick else YALE_EXPR[:2]:
+        res = {k: [] for k in tot}
+        for a, b in itertools.permutations(subs, 2):
+            s, sp = yale(f"{a}.normal")
+            x, xp = yale(f"{a}.{e}")
+            t, tp = yale(f"{b}.normal")
+            tx, txp = yale(f"{b}.{e}")
+            truth = aligned_to(tx, txp, tp)
+            mask = hull_mask(tp, t.shape)
+            an = ImageAnalogy(t, tp)
+            r = {m: an.transfer(s, sp, x, xp, method=m).image for m in ("vtc", "eri", "warp")}
+            for m in r:
+                res[m].append(psnr(r[m], truth, mask))
+            res["neutral"].append(psnr(t, truth, mask))
+            if (a, b) in (("subject01", "subject03"), ("subject04", "subject02")) and e in ("happy", "surprised"):
+                rows.append([s, x, t, r["eri"], r["vtc"], truth])
+        for k in tot:
+            tot[k] += res[k]
+        print(f"  Yale A->B {e:9s} ({len(res['vtc'])} pairs) median PSNR: "
+              + ", ".join(f"{k} {np.median(v):.2f}" for k, v in res.items()))
+    print("Yale A->B all: median PSNR " + ", ".join(f"{k} {np.median(v):.2f} dB" for k, v in tot.items()))
+    if rows:
+        LOCAL_FIG.mkdir(parents=True, exist_ok=True)
+        save_png(LOCAL_FIG / "transfer_image_yale.png", contact_sheet(
+            [u8(c) for row in rows for c in row], columns=6,
+            labels=["A neutral", "A expression", "B neutral", "ERI", "ours (VTC)", "B's own photo"] * len(rows),
+            title="Yale faces: A's expression onto B"))
+
+
+def video(quick):
+    import skimage.data
+    ph = ICTPhotos(size=(640, 480), zoom=1.6)
+    n = 24 if quick else 60
+    amounts = 0.5 - 0.5 * np.cos(np.linspace(0, 2 * np.pi, n))
+    tgt = skimage.data.astronaut().astype(np.float32) / 255.0
+    src, sp = ph.photo("identity003", None)
+    keep = (n // 2 - 1, n // 2 + 2)                       # smile and surprise near their peaks
+    with tempfile.TemporaryDirectory() as tmp:
+        drv = Path(tmp) / "driving.mp4"
+        with VideoWriter(drv, 30) as vw:
+            for k, amt in enumerate(amounts):
+                vw.write(ph.photo("identity003", "happiness" if k < n // 2 else "surprise", amount=amt)[0])
+        out = Path(tmp) / "out.mp4"
+        detect(src, "warm-up")                            # dlib's model file is read once per process
+        t0 = time.perf_counter()
+        tp = detect(tgt, "astronaut")
+        an = ImageAnalogy(tgt, tp)
+        sp = detect(src, "source")
+        track = Tracker()
+        count, frames = 0, []
+        _, fps, it = frame_source(drv)
+        with VideoWriter(out, fps) as vw:
+            for f in it:
+                r = an.transfer(src, sp, f, track(f))
+                vw.write(r.image)
+                if count in keep:
+                    frames += [f, r.image]
+                count += 1
+        dt = time.perf_counter() - t0
+    vfps = count / dt
+    print(f"video: {count} frames 640x480 (decode, track, transfer onto the 512x512 astronaut, encode) in "
+          f"{dt:.2f}s = {vfps:.1f} frames/s (per-target setup and first detections included; model file read before)")
+    x0, y0, x1, y1 = an.box
+    crop = lambda im: np.asarray(Image.fromarray(u8(im[y0:y1, x0:x1])).resize((300, 300)))      # noqa: E731
+    dr = lambda im: np.asarray(Image.fromarray(u8(im[60:420, 140:500])).resize((300, 300)))     # noqa: E731
+    tiles = [dr(src), crop(tgt), dr(frames[0]), crop(frames[1]), dr(frames[2]), crop(frames[3])]
+    save_png(FIG / "transfer_image_astronaut.png", contact_sheet(
+        tiles, columns=6, labels=["driving: neutral", "astronaut", "driving: smile", "astronaut",
+                                  "driving: surprise", "astronaut"],
+        title="A rendered performance (640x480 MP4) driving a colour photo, frame by frame"))
+    return vfps
+
+
+def landmarks3d(quick):
+    m = ICTModel(ICT_HEAD_VERTICES)
+    errs = []
+    t0 = time.perf_counter()
+    ids = range(1, 20, 2) if not quick else range(1, 6, 2)
+    for i in ids:
+        v = m.identity(f"identity{i:03d}")
+        p, _ = detect_mesh(m.mesh, v)
+        tru = v[ICT_LANDMARKS_68]
+        errs.append(np.median(np.linalg.norm(p - tru, axis=1)) / np.linalg.norm(tru[0] - tru[16]))
+    dt = (time.perf_counter() - t0) / len(errs)
+    print(f"3D landmarks on {len(errs)} held-out ICT identities: median error {100 * np.median(errs):.2f}% of "
+          f"the face width (worst identity {100 * np.max(errs):.2f}%), {dt:.2f}s per mesh")
+    return float(np.median(errs))
+
+
+def main():
+    quick = "--quick" in sys.argv
+    print(f"machine: {platform.machine()}, {platform.processor() or ''} python {platform.python_version()}")
+    yale = Yale()
+    image_s, eri_s = timing(quick)
+    p_self = self_transfer(yale, quick)
+    gain = ict_pairs(quick)
+    yale_pairs(yale, quick)
+    vfps = video(quick)
+    lm3 = landmarks3d(quick)
+    print(f"image_s={image_s:.4f} eri_image_s={eri_s:.4f} video_fps={vfps:.1f} psnr_self={p_self:.2f} "
+          f"psnr_gain_vs_eri={gain:.2f} landmarks3d_err={lm3:.4f}")
+
+
+if __name__ == "__main__":
+    main()

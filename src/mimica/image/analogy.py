@@ -1,0 +1,281 @@
+"""2D facial expression analogy (Song et al. §VI) and expression ratio images (Liu et al. 2001).
+
+For a target photo T (neutral) and a source pair S (neutral), S' (expression):
+1. feature points on all three (dlib, or the user's file);
+2. S and S' aligned to T by similarities from the points (§VI step 2);
+3. S and S' resampled onto the target's pixel grid through the feature points (S' by its
+   own points, i.e. back to the material points of the neutral), so all three image grids
+   share one topology (§VI.C);
+4. each grid a height field (i, j, l = height * Y) (§VI.A); per pixel the VTC transformation
+   Q = w' w^T (w w^T)^-1 (eq. 2) from S's to S''s vertex tent, applied to the target's tent;
+   the new luminances solve eq. 4 restricted to l (i, j stay on the grid), D^T D l = D^T g,
+   with the pixels outside the face held at the target's own (Dirichlet);
+5. the result warped by the feature points' motion S -> S' (§VI.B), piecewise affine.
+The paper warps first and solves on the warped grid; solving on the target's own grid is the
+same correspondence (material points) with a domain that does not change from one
+expression to the next, so the sparse system is factored once per target photo (§VI.D: "only
+the luminance is solved", one factorization reused for every expression and video frame).
+Only a box around the target's face is processed; the rest of the photo is kept.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+
+from ..errors import MimicaError
+from .io import rgb_to_yuv, yuv_to_rgb
+from .warp import (FOREHEAD_BROW, Bilinear, FOREHEAD_FOLLOW, STABLE, PiecewiseAffine, Similarity2D, border_points,
+                   forehead_points, sample, triangulate)
+
+
+def psnr(a, b, mask=None) -> float:
+    """PSNR in dB of images in [0, 1] over the pixels where mask is set."""
+    d = (np.asarray(a, float) - np.asarray(b, float)) ** 2
+    if d.ndim == 3:
+        d = d.mean(-1)
+    mse = float(d[mask].mean() if mask is not None else d.mean())
+    return float("inf") if mse == 0 else 10 * np.log10(1.0 / mse)
+
+
+class Result:
+    """image: (H, W, 3) the target with the expression; points: (68, 2) the target's feature
+    points after the warp; warped: the target warped only (shape, no appearance); mask: (H, W)
+    face weight in [0, 1] where the appearance was solved for (the last two on first use)."""
+
+    def __init__(self, image, points, analogy, lookup):
+        self.image, self.points, self._an, self._lookup = image, points, analogy, lookup
+
+    def _paste(self, crop):
+        an = self._an
+        x0, y0, x1, y1 = an.box
+        full = np.zeros(an.target.shape[:2] + crop.shape[2:], np.float32) if crop.ndim == 2 else an.target.copy()
+        full[y0:y1, x0:x1] = crop
+        return full
+
+    @cached_property
+    def warped(self) -> np.ndarray:
+        an = self._an
+        return self._paste(np.clip(yuv_to_rgb(self._lookup(an.crop_yuv).reshape(an.h, an.w, 3)), 0, 1))
+
+    @cached_property
+    def mask(self) -> np.ndarray:
+        an = self._an
+        return self._paste(self._lookup(an.mask_t).reshape(an.h, an.w))
+
+
+def _face_laplacian(inside):
+    """D^T D restricted to the unknown pixels `inside` (h, w) bool: the grid Laplacian whose
+    neighbours outside are known (Dirichlet); crop edges have no neighbour (Neumann)."""
+    import scipy.sparse as sp
+    h, w = inside.shape
+    idx = -np.ones(h * w, np.int64)
+    flat = inside.ravel()
+    idx[flat] = np.arange(flat.sum())
+    rows, cols = [], []
+    deg = np.zeros(h * w)
+    for a, b in ((np.arange(h * w).reshape(h, w)[:, :-1].ravel(), np.arange(h * w).reshape(h, w)[:, 1:].ravel()),
+                 (np.arange(h * w).reshape(h, w)[:-1, :].ravel(), np.arange(h * w).reshape(h, w)[1:, :].ravel())):
+        touch = flat[a] | flat[b]
+        a, b = a[touch], b[touch]
+        np.add.at(deg, a, 1.0)
+        np.add.at(deg, b, 1.0)
+        both = flat[a] & flat[b]
+        rows += [idx[a[both]], idx[b[both]]]
+        cols += [idx[b[both]], idx[a[both]]]
+    n = int(flat.sum())
+    r = np.concatenate(rows + [np.arange(n)])
+    c = np.concatenate(cols + [np.arange(n)])
+    v = np.concatenate([-np.ones(sum(len(x) for x in rows)), deg[flat]])
+    return sp.csc_matrix((v, (r, c)), shape=(n, n))
+
+
+class ImageAnalogy:
+    """Expression transfer onto one target photo; per-size tables built once, reused for every
+    source pair (and every video frame)."""
+
+    def __init__(self, target, target_points, height=1.0, margin=0.25, feather=None):
+        t = np.asarray(target, np.float32)
+        if t.ndim != 3 or t.shape[2] != 3:
+            raise MimicaError("target: expected an RGB image (h, w, 3)")
+        p = np.asarray(target_points, float)
+        if p.shape != (68, 2) or not np.isfinite(p).all():
+            raise MimicaError("target: 68 finite feature points (x, y) are needed")
+        self.target, self.points, self.height = t, p, float(height)
+        H, W = t.shape[:2]
+        face = np.concatenate([p, forehead_points(p)])
+        lo, hi = face.min(0), face.max(0)
+        pad = margin * (hi - lo).max()
+        x0, y0 = (np.floor(np.maximum(lo - pad, 0))).astype(int)
+        x1, y1 = (np.ceil(np.minimum(hi + pad, [W, H]))).astype(int)
+        if x1 - x0 < 16 or y1 - y0 < 16:
+            raise MimicaError("target: the face box is smaller than 16 pixels")
+        self.box = (x0, y0, x1, y1)
+        self.w, self.h = x1 - x0, y1 - y0
+        off = np.array([x0, y0], float)
+        self.border = border_points(self.w, self.h)                     # crop coordinates
+        self.ctrl_t = np.concatenate([face - off, self.border])          # target control points (crop)
+        self.n_face = len(face)
+        self.tris = triangulate(self.ctrl_t)
+        self.face_tri = (self.tris < self.n_face).all(1)
+        self.crop = t[y0:y1, x0:x1]
+        self.crop_yuv = rgb_to_yuv(self.crop)
+        # the mask fades out over this many pixels inside the face outline (§VI.D: keep the
+        # source's contour off the target)
+        self.feather = feather or max(2.0, 0.04 * (hi - lo).max())
+        self.grid = PiecewiseAffine(self.ctrl_t, self.tris, self.w, self.h)   # the target's own grid
+        self.mask_t = self._neutral_mask()
+        from ..solver import SPDSolver
+        self.inside = self.mask_t > 0
+        self._solver = SPDSolver(_face_laplacian(self.inside))               # factored once
+
+    # -- geometry ----------------------------------------------------------------------------
+    def _controls(self, s_pts, x_pts):
+        """Control points (crop coordinates for the target, image coordinates for the sources)."""
+        s_pts, x_pts = np.asarray(s_pts, float), np.asarray(x_pts, float)
+        a = Similarity2D.fit(s_pts, self.points)                         # S -> T (step 2)
+        b = Similarity2D.fit(x_pts[STABLE], s_pts[STABLE])               # S' -> S (head motion)
+        d68 = b(x_pts) - s_pts                                           # feature motion in S
+        d_fh = FOREHEAD_FOLLOW[:, None] * d68[FOREHEAD_BROW]
+        d = np.concatenate([d68, d_fh, np.zeros((len(self.border), 2))])
+        off = np.array(self.box[:2], float)
+        p_s = np.concatenate([s_pts, forehead_points(s_pts), a.inverse()(self.border + off)])
+        p_x = b.inverse()(p_s + d)
+        p_tw = self.ctrl_t + a.linear(d)                                 # step 3: T warped
+        return p_s, p_x, p_tw
+
+    def _neutral_mask(self) -> np.ndarray:
+        """Face weight on the target's own grid: 0 outside the face triangles, rising to 1 over
+        `feather` pixels inside the outline."""
+        from scipy.ndimage import distance_transform_edt
+        pa = self.grid
+        inside = (self.face_tri[pa.tri_id] & pa.covered).reshape(self.h, self.w)
+        return np.clip(distance_transform_edt(inside) / self.feather, 0, 1).astype(np.float32)
+
+    def prepare(self, source, s_pts, expressive, x_pts):
+        """Steps 2-3: both sources resampled onto the target's grid (crop), and the warp of step 5."""
+        p_s, p_x, p_tw = self._controls(s_pts, x_pts)
+        hw = (self.h, self.w)
+        s_r = sample(_y(source), *self.grid.map(p_s)).reshape(hw)
+        x_r = sample(_y(expressive), *self.grid.map(p_x)).reshape(hw)
+        warp = Bilinear(*PiecewiseAffine(p_tw, self.tris, self.w, self.h).map(self.ctrl_t), self.h, self.w)
+        off = np.array(self.box[:2], float)
+        return s_r, x_r, warp, p_tw[:68] + off
+
+    # -- appearance ----------------------------------------------------------------------------
+    def vtc_luminance(self, t_l, s_l, x_l, mask) -> np.ndarray:
+        """Eq. 2 per pixel, then eq. 4 for the luminance alone (DCT solve). Inputs are Y in [0, 1]."""
+        from scipy.fft import dctn, idctn
+        k = np.float32(self.height)
+        t, s, x = t_l * k, s_l * k, x_l * k
+        # neighbour differences right/left/down/up (edge-replicated: zero across the border)
+        ds, dx_, dt = _diffs(s), _diffs(x), _diffs(t)
+        ns, nx = _tip(s), _tip(x)
+        r, l, d, u = ds
+        # M = w w^T (symmetric) and the z row of N = w' w^T; columns (1,0,r) (-1,0,l) (0,1,d) (0,-1,u), tip n
+        mxx = 2 + ns[0] * ns[0]
+        myy = 2 + ns[1] * ns[1]
+        mxy = ns[0] * ns[1]
+        mxz = r - l + ns[0] * ns[2]
+        myz = d - u + ns[1] * ns[2]
+        mzz = r * r + l * l + d * d + u * u + ns[2] * ns[2]
+        xr, xl, xd, xu = dx_
+        nzx = xr - xl + nx[2] * ns[0]
+        nzy = xd - xu + nx[2] * ns[1]
+        nzz = xr * r + xl * l + xd * d + xu * u + nx[2] * ns[2]
+        # q = M^-1 N_z (z row of Q = N M^-1, M symmetric), by cofactors
+        c00 = myy * mzz - myz * myz
+        c01 = mxz * myz - mxy * mzz
+        c02 = mxy * myz - myy * mxz
+        c11 = mxx * mzz - mxz * mxz
+        c12 = mxy * mxz - mxx * myz
+        c22 = mxx * myy - mxy * mxy
+        det = mxx * c00 + mxy * c01 + mxz * c02
+        qx = (c00 * nzx + c01 * nzy + c02 * nzz) / det
+        qy = (c01 * nzx + c11 * nzy + c12 * nzz) / det
+        qz = (c02 * nzx + c12 * nzy + c22 * nzz) / det
+        # outside the face the target keeps its own tents (Q = I)
+        qx *= mask
+        qy *= mask
+        qz = mask * qz + (1 - mask)
+        tr, tl, td, tu = dt
+        g_r, g_l = qx + qz * tr, -qx + qz * tl                  # new z differences, eq. 1: w' = Q w
+        g_d, g_u = qy + qz * td, -qy + qz * tu
+        # one value per grid edge: the two tents that share it, averaged
+        eh = 0.5 * (g_r[:, :-1] - g_l[:, 1:])                   # l[:, j+1] - l[:, j]
+        ev = 0.5 * (g_d[:-1, :] - g_u[1:, :])                   # l[i+1, :] - l[i, :]
+        div = np.zeros_like(t)
+        div[:, 1:] += eh
+        div[:, :-1] -= eh
+        div[1:, :] += ev
+        div[:-1, :] -= ev
+        # known neighbours (outside the face) move to the right-hand side
+        out_ = np.where(self.inside, 0, t)
+        known = np.zeros_like(t)
+        known[:, 1:] += out_[:, :-1]
+        known[:, :-1] += out_[:, 1:]
+        known[1:, :] += out_[:-1, :]
+        known[:-1, :] += out_[1:, :]
+        sol = t.copy()
+        sol[self.inside] = self._solver.solve((div + known)[self.inside])
+        return sol / k
+
+    def eri_ratio(self, s_l, x_l, mask, small=None, large=None) -> np.ndarray:
+        """Liu, Shan & Zhang 2001: R = A'/A on the aligned sources, filtered by an adaptive
+        Gaussian (a small kernel where the ratio carries expression detail, a large one
+        elsewhere, to hide misregistration); 1 outside the face."""
+        from scipy.ndimage import gaussian_filter
+        size = np.ptp(self.points, 0).max()
+        small = small or max(0.5, 0.004 * size)
+        large = large or max(1.5, 0.02 * size)
+        r = (x_l + 0.02) / (s_l + 0.02)
+        r_s, r_l = gaussian_filter(r, small), gaussian_filter(r, large)
+        detail = gaussian_filter(np.abs(r_s - r_l), large)
+        wgt = np.clip(detail / 0.03, 0, 1)
+        rr = wgt * r_s + (1 - wgt) * r_l
+        return (mask * rr + (1 - mask)).astype(np.float32)
+
+    def transfer(self, source, s_pts, expressive, x_pts, method="vtc") -> Result:
+        """The target with the expression of (source -> expressive). Images RGB in [0, 1]."""
+        if method not in ("vtc", "eri", "warp"):
+            raise MimicaError(f"unknown method {method!r}; use vtc, eri or warp")
+        s_r, x_r, look, pts = self.prepare(source, s_pts, expressive, x_pts)
+        yuv = self.crop_yuv
+        if method == "vtc":
+            yuv = yuv.copy()
+            yuv[..., 0] = self.vtc_luminance(yuv[..., 0], s_r, x_r, self.mask_t)
+        elif method == "eri":
+            yuv = yuv * self.eri_ratio(s_r, x_r, self.mask_t)[..., None]   # Y, U, V all scale with RGB
+        x0, y0, x1, y1 = self.box
+        out = self.target.copy()
+        out[y0:y1, x0:x1] = np.clip(yuv_to_rgb(look(yuv).reshape(self.h, self.w, 3)), 0, 1)
+        return Result(out, pts, self, look)
+
+
+def _y(img) -> np.ndarray:
+    img = np.asarray(img, np.float32)
+    if img.ndim == 2:
+        return img
+    return img[..., 0] * np.float32(0.299) + img[..., 1] * np.float32(0.587) + img[..., 2] * np.float32(0.114)
+
+
+def _diffs(a):
+    """Differences to the right, left, down and up neighbours (zero across the border)."""
+    r = np.zeros_like(a)
+    r[:, :-1] = a[:, 1:] - a[:, :-1]
+    l = np.zeros_like(a)
+    l[:, 1:] = a[:, :-1] - a[:, 1:]
+    d = np.zeros_like(a)
+    d[:-1] = a[1:] - a[:-1]
+    u = np.zeros_like(a)
+    u[1:] = a[:-1] - a[1:]
+    return r, l, d, u
+
+
+def _tip(a):
+    """Unit normal of the height field at each pixel (the tent's tip, Song §IV), central differences."""
+    r, l, d, u = _diffs(a)
+    gx, gy = 0.5 * (r - l), 0.5 * (d - u)
+    inv = 1 / np.sqrt(gx * gx + gy * gy + 1)
+    return -gx * inv, -gy * inv, inv

