@@ -465,6 +465,137 @@ def _draw_points(img, xy):
     return np.asarray(im)
 
 
+def _read_values(path, n, what="--heatmap"):
+    """Per-vertex values: .npy, a text file with one number per line, or a mesh of the same
+    topology (the distance of each vertex to its partner)."""
+    from .mesh import MESH_SUFFIXES, read_vertices
+    p = Path(path)
+    if not p.is_file():
+        raise MimicaError(f"{p}: no such file ({what})")
+    if p.suffix.lower() in MESH_SUFFIXES:
+        return p, read_vertices(p)
+    try:
+        vals = np.load(p) if p.suffix.lower() == ".npy" else np.loadtxt(p, ndmin=1)
+    except (OSError, ValueError) as e:
+        raise MimicaError(f"{p}: not a list of numbers ({e.__class__.__name__}); {what} takes .npy, .txt "
+                          f"(one value per vertex) or a mesh of the same topology") from None
+    vals = np.asarray(vals, float).ravel()
+    if len(vals) != n or not np.isfinite(vals).all():
+        raise MimicaError(f"{p}: {len(vals)} values{'' if np.isfinite(vals).all() else ' (some not finite)'}; "
+                          f"the mesh has {n} vertices")
+    return p, vals
+
+
+def cmd_render(a):
+    from .mesh import read_mesh, read_vertices
+    from .render import (VIEWS, contact_sheet, heat_colors, render_mesh, render_views, save_png,
+                         turntable_angles, with_legend)
+    from .render.shots import shared_frame_all_views
+
+    src, out = Path(a.face), Path(a.out)
+    kind = out.suffix.lower()
+    if kind not in (".png", ".mp4"):
+        raise MimicaError(f"{out}: the output is a .png picture or an .mp4 video")
+    views = list(VIEWS) if a.view == "all" else [a.view]
+    t0 = time.perf_counter()
+    if src.is_dir():
+        paths = _expand_frames([src])
+        mesh = read_mesh(paths[0])
+        frames = [mesh.vertices] + [read_vertices(p) for p in _progress(paths[1:], len(paths) - 1, "reading")]
+        if any(len(f) != mesh.n_vertices for f in frames):
+            raise MimicaError(f"{src}: the meshes do not all share the first one's topology")
+        names = [p.stem for p in paths]
+    else:
+        mesh = read_mesh(src)
+        frames, names = [mesh.vertices], [src.stem]
+    colors = legend = None
+    if a.heatmap:
+        hp, vals = _read_values(a.heatmap, mesh.n_vertices)
+        if vals.ndim == 2:
+            if len(vals) != mesh.n_vertices:
+                raise MimicaError(f"{hp}: {len(vals)} vertices; {src} has {mesh.n_vertices}")
+            vals = np.linalg.norm(vals - frames[0], axis=1)
+        vmax = float(np.max(vals)) if np.max(vals) > 0 else 1.0
+        colors, legend = heat_colors(np.clip(vals, 0, None)), (0.0, vmax, hp.name)
+    frame = shared_frame_all_views(np.concatenate(frames), views if not a.turntable else
+                                   [(y, 0.0) for y in turntable_angles(8)])
+    size = a.size
+    if kind == ".png":
+        if a.turntable:
+            tiles = [render_mesh(mesh, frames[0], size=(size, size), yaw=y, frame=frame, colors=colors)
+                     for y in turntable_angles(8)]
+            img = contact_sheet(tiles, labels=[f"{y:.0f}°" for y in turntable_angles(8)], columns=4)
+        elif len(frames) == 1:
+            tiles = render_views(mesh, frames[0], views, size, colors, frame)
+            img = tiles[0] if len(tiles) == 1 else contact_sheet(tiles, labels=views)
+        else:
+            pick = np.unique(np.linspace(0, len(frames) - 1, min(len(frames), 12)).round().astype(int))
+            tiles = [render_mesh(mesh, frames[i], size=(size, size), yaw=VIEWS[views[0]][0], frame=frame,
+                                 colors=colors) for i in pick]
+            img = contact_sheet(tiles, labels=[names[i] for i in pick], columns=min(len(pick), 4))
+        if legend:
+            img = with_legend(img, *legend)
+        save_png(out, img)
+        _say(f"{out} ({img.shape[1]}x{img.shape[0]}, {time.perf_counter() - t0:.2f}s)")
+        return 0
+    from .image.video import VideoWriter
+    yaw0 = VIEWS[views[0]][0]
+    jobs = ([(frames[0], y) for y in turntable_angles(a.frames)] if a.turntable or len(frames) == 1
+            else [(f, yaw0) for f in frames])
+    with VideoWriter(out, a.fps) as vw:
+        for v, yaw in _progress(jobs, len(jobs), "rendering"):
+            img = render_mesh(mesh, v, size=(size, size), yaw=yaw, frame=frame, colors=colors)
+            vw.write((with_legend(img, *legend) if legend else img) / 255.0)
+    _say(f"{out}: {len(jobs)} frames at {a.fps:g} fps in {time.perf_counter() - t0:.1f}s")
+    return 0
+
+
+def cmd_export(a):
+    from .mesh import MESH_SUFFIXES, atomic_path, read_mesh, read_vertices, write_glb, write_mesh
+    paths = _expand_frames([Path(p) for p in a.frames])
+    mesh = read_mesh(paths[0])
+    frames = [read_vertices(p) for p in _progress(paths, len(paths), "reading")]
+    for p, f in zip(paths, frames):
+        if len(f) != mesh.n_vertices:
+            raise MimicaError(f"{p}: {len(f)} vertices; {paths[0]} has {mesh.n_vertices} (one topology per sequence)")
+    out = Path(a.out)
+    suf = out.suffix.lower()
+    if suf in (".glb", ".gltf"):
+        base = read_mesh(a.rest) if a.rest else mesh
+        if base.n_vertices != mesh.n_vertices:
+            raise MimicaError(f"{a.rest}: not the sequence's topology")
+        with atomic_path(out) as tmp:
+            write_glb(tmp, base, {p.stem: f for p, f in zip(paths, frames)}, binary=suf == ".glb", fps=a.fps)
+        _say(f"{out}: {len(frames)} frames as morph targets, one animation at {a.fps:g} fps")
+        return 0
+    if suf:
+        raise MimicaError(f"{out}: export to .glb/.gltf, or to a folder (with --format obj|ply)")
+    if a.format not in ("obj", "ply"):
+        raise MimicaError(f"--format {a.format}: obj or ply")
+    for p, f in zip(paths, frames):
+        write_mesh(out / f"{p.stem}.{a.format}", mesh.with_vertices(f))
+    _say(f"{out}/: {len(frames)} {a.format.upper()} files")
+    return 0
+
+
+def cmd_blendshapes(a):
+    from .export import ARKIT_52, arkit_blendshapes
+    from .landmarks import read_landmarks
+    from .mesh import atomic_path, read_mesh, write_glb
+    out = Path(a.out)
+    if out.suffix.lower() not in (".glb", ".gltf"):
+        raise MimicaError(f"{out}: blendshapes are written as glTF (.glb or .gltf)")
+    t0 = time.perf_counter()
+    head = read_mesh(a.head)
+    lm = read_landmarks(a.landmarks, head) if a.landmarks else None
+    shapes = arkit_blendshapes(head, lm, progress=_say)
+    with atomic_path(out) as tmp:
+        write_glb(tmp, head, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb")
+    _say(f"{out}: {len(ARKIT_52)} ARKit morph targets on {head.n_vertices} vertices "
+         f"({time.perf_counter() - t0:.1f}s; tongueOut stays at rest: ICT-FaceKit has no tongue shape)")
+    return 0
+
+
 def cmd_demo(a):
     from .demo import run_demo
     return run_demo(Path(a.out), quick=a.quick)
@@ -573,6 +704,32 @@ def build_parser():
     lm.add_argument("--out", required=True, help="landmark JSON to write (pixels for photos, 3D for meshes)")
     lm.add_argument("--show", metavar="PNG", help="also draw the points")
     lm.set_defaults(func=cmd_landmarks)
+
+    rd = sub.add_parser("render", help="pictures and videos of a face or a sequence (no GPU needed)")
+    rd.add_argument("face", help="a mesh, or a folder of meshes (a sequence)")
+    rd.add_argument("--out", required=True, help=".png (views, contact sheet) or .mp4 (sequence or turntable)")
+    rd.add_argument("--view", choices=["all", "front", "three-quarter", "profile"], default="all")
+    rd.add_argument("--turntable", action="store_true", help="turn the face around (PNG: 8 angles; MP4: --frames)")
+    rd.add_argument("--heatmap", metavar="VALUES", help="colour by per-vertex values (.npy, .txt) or by the "
+                    "distance to a mesh of the same topology; a legend is added")
+    rd.add_argument("--size", type=int, default=512, help="pixels per view")
+    rd.add_argument("--frames", type=int, default=120, help="turntable video length in frames")
+    rd.add_argument("--fps", type=float, default=30.0)
+    rd.set_defaults(func=cmd_render)
+
+    ex = sub.add_parser("export", help="a sequence of meshes as one glTF animation, or as OBJ/PLY files")
+    ex.add_argument("frames", nargs="+", help="mesh files or a folder, one topology")
+    ex.add_argument("--out", required=True, help="anim.glb / anim.gltf, or a folder")
+    ex.add_argument("--rest", help="the rest mesh the morph targets are relative to (default: the first frame)")
+    ex.add_argument("--fps", type=float, default=30.0)
+    ex.add_argument("--format", default="obj", help="obj or ply, for a folder")
+    ex.set_defaults(func=cmd_export)
+
+    bs = sub.add_parser("blendshapes", help="the 52 ARKit blendshapes on any head mesh, as one GLB")
+    bs.add_argument("head", help="head mesh (OBJ/PLY/glTF), any topology, neutral")
+    bs.add_argument("--landmarks", help="68-point landmark JSON (found automatically otherwise)")
+    bs.add_argument("--out", required=True, help="head_arkit.glb")
+    bs.set_defaults(func=cmd_blendshapes)
 
     d = sub.add_parser("demo", help="transfer bundled ICT-FaceKit expressions; write meshes and a contact sheet")
     d.add_argument("--out", default="out/demo")

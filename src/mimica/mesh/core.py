@@ -87,7 +87,8 @@ class Mesh:
             raise ValueError(f"expected vertices of shape {self.vertices.shape}, got {v.shape}")
         m = Mesh(v, self.face_indices, self.face_starts, self.uv, self.face_uv_indices,
                  self.name if name is None else name)
-        for k in ("triangles", "tri_face", "_fan_corners", "uv_triangles", "edges", "adjacency", "face_sizes"):
+        for k in ("triangles", "tri_face", "_fan_corners", "uv_triangles", "edges", "adjacency", "face_sizes",
+                  "outward_oriented"):
             if k in self.__dict__:
                 m.__dict__[k] = self.__dict__[k]
         return m
@@ -175,6 +176,23 @@ class Mesh:
         """Mean of each polygon's corners, (F, 3)."""
         sums = np.add.reduceat(self.vertices[self.face_indices], self.face_starts[:-1], axis=0)
         return sums / self.face_sizes[:, None]
+
+    @cached_property
+    def outward_oriented(self) -> bool:
+        """True when the polygons are consistently oriented (no directed edge used twice) and
+        face outward (the signed volume they enclose about the centroid is positive and more
+        than 5% of the bounding box's), so that back faces can be culled when drawing."""
+        t = self.triangles
+        if len(t) == 0:
+            return False
+        a = np.concatenate([t[:, 0], t[:, 1], t[:, 2]])
+        b = np.concatenate([t[:, 1], t[:, 2], t[:, 0]])
+        key = a * np.int64(self.n_vertices) + b
+        if len(np.unique(key)) != len(key):
+            return False
+        v = self.vertices - self.vertices.mean(0)
+        vol = np.einsum("ij,ij->i", v[t[:, 0]], np.cross(v[t[:, 1]], v[t[:, 2]])).sum() / 6
+        return bool(vol > 0.05 * np.prod(np.ptp(v, 0)))
 
     def vertex_normals(self, vertices=None) -> np.ndarray:
         """Unit area-weighted vertex normals (n, 3); isolated vertices get (0, 0, 0)."""

@@ -2,6 +2,7 @@
 
 from .raster import face_framing, framing, project, rasterize, render_mesh, shared_frame, view_matrix
 from .sheet import colormap, contact_sheet, heat_colors, save_png
+from .shots import VIEWS, render_views, turntable_angles, with_legend
 
 __all__ = ["face_framing", "framing", "project", "rasterize", "render_mesh", "shared_frame", "view_matrix", "contact_sheet",
-           "save_png", "heat_colors", "colormap"]
+           "save_png", "heat_colors", "colormap", "VIEWS", "render_views", "turntable_angles", "with_legend"]

@@ -20,12 +20,20 @@ def view_matrix(yaw_deg=0.0, pitch_deg=0.0) -> np.ndarray:
     return rx @ ry
 
 
-def rasterize(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, width: int, height: int):
-    """Visible triangle and barycentrics per pixel.
+def _round_up(n):
+    """Bounding-box sizes rounded up (exact to 4, then steps of 2, 4, 16) to share groups."""
+    n = np.asarray(n, np.int64)
+    return np.where(n <= 4, n, np.where(n <= 16, (n + 1) // 2 * 2, np.where(n <= 64, (n + 3) // 4 * 4,
+                                                                              (n + 15) // 16 * 16)))
+
+
+def rasterize_pixels(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, width: int, height: int):
+    """The visible fragments: flat pixel index (y * width + x), triangle (row of `tris`) and
+    barycentrics (l0, l1; l2 = 1 - l0 - l1, float32) of each covered pixel.
 
     xy: (n, 2) pixel coordinates (x right, y down); z: (n,) depth, larger = closer.
-    Returns tri_id (h, w) int (-1 = background) and bary (h, w, 3).
     """
+    tris = np.asarray(tris)
     p = xy[tris]                                    # (T, 3, 2)
     lo = np.floor(p.min(1)).astype(np.int64)
     hi = np.ceil(p.max(1)).astype(np.int64)
@@ -34,64 +42,74 @@ def rasterize(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, width: int, heigh
     keep = (hi >= lo).all(1)
     ids = np.nonzero(keep)[0]
     size = (hi - lo + 1)[ids]
-    zbuf = np.full(width * height, -np.inf)
-    pix_tri = np.full(width * height, -1, dtype=np.int64)
-    all_pix, all_tri, all_z = [], [], []
-    # group triangles by their bounding box size (capped rows for big ones)
-    bw = np.minimum(size[:, 0], 4096)
-    bh = np.minimum(size[:, 1], 4096)
+    all_pix, all_tri, all_z, all_l0, all_l1 = [], [], [], [], []
+    # group triangles by their bounding box size, rounded up a little so that there are few
+    # groups (each group is one vectorized pass); capped rows for big ones
+    bw = _round_up(np.minimum(size[:, 0], 4096))
+    bh = _round_up(np.minimum(size[:, 1], 4096))
     key = bw * 8192 + bh
     order = np.argsort(key, kind="stable")
     ks, starts = np.unique(key[order], return_index=True)
     bounds = np.r_[starts, len(order)]
+    pf = p.astype(np.float32)
+    zf = np.asarray(z, np.float32)
     for g in range(len(ks)):
         sel = ids[order[bounds[g]:bounds[g + 1]]]
         w_, h_ = int(ks[g] // 8192), int(ks[g] % 8192)
         chunk = max(1, 2_000_000 // max(w_ * h_, 1))
+        ox = np.tile(np.arange(w_, dtype=np.int32), h_)[None]
+        oy = np.repeat(np.arange(h_, dtype=np.int32), w_)[None]
         for c0 in range(0, len(sel), chunk):
             s = sel[c0:c0 + chunk]
-            ox, oy = np.meshgrid(np.arange(w_), np.arange(h_))
-            px = lo[s, 0][:, None] + ox.ravel()[None]
-            py = lo[s, 1][:, None] + oy.ravel()[None]
-            a, b, c = p[s, 0], p[s, 1], p[s, 2]
-            cx, cy = px + 0.5, py + 0.5
+            px = lo[s, 0, None].astype(np.int32) + ox
+            py = lo[s, 1, None].astype(np.int32) + oy
+            a, b, c = pf[s, 0], pf[s, 1], pf[s, 2]
+            cx = px + np.float32(0.5) - c[:, 0, None]
+            cy = py + np.float32(0.5) - c[:, 1, None]
             den = (b[:, 1] - c[:, 1]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 1] - c[:, 1])
-            den = np.where(np.abs(den) < 1e-12, np.nan, den)[:, None]
-            l0 = ((b[:, 1] - c[:, 1])[:, None] * (cx - c[:, 0][:, None])
-                  + (c[:, 0] - b[:, 0])[:, None] * (cy - c[:, 1][:, None])) / den
-            l1 = ((c[:, 1] - a[:, 1])[:, None] * (cx - c[:, 0][:, None])
-                  + (a[:, 0] - c[:, 0])[:, None] * (cy - c[:, 1][:, None])) / den
-            l2 = 1 - l0 - l1
-            ins = (l0 >= 0) & (l1 >= 0) & (l2 >= 0) & (px <= hi[s, 0][:, None]) & (py <= hi[s, 1][:, None])
+            den = np.where(np.abs(den) < 1e-9, np.nan, den)
+            inv = (1 / den)[:, None]
+            l0 = ((b[:, 1] - c[:, 1])[:, None] * cx + (c[:, 0] - b[:, 0])[:, None] * cy) * inv
+            l1 = ((c[:, 1] - a[:, 1])[:, None] * cx + (a[:, 0] - c[:, 0])[:, None] * cy) * inv
+            ins = (l0 >= 0) & (l1 >= 0) & (l0 + l1 <= 1) & (px <= hi[s, 0, None]) & (py <= hi[s, 1, None])
             if not ins.any():
                 continue
             ti, pi = np.nonzero(ins)
-            zz = (l0[ti, pi] * z[tris[s[ti], 0]] + l1[ti, pi] * z[tris[s[ti], 1]]
-                  + l2[ti, pi] * z[tris[s[ti], 2]])
-            all_pix.append(py[ti, pi] * width + px[ti, pi])
+            t3 = tris[s[ti]]
+            a0, a1 = l0[ti, pi], l1[ti, pi]
+            zz = a0 * zf[t3[:, 0]] + a1 * zf[t3[:, 1]] + (1 - a0 - a1) * zf[t3[:, 2]]
+            all_pix.append(py[ti, pi] * np.int64(width) + px[ti, pi])
             all_tri.append(s[ti])
             all_z.append(zz)
-    if all_pix:
-        pix = np.concatenate(all_pix)
-        tri = np.concatenate(all_tri)
-        zz = np.concatenate(all_z)
-        o = np.lexsort((-zz, pix))                    # per pixel, nearest first
-        pix, tri, zz = pix[o], tri[o], zz[o]
-        first = np.r_[True, pix[1:] != pix[:-1]]
-        pix_tri[pix[first]] = tri[first]
-        zbuf[pix[first]] = zz[first]
-    tri_id = pix_tri.reshape(height, width)
-    # barycentrics of the visible triangle at pixel centres
-    yy, xx = np.nonzero(tri_id >= 0)
-    t = tri_id[yy, xx]
-    a, b, c = p[t, 0], p[t, 1], p[t, 2]
-    cx, cy = xx + 0.5, yy + 0.5
-    den = (b[:, 1] - c[:, 1]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 1] - c[:, 1])
-    l0 = ((b[:, 1] - c[:, 1]) * (cx - c[:, 0]) + (c[:, 0] - b[:, 0]) * (cy - c[:, 1])) / den
-    l1 = ((c[:, 1] - a[:, 1]) * (cx - c[:, 0]) + (a[:, 0] - c[:, 0]) * (cy - c[:, 1])) / den
-    bary = np.zeros((height, width, 3))
-    bary[yy, xx] = np.stack([l0, l1, 1 - l0 - l1], 1)
-    return tri_id, bary
+            all_l0.append(a0)
+            all_l1.append(a1)
+    if not all_pix:
+        e = np.zeros(0, np.float32)
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), e, e
+    pix = np.concatenate(all_pix)
+    zz = np.concatenate(all_z)
+    # per pixel the nearest fragment: one integer sort on (pixel, quantized far-to-near depth)
+    zmin, zmax = float(zz.min()), float(zz.max())
+    q = ((zmax - zz) * ((2 ** 21 - 1) / max(zmax - zmin, 1e-30))).astype(np.int64)
+    o = np.argsort((pix << 21) | q)
+    ps = pix[o]
+    first = np.r_[True, ps[1:] != ps[:-1]]
+    k = o[first]
+    return pix[k], np.concatenate(all_tri)[k], np.concatenate(all_l0)[k], np.concatenate(all_l1)[k]
+
+
+def rasterize(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, width: int, height: int):
+    """Visible triangle and barycentrics per pixel.
+
+    xy: (n, 2) pixel coordinates (x right, y down); z: (n,) depth, larger = closer.
+    Returns tri_id (h, w) int (-1 = background) and bary (h, w, 3).
+    """
+    pix, tri, l0, l1 = rasterize_pixels(xy, z, tris, width, height)
+    tri_id = np.full(width * height, -1, dtype=np.int64)
+    tri_id[pix] = tri
+    bary = np.zeros((width * height, 3))
+    bary[pix] = np.stack([l0, l1, 1 - l0 - l1], 1)
+    return tri_id.reshape(height, width), bary.reshape(height, width, 3)
 
 
 def render_mesh(mesh: Mesh, vertices=None, size=(512, 512), yaw=0.0, pitch=0.0, colors=None,
@@ -109,29 +127,35 @@ def render_mesh(mesh: Mesh, vertices=None, size=(512, 512), yaw=0.0, pitch=0.0, 
     frame = frame or framing(v, yaw, pitch)
     xy, cam = project(v, frame, size, yaw, pitch)
     tris = mesh.triangles
-    tri_id, bary = rasterize(xy, cam[:, 2], tris, w, h)
-    img = np.empty((h, w, 3))
-    img[:] = np.asarray(background) / 255.0
-    yy, xx = np.nonzero(tri_id >= 0)
-    t = tris[tri_id[yy, xx]]
-    b = bary[yy, xx]
-    n = vertex_normals(v, tris) @ rot.T
-    nn = np.einsum("ij,ijk->ik", b, n[t])
+    if mesh.outward_oriented:
+        # back faces are hidden on a consistently oriented, outward-facing mesh: skip them
+        q = xy[tris]
+        area = ((q[:, 1, 0] - q[:, 0, 0]) * (q[:, 2, 1] - q[:, 0, 1])
+                - (q[:, 2, 0] - q[:, 0, 0]) * (q[:, 1, 1] - q[:, 0, 1]))
+        tris = tris[area < 0]
+    pix, tri, l0, l1 = rasterize_pixels(xy, cam[:, 2], tris, w, h)
+    t = tris[tri]
+    b = np.stack([l0, l1, 1 - l0 - l1], 1)
+    n = (vertex_normals(v, mesh.triangles) @ rot.T).astype(np.float32)
+    nn = b[:, 0:1] * n[t[:, 0]] + b[:, 1:2] * n[t[:, 1]] + b[:, 2:3] * n[t[:, 2]]
     nn /= np.maximum(np.linalg.norm(nn, axis=1, keepdims=True), 1e-12)
     # two-sided lighting: a key light from the upper left front and a soft fill
     nn *= np.sign(nn[:, 2:3] + 1e-12)
     if light is None:
-        key = np.clip(nn @ np.array([-0.35, 0.45, 0.82]) / np.linalg.norm([-0.35, 0.45, 0.82]), 0, 1)
-        fill = np.clip(nn @ np.array([0.5, 0.1, 0.86]) / np.linalg.norm([0.5, 0.1, 0.86]), 0, 1)
+        key = np.clip(nn @ (np.array([-0.35, 0.45, 0.82], np.float32) / np.float32(np.linalg.norm([-0.35, 0.45, 0.82]))), 0, 1)
+        fill = np.clip(nn @ (np.array([0.5, 0.1, 0.86], np.float32) / np.float32(np.linalg.norm([0.5, 0.1, 0.86]))), 0, 1)
         shade = 0.25 + 0.6 * key + 0.2 * fill
     else:
-        shade = 0.15 + 0.85 * np.clip(nn @ (np.asarray(light, float) / np.linalg.norm(light)), 0, 1)
+        shade = 0.15 + 0.85 * np.clip(nn @ (np.asarray(light, np.float32) / np.float32(np.linalg.norm(light))), 0, 1)
     if colors is None:
-        col = np.broadcast_to(np.asarray(base_color), (len(t), 3))
+        col = np.asarray(base_color, np.float32)[None]
     else:
-        col = np.einsum("ij,ijk->ik", b, np.asarray(colors)[t])
-    img[yy, xx] = np.clip(col * shade[:, None], 0, 1)
-    return (img * 255 + 0.5).astype(np.uint8)
+        c = np.asarray(colors, np.float32)
+        col = b[:, 0:1] * c[t[:, 0]] + b[:, 1:2] * c[t[:, 1]] + b[:, 2:3] * c[t[:, 2]]
+    img = np.empty((h * w, 3), np.uint8)
+    img[:] = np.asarray(background, np.uint8)
+    img[pix] = (np.clip(col * shade[:, None], 0, 1) * 255 + 0.5).astype(np.uint8)
+    return img.reshape(h, w, 3)
 
 
 def framing(v, yaw=0.0, pitch=0.0, margin=1.05):

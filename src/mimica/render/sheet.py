@@ -13,7 +13,7 @@ from ..mesh import atomic_path
 def save_png(path, img: np.ndarray) -> Path:
     path = Path(path)
     with atomic_path(path) as tmp:
-        Image.fromarray(img).save(tmp, format="PNG")
+        Image.fromarray(img).save(tmp, format="PNG", compress_level=3)
     return path
 
 

@@ -1,0 +1,66 @@
+"""The 52 ARKit blendshapes on any head: ICT-FaceKit's expression shapes (ARKit naming, split
+_L/_R) moved onto the user's head by the expression transfer (Song et al.; landmarks found
+automatically on other topologies), written as named morph targets."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import MimicaError
+
+ARKIT_52 = [
+    "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft", "eyeSquintLeft",
+    "eyeWideLeft", "eyeBlinkRight", "eyeLookDownRight", "eyeLookInRight", "eyeLookOutRight", "eyeLookUpRight",
+    "eyeSquintRight", "eyeWideRight", "jawForward", "jawLeft", "jawRight", "jawOpen", "mouthClose",
+    "mouthFunnel", "mouthPucker", "mouthLeft", "mouthRight", "mouthSmileLeft", "mouthSmileRight",
+    "mouthFrownLeft", "mouthFrownRight", "mouthDimpleLeft", "mouthDimpleRight", "mouthStretchLeft",
+    "mouthStretchRight", "mouthRollLower", "mouthRollUpper", "mouthShrugLower", "mouthShrugUpper",
+    "mouthPressLeft", "mouthPressRight", "mouthLowerDownLeft", "mouthLowerDownRight", "mouthUpperUpLeft",
+    "mouthUpperUpRight", "browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft",
+    "browOuterUpRight", "cheekPuff", "cheekSquintLeft", "cheekSquintRight", "noseSneerLeft",
+    "noseSneerRight", "tongueOut",
+]
+
+
+def ict_sources(arkit: str) -> list[str]:
+    """ICT-FaceKit shapes whose deltas sum to an ARKit shape.  ICT splits browInnerUp and
+    cheekPuff into halves and has no tongue (tongueOut stays at rest)."""
+    if arkit in ("browInnerUp", "cheekPuff"):
+        return [f"{arkit}_L", f"{arkit}_R"]
+    if arkit == "tongueOut":
+        return []
+    if arkit in ("jawLeft", "jawRight", "mouthLeft", "mouthRight"):      # ICT keeps these names
+        return [arkit]
+    for side, suf in (("Left", "_L"), ("Right", "_R")):
+        if arkit.endswith(side):
+            return [arkit[: -len(side)] + suf]
+    return [arkit]
+
+
+def arkit_blendshapes(head, landmarks=None, progress=None, store=None) -> dict:
+    """{ARKit name: (n, 3) positions} on `head` (a Mesh of any topology)."""
+    from ..data import ICT_HEAD_FACES, ICT_HEAD_VERTICES
+    from ..landmarks import ict_landmarks, landmarks_for
+    from ..mesh import read_mesh
+    from ..transfer import ExpressionTransfer, static_vertices
+    from .templates import TemplateStore
+
+    store = store or TemplateStore()
+    say = progress or (lambda m: None)
+    full = read_mesh(store.path("generic_neutral_mesh", say))
+    src, _ = full.submesh(np.arange(ICT_HEAD_FACES))
+    if src.n_vertices != ICT_HEAD_VERTICES:
+        raise MimicaError("ICT-FaceKit neutral: unexpected topology (face + head part)")
+    names = sorted({n for a in ARKIT_52 for n in ict_sources(a)})
+    say(f"reading {len(names)} ICT-FaceKit shapes")
+    shapes = store.shapes(names, ICT_HEAD_VERTICES, say)
+    lt = landmarks if landmarks is not None else landmarks_for(head, None, "--landmarks", "head")
+    frames = np.stack([src.vertices + sum((shapes[n] - src.vertices for n in ict_sources(a)),
+                                          np.zeros_like(src.vertices)) for a in ARKIT_52])
+    say("transferring 52 shapes")
+    xfer = ExpressionTransfer(src, head, ict_landmarks(src), lt, method="vtc",
+                              static=static_vertices(src.vertices, frames))
+    out = xfer.apply(frames)
+    res = dict(zip(ARKIT_52, out))
+    res["tongueOut"] = head.vertices.copy()
+    return res

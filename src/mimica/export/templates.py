@@ -1,0 +1,93 @@
+"""ICT-FaceKit template files for users outside this repository: read from the data directory
+when it is there, else downloaded once from the public repository at a pinned commit into the
+user cache, each file checked against its sha256 (ict_manifest.json)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MimicaError
+
+MANIFEST = json.loads(Path(__file__).with_name("ict_manifest.json").read_text())
+
+
+def cache_dir() -> Path:
+    """$MIMICA_CACHE, else $XDG_CACHE_HOME/mimica, else ~/.cache/mimica."""
+    env = os.environ.get("MIMICA_CACHE")
+    if env:
+        return Path(env).expanduser()
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "mimica"
+
+
+class TemplateStore:
+    """Where the ICT-FaceKit template files come from (data directory, cache, or download)."""
+
+    def __init__(self, data=None, cache=None, url=None, timeout=30.0):
+        from ..data import data_dir
+        self.data = Path(data) if data is not None else data_dir() / "ict-facekit" / "FaceXModel"
+        self.cache = Path(cache) if cache is not None else cache_dir() / "ict-facekit" / MANIFEST["commit"][:12]
+        self.url = url or MANIFEST["url"]
+        self.timeout = timeout
+
+    def path(self, name: str, progress=None) -> Path:
+        if name not in MANIFEST["files"]:
+            raise MimicaError(f"ICT-FaceKit: {name!r} is not one of the template files")
+        p = self.data / f"{name}.obj"
+        if p.is_file():
+            return p
+        p = self.cache / f"{name}.obj"
+        if p.is_file():
+            return p
+        return self._download(name, p, progress)
+
+    def _download(self, name, dest: Path, progress=None) -> Path:
+        import urllib.error
+        import urllib.request
+        url = self.url.format(commit=MANIFEST["commit"], name=name)
+        if progress:
+            progress(f"downloading {url}")
+        try:
+            with urllib.request.urlopen(url, timeout=self.timeout) as r:
+                data = r.read()
+        except (urllib.error.URLError, OSError, ValueError) as e:
+            reason = getattr(e, "reason", None) or e
+            raise MimicaError(f"ICT-FaceKit template {name}.obj: not in the data directory ({self.data}) "
+                              f"and the download from {url} failed ({reason}); connect once, or set "
+                              f"MIMICA_DATA to a folder holding ict-facekit/FaceXModel") from None
+        digest = hashlib.sha256(data).hexdigest()
+        if digest != MANIFEST["files"][name]:
+            raise MimicaError(f"ICT-FaceKit template {name}.obj from {url}: sha256 {digest[:16]}... does not "
+                              f"match the expected {MANIFEST['files'][name][:16]}...; not used")
+        from ..mesh import atomic_path
+        with atomic_path(dest) as tmp:
+            tmp.write_bytes(data)
+        return dest
+
+    def shapes(self, names, n_vertices, progress=None) -> dict:
+        """Vertex positions (first n_vertices) of the named shapes, via a compact cache file."""
+        from ..mesh import atomic_path, read_vertices
+        key = f"shapes-{n_vertices}-{hashlib.sha1(','.join(sorted(names)).encode()).hexdigest()[:10]}.npz"
+        cache = self.cache / key
+        if cache.is_file():
+            try:
+                with np.load(cache) as z:
+                    if all(n in z.files for n in names):
+                        return {n: z[n].astype(np.float64) for n in names}
+            except (OSError, ValueError):
+                pass
+        out = {}
+        for n in names:
+            out[n] = read_vertices(self.path(n, progress))[:n_vertices]
+        try:
+            cache.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_path(cache) as tmp:
+                with open(tmp, "wb") as fh:
+                    np.savez(fh, **{n: v.astype(np.float32) for n, v in out.items()})
+        except OSError:
+            pass                                  # a read-only home: just slower next time
+        return out
