@@ -7,7 +7,10 @@
 - blendshapes_s: the 52 ARKit shapes onto a 22,708-vertex head of another topology (ICT
   identity011 resampled with its own triangulation), from the command line's function,
   landmarks found automatically, with the ICT shapes' cache warm (cold printed too).
-- viewer_fps: the live viewer is not built yet (nan).
+- viewer_fps: `mimica view` (its own process, Kim's 8 muscles on the ICT face area, wrinkles on)
+  in headless Chromium (Debian's, software GL: SwiftShader) driven by Playwright: frames the
+  page shows per second while a muscle slider moves every 16 ms; beside it, the frames per
+  second the server streams to a plain WebSocket client (no drawing), the baseline.
 
 Run from the project root: .venv/bin/python bench/render.py
 Picture: docs/figures/blendshapes.png (ARKit shapes on the resampled head).
@@ -98,7 +101,45 @@ def main():
     save_png(FIG / "blendshapes.png", contact_sheet(tiles, labels=["rest"] + show, columns=4,
                                                     title=f"ARKit blendshapes on a {target.n_vertices}-vertex head "
                                                           "of another topology (mimica blendshapes)"))
-    print(f"render_s={t_cull:.3f} blendshapes_s={warm:.2f} viewer_fps=nan")
+    vfps = viewer()
+    print(f"render_s={t_cull:.3f} blendshapes_s={warm:.2f} viewer_fps={vfps:.1f}")
+
+
+def viewer():
+    import asyncio
+    import json
+    from mimica.data import ICT_FACE_AREA_VERTICES
+    from mimica.rig import build_rig
+    from mimica.viewer.probe import browser_page, chromium_path, drag_fps, viewer_process
+    from websockets.asyncio.client import connect
+    if chromium_path() is None:
+        print("viewer: no Chromium on this machine (apt install chromium)")
+        return float("nan")
+    face = ICTModel(ICT_FACE_AREA_VERTICES)
+    rig = build_rig(face.mesh, face.neutral[ICT_LANDMARKS_68])
+    with tempfile.TemporaryDirectory() as tmp:
+        rig.save(Path(tmp) / "face.rig")
+        with viewer_process("face.obj", Path(tmp) / "face.rig") as (url, _):
+            async def socket_fps():
+                async with connect(url.replace("http", "ws") + "ws", max_size=1 << 26) as ws:
+                    n, t0, k = 0, time.time(), 0
+                    while time.time() - t0 < 2.5:
+                        await ws.send(json.dumps({"type": "set", "name": "zygomaticus_major_L",
+                                                  "value": 0.5 + 0.4 * np.sin(k / 5)}))
+                        k += 1
+                        try:
+                            while True:
+                                r = await asyncio.wait_for(ws.recv(), 0.016)
+                                n += isinstance(r, bytes) and r[:4] == b"\0\0\0\0"
+                        except asyncio.TimeoutError:
+                            pass
+                    return n / (time.time() - t0)
+            base = asyncio.run(socket_fps())
+            with browser_page(url) as pg:
+                fps = max(drag_fps(pg, "zygomaticus_major_L") for _ in range(2))
+    print(f"viewer: {fps:.1f} frames/s shown in headless Chromium (software GL) while a slider is dragged; "
+          f"the server streams {base:.1f} frames/s to a WebSocket client that does not draw")
+    return fps
 
 
 if __name__ == "__main__":

@@ -596,6 +596,38 @@ def cmd_blendshapes(a):
     return 0
 
 
+def cmd_view(a):
+    import asyncio
+    import webbrowser
+    from .rig import Rig, build_rig
+    from .viewer import ViewerServer, ViewerSession, ensure_three
+
+    vendor = ensure_three(progress=_say)
+    if a.rig:
+        rig = Rig.load(a.rig)
+        name = Path(a.rig).stem
+    else:
+        from .landmarks import landmarks_for
+        from .mesh import read_mesh
+        face = read_mesh(a.face)
+        lm = landmarks_for(face, a.landmarks, "--landmarks", str(a.face))
+        _say(f"building a rig of {a.face} (Kim's muscles; `mimica rig` once and --rig to skip this)...")
+        rig = build_rig(face, lm.positions(face))
+        name = Path(a.face).stem
+    mask = None
+    if not a.no_wrinkles:
+        mask, _ = _mask_for(rig.skin, rig.landmarks)
+    session = ViewerSession(rig, mask)
+    server = ViewerServer(session, vendor, title=f"mimica · {name}", port=a.port)
+
+    def ready(srv):
+        _say(f"viewer on {srv.url} (Ctrl-C to stop)")
+        if not a.no_browser:
+            webbrowser.open(srv.url)
+    asyncio.run(server.run(ready))
+    return 0
+
+
 def cmd_demo(a):
     from .demo import run_demo
     return run_demo(Path(a.out), quick=a.quick)
@@ -730,6 +762,16 @@ def build_parser():
     bs.add_argument("--landmarks", help="68-point landmark JSON (found automatically otherwise)")
     bs.add_argument("--out", required=True, help="head_arkit.glb")
     bs.set_defaults(func=cmd_blendshapes)
+
+    vw = sub.add_parser("view", help="a live viewer in the browser: muscles, facial actions, age, presets, "
+                                     "a timeline, a second face")
+    vw.add_argument("face", help="face mesh (OBJ/PLY/glTF); with --rig, the rig's own face is shown")
+    vw.add_argument("--rig", help="a rig from `mimica rig` (else one is built, about 10 s)")
+    vw.add_argument("--landmarks", help="68-point landmark JSON (built in for ICT-FaceKit, else found)")
+    vw.add_argument("--no-wrinkles", action="store_true", help="no wrinkle layer (and no age slider)")
+    vw.add_argument("--port", type=int, default=0, help="port on 127.0.0.1 (default: a free one)")
+    vw.add_argument("--no-browser", action="store_true", help="only print the address")
+    vw.set_defaults(func=cmd_view)
 
     d = sub.add_parser("demo", help="transfer bundled ICT-FaceKit expressions; write meshes and a contact sheet")
     d.add_argument("--out", default="out/demo")

@@ -1,0 +1,72 @@
+"""Drive the viewer page in a headless Chromium (Playwright + the system's Chromium): used by
+the browser tests and by bench/render.py."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from contextlib import contextmanager
+
+SOFTWARE_GL = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox"]
+
+
+def chromium_path():
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@contextmanager
+def viewer_process(face, rig, extra=(), timeout=180):
+    """`mimica view FACE --rig RIG --no-browser` in its own process; yields (url, log lines)."""
+    proc = subprocess.Popen([sys.executable, "-m", "mimica.cli", "view", str(face), "--rig", str(rig),
+                             "--no-browser", *extra], stderr=subprocess.PIPE, text=True)
+    url, log, t0 = None, [], time.time()
+    for line in proc.stderr:
+        log.append(line)
+        m = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
+        if m:
+            url = m.group(1)
+            break
+        if time.time() - t0 > timeout:
+            break
+    if url is None:
+        proc.kill()
+        raise RuntimeError("the viewer did not start: " + "".join(log))
+    threading.Thread(target=lambda: log.extend(proc.stderr), daemon=True).start()   # never let the pipe fill
+    try:
+        yield url, log
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+@contextmanager
+def browser_page(url, size=(960, 640)):
+    from playwright.sync_api import sync_playwright
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=chromium_path(), args=SOFTWARE_GL)
+        try:
+            pg = b.new_page(viewport={"width": size[0], "height": size[1]})
+            pg.errors = []
+            pg.on("pageerror", lambda e: pg.errors.append(str(e)))
+            pg.goto(url + "?software")
+            pg.wait_for_function("window.mimica && window.mimica.ready && window.mimica.framesApplied > 0",
+                                 timeout=30000)
+            yield pg
+        finally:
+            b.close()
+
+
+def drag_fps(pg, slider: str, seconds: float = 3.0) -> float:
+    """Frames the page shows per second while a slider is moved every 16 ms (like a drag)."""
+    pg.evaluate("""(name) => { const i = document.querySelector(`input[data-name="${name}"]`); let n = 0;
+        window.__drag = setInterval(() => { i.value = 0.5 + 0.5 * Math.sin(n++ / 5);
+                                             i.dispatchEvent(new Event('input')); }, 16); }""", slider)
+    f0, t0 = pg.evaluate("window.mimica.framesApplied"), time.time()
+    pg.wait_for_timeout(int(seconds * 1000))
+    fps = (pg.evaluate("window.mimica.framesApplied") - f0) / (time.time() - t0)
+    pg.evaluate("clearInterval(window.__drag)")
+    return fps

@@ -1,0 +1,177 @@
+"""`mimica view`: a local page (three.js) bound to 127.0.0.1, the simulation streamed over a
+WebSocket.  Only the page's own files are served; faces come in over the socket.
+
+Messages from the page (JSON text):
+  {"type": "set", "name": <muscle | facial action | "age">, "value": number}
+  {"type": "pose", "values": {name: number, ...}}        (timeline playback)
+  {"type": "preset", "name": "happiness"}                (or "neutral")
+  {"type": "load", "name": "face.obj", "obj": "<OBJ text>"}   (a second face)
+Replies: JSON {"type": "init" | "error" | "loaded", ...}; binary frames: a uint32 kind then
+data (0: positions float32 of the face, 1: of the second face, 2: triangles uint32 of the
+face, 3: of the second face).  A bad message gets an error reply; the server keeps going.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import mimetypes
+import struct
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MimicaError
+
+STATIC = Path(__file__).with_name("static")
+MAX_MESSAGE = 64 << 20
+
+
+def _frame(kind: int, arr) -> bytes:
+    return struct.pack("<I", kind) + np.ascontiguousarray(arr).tobytes()
+
+
+class ViewerServer:
+    def __init__(self, session, vendor: Path, title="mimica", host="127.0.0.1", port=0, log=None):
+        self.session, self.vendor, self.title = session, Path(vendor), title
+        self.host, self.port = host, port
+        self.log = log or (lambda m: None)
+        self.routes = {"/": STATIC / "index.html", "/app.js": STATIC / "app.js", "/style.css": STATIC / "style.css",
+                       "/vendor/three.module.js": self.vendor / "three.module.js",
+                       "/vendor/three.core.js": self.vendor / "three.core.js",
+                       "/vendor/OrbitControls.js": self.vendor / "OrbitControls.js"}
+        self.clients = set()
+        self.last_input = 0.0
+        self.frames_sent = 0
+
+    # -- HTTP -----------------------------------------------------------------------------------
+    def _http(self, connection, request):
+        from websockets.datastructures import Headers
+        from websockets.http11 import Response
+        path = request.path.split("?", 1)[0]
+        if path == "/ws":
+            return None                                             # the WebSocket handshake
+        f = self.routes.get(path)
+        if f is None or not f.is_file():
+            body = b"not found\n"
+            return Response(404, "Not Found", Headers([("Content-Type", "text/plain"),
+                                                       ("Content-Length", str(len(body)))]), body)
+        body = f.read_bytes()
+        ctype = mimetypes.guess_type(f.name)[0] or "application/octet-stream"
+        if f.suffix == ".js":
+            ctype = "text/javascript"
+        return Response(200, "OK", Headers([("Content-Type", ctype), ("Content-Length", str(len(body))),
+                                            ("Cache-Control", "no-store")]), body)
+
+    # -- WebSocket ---------------------------------------------------------------------------------
+    async def _client(self, ws):
+        from websockets.exceptions import ConnectionClosed
+        s = self.session
+        self.clients.add(ws)
+        try:
+            await ws.send(json.dumps({"type": "init", "title": self.title, **s.controls(),
+                                      "timeline_format": _timeline_format()}))
+            await ws.send(_frame(2, s.rig.skin.triangles.astype(np.uint32)))
+            await ws.send(_frame(0, (s._last if s._last is not None else s.rest).astype(np.float32)))
+            async for msg in ws:
+                try:
+                    reply = await self._handle(msg)
+                except MimicaError as e:
+                    reply = {"type": "error", "message": str(e)}
+                except Exception as e:                              # never let one message kill the server
+                    reply = {"type": "error", "message": f"{type(e).__name__}: {e}"}
+                if reply:
+                    await ws.send(json.dumps(reply))
+                    if reply.get("type") == "loaded":
+                        mesh = s.second[0]
+                        await ws.send(_frame(3, mesh.triangles.astype(np.uint32)))
+                        await ws.send(_frame(1, s.second_positions()))
+        except ConnectionClosed:
+            pass                                                    # the page went away
+        finally:
+            self.clients.discard(ws)
+
+    async def _handle(self, msg):
+        s = self.session
+        if isinstance(msg, bytes):
+            raise MimicaError("binary messages are not understood")
+        try:
+            m = json.loads(msg)
+        except json.JSONDecodeError:
+            raise MimicaError("not JSON") from None
+        if not isinstance(m, dict) or not isinstance(m.get("type"), str):
+            raise MimicaError("a message is a JSON object with a 'type'")
+        t = m["type"]
+        self.last_input = time.monotonic()
+        if t == "set":
+            s.set(m.get("name"), m.get("value"))
+        elif t == "pose":
+            vals = m.get("values")
+            if not isinstance(vals, dict):
+                raise MimicaError("pose: 'values' must be an object {name: number}")
+            for k, v in vals.items():
+                s.set(k, v)
+        elif t == "preset":
+            s.preset(m.get("name"))
+        elif t == "load":
+            return await asyncio.get_running_loop().run_in_executor(None, self._load, m)
+        else:
+            raise MimicaError(f"unknown message type {t!r}")
+        return None
+
+    def _load(self, m):
+        from ..mesh import read_mesh
+        name, text = m.get("name"), m.get("obj")
+        if not isinstance(name, str) or not isinstance(text, str):
+            raise MimicaError("load: 'name' and 'obj' (the OBJ file's text) are needed")
+        with tempfile.TemporaryDirectory() as d:
+            p = Path(d) / "second.obj"
+            p.write_text(text)
+            try:
+                mesh = read_mesh(p)
+            except MimicaError as e:
+                raise MimicaError(str(e).replace(str(p), Path(name).name)) from None
+        self.session.load_second(mesh)
+        return {"type": "loaded", "name": Path(name).name, "n_vertices": mesh.n_vertices}
+
+    async def _simulate(self):
+        s = self.session
+        dt = 1.0 / s.fps
+        nxt = time.monotonic()
+        while True:
+            nxt += dt
+            active = time.monotonic() - self.last_input < 3.0
+            if self.clients:
+                x = s.tick()
+                if active or s.moving(x):
+                    s._prev = x
+                    data = _frame(0, x)
+                    second = s.second_positions() if s.second is not None else None
+                    for ws in list(self.clients):
+                        try:
+                            await ws.send(data)
+                            if second is not None:
+                                await ws.send(_frame(1, second))
+                        except Exception:
+                            self.clients.discard(ws)
+                    self.frames_sent += 1
+            await asyncio.sleep(max(0.0, nxt - time.monotonic()))
+            if time.monotonic() - nxt > 1.0:                       # fell behind: do not try to catch up
+                nxt = time.monotonic()
+
+    async def run(self, ready=None):
+        from websockets.asyncio.server import serve
+        async with serve(self._client, self.host, self.port, process_request=self._http,
+                         max_size=MAX_MESSAGE, compression=None) as server:
+            self.port = server.sockets[0].getsockname()[1]
+            self.url = f"http://{self.host}:{self.port}/"
+            if ready:
+                ready(self)
+            await self._simulate()
+
+
+def _timeline_format():
+    from ..anim import FORMAT
+    return FORMAT

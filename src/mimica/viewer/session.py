@@ -1,0 +1,108 @@
+"""The viewer's state: a rig's muscles (and facial actions, and age when wrinkles are on),
+simulated live; a second face the current expression is transferred onto."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import MimicaError
+
+
+class ViewerSession:
+    def __init__(self, rig, mask=None, fps: float = 60.0):
+        from ..anim import PRESETS
+        from ..physics.face import FaceSimulator
+        from ..physics.sprung import FACIAL_ACTIONS
+        self.rig, self.fps = rig, fps
+        self.sim = FaceSimulator(rig, fps=fps)
+        self.muscles = list(self.sim.names)
+        self.base = np.array([n.rsplit("_", 1)[0] if n.endswith(("_L", "_R")) else n for n in self.muscles])
+        # facial actions that reach at least one muscle of this rig
+        self.actions = {k: v for k, v in FACIAL_ACTIONS.items() if any(b in v for b in self.base)}
+        self.presets = {k: v for k, v in PRESETS.items()}
+        self.values = {n: 0.0 for n in self.muscles}
+        self.action_values = {k: 0.0 for k in self.actions}
+        self.age = 40.0
+        self.layer = None
+        if mask is not None:
+            from ..wrinkles import WrinkledSkin
+            self.layer = WrinkledSkin.build(rig.skin, mask, refine=False).layer
+        self.rest = rig.skin.vertices
+        self.second = None            # (mesh, ExpressionTransfer)
+        self._last = None
+
+    # -- controls ------------------------------------------------------------------------------
+    def controls(self) -> dict:
+        return {"muscles": self.muscles, "actions": list(self.actions), "presets": list(self.presets),
+                "age": self.layer is not None}
+
+    def set(self, name: str, value) -> None:
+        if not isinstance(name, str):
+            raise MimicaError("set: 'name' must be a string")
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not np.isfinite(value):
+            raise MimicaError(f"set {name}: 'value' must be a finite number")
+        v = float(value)
+        if name == "age":
+            if self.layer is None:
+                raise MimicaError("age: this face has no wrinkle layer (start the viewer with --wrinkles)")
+            self.age = float(np.clip(v, 15.0, 95.0))
+        elif name in self.values:
+            self.values[name] = float(np.clip(v, -1.0, 1.0))
+        elif name in self.action_values:
+            self.action_values[name] = float(np.clip(v, 0.0, 1.0))
+        else:
+            raise MimicaError(f"set: no control named {name!r}")
+
+    def preset(self, name: str) -> None:
+        if name not in self.presets and name != "neutral":
+            raise MimicaError(f"preset: unknown expression {name!r}")
+        p = self.presets.get(name, {})
+        for n, b in zip(self.muscles, self.base):
+            self.values[n] = float(p.get(b, p.get(n, 0.0)))
+        for k in self.action_values:
+            self.action_values[k] = 0.0
+
+    def activations(self) -> np.ndarray:
+        a = np.array([self.values[n] for n in self.muscles])
+        for k, w in self.action_values.items():
+            if w:
+                for i, b in enumerate(self.base):
+                    a[i] += w * self.actions[k].get(b, 0.0)
+        return np.clip(a, -1.0, 1.0)
+
+    # -- simulation -----------------------------------------------------------------------------
+    def tick(self) -> np.ndarray:
+        """One displayed frame: the simulator's substeps, then the skin (with wrinkles), float32."""
+        a = self.activations()
+        for _ in range(self.sim.substeps):
+            self.sim.step(a)
+        x = self.rest + self.sim.displacement()
+        if self.layer is not None:
+            x = self.layer.apply(x, self.age)
+        self._last = x
+        return x.astype(np.float32)
+
+    def moving(self, x, tol=1e-4) -> bool:
+        return self._prev is None or float(np.abs(x - self._prev).max()) > tol
+
+    _prev = None
+
+    # -- a second face ----------------------------------------------------------------------------
+    def load_second(self, mesh):
+        from ..landmarks import landmarks_for
+        from ..transfer import ExpressionTransfer
+        src = self.rig.skin
+        ls = self.rig_landmarks()
+        lt = landmarks_for(mesh, None, "a landmark file", "the second face")
+        self.second = (mesh, ExpressionTransfer(src, mesh, ls, lt, method="vtc"))
+        return mesh
+
+    def rig_landmarks(self):
+        from ..landmarks import Landmarks
+        return Landmarks.snap(self.rig.skin, self.rig.landmarks)
+
+    def second_positions(self) -> np.ndarray | None:
+        if self.second is None:
+            return None
+        x = self._last if self._last is not None else self.rest
+        return self.second[1].apply(x[None])[0].astype(np.float32)
