@@ -194,3 +194,33 @@ def test_cli_landmarks_and_driving_frames(tmp_path):
     n, fps, it = frame_source(clip)
     got = list(it)
     assert len(got) == 3 and got[0].shape[:2] == (242, 320)
+
+
+def test_luminance_solve_keeps_the_border_fixed(photos):
+    """Outside the face (where the solve holds the target's pixels) the result is the target
+    warped, to the last bit; inside it differs."""
+    s, sp = photos.photo("identity001")
+    x, xp = photos.photo("identity001", "surprise")
+    t, tp = photos.photo("identity004", None, LIGHT_RIGHT)
+    an = ImageAnalogy(t, tp)
+    r = an.transfer(s, sp, x, xp)
+    outside = r.mask == 0
+    assert outside.sum() > 1000
+    assert np.abs(r.image - r.warped)[outside].max() < 1e-6
+    inside = r.mask > 0.9
+    assert np.abs(r.image - r.warped)[inside].mean() > 0.003
+
+
+def test_tiny_and_faceless_photos_write_nothing(tmp_path):
+    from PIL import Image
+    tiny = tmp_path / "tiny.png"
+    Image.new("RGB", (10, 12), "white").save(tiny)
+    with pytest.raises(MimicaError, match="tiny.png.*16x16"):
+        read_image(tiny)
+    grey = tmp_path / "grey.png"
+    Image.new("RGB", (200, 200), (128, 128, 128)).save(grey)
+    out = tmp_path / "out"
+    r = _cli("transfer-image", YALE / "subject01.normal.gif", YALE / "subject01.happy.gif", "--target", grey,
+             "--out", out)
+    assert r.returncode == 2 and "grey.png" in r.stderr and "no face" in r.stderr
+    assert not out.exists()
