@@ -130,7 +130,9 @@ def viewer():
                         try:
                             while True:
                                 r = await asyncio.wait_for(ws.recv(), 0.016)
-                                n += isinstance(r, bytes) and r[:4] == b"\0\0\0\0"
+                                if isinstance(r, bytes) and r[:4] == b"\0\0\0\0":
+                                    n += 1
+                                    await ws.send(json.dumps({"type": "ack"}))
                         except asyncio.TimeoutError:
                             pass
                     return n / (time.time() - t0)

@@ -76,18 +76,23 @@ def test_bad_messages_are_answered_and_the_server_lives(server):
                     if isinstance(r, str):
                         errors.append(json.loads(r))
                         break
+                    await ws.send(json.dumps({"type": "ack"}))
             assert all(e["type"] == "error" for e in errors) and len(errors) == 9
             assert "broken.obj" in errors[7]["message"]
             # still alive: a good message makes the face move
             await ws.send(json.dumps({"type": "set", "name": "zygomaticus_major_L", "value": 1.0}))
             first = last = None
+            n = 0
             t0 = time.time()
             while time.time() - t0 < 1.5:                    # the server streams for 3 s after an input
                 r = await asyncio.wait_for(ws.recv(), 10)
                 if isinstance(r, bytes) and r[:4] == b"\0\0\0\0":
+                    await ws.send(json.dumps({"type": "ack"}))       # shown: the next, please
+                    n += 1
                     x = np.frombuffer(r[4:], np.float32)
                     first = x if first is None else first
                     last = x
+            assert n > 10, n
             assert np.abs(last - first).max() > 0.05
     asyncio.run(run())
 

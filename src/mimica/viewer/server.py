@@ -6,6 +6,7 @@ Messages from the page (JSON text):
   {"type": "pose", "values": {name: number, ...}}        (timeline playback)
   {"type": "preset", "name": "happiness"}                (or "neutral")
   {"type": "load", "name": "face.obj", "obj": "<OBJ text>"}   (a second face)
+  {"type": "ack"}                                        (a frame was shown: send the next)
 Replies: JSON {"type": "init" | "error" | "loaded", ...}; binary frames: a uint32 kind then
 data (0: positions float32 of the face, 1: of the second face, 2: triangles uint32 of the
 face, 3: of the second face).  A bad message gets an error reply; the server keeps going.
@@ -43,6 +44,9 @@ class ViewerServer:
                        "/vendor/three.core.js": self.vendor / "three.core.js",
                        "/vendor/OrbitControls.js": self.vendor / "OrbitControls.js"}
         self.clients = set()
+        self.waiting = set()          # pages that have not yet shown the last frame sent to them
+        self.sent_at = {}
+        self._still_moving = True
         self.last_input = 0.0
         self.frames_sent = 0
 
@@ -77,7 +81,7 @@ class ViewerServer:
             await ws.send(_frame(0, (s._last if s._last is not None else s.rest).astype(np.float32)))
             async for msg in ws:
                 try:
-                    reply = await self._handle(msg)
+                    reply = await self._handle(msg, ws)
                 except MimicaError as e:
                     reply = {"type": "error", "message": str(e)}
                 except Exception as e:                              # never let one message kill the server
@@ -92,8 +96,10 @@ class ViewerServer:
             pass                                                    # the page went away
         finally:
             self.clients.discard(ws)
+            self.waiting.discard(ws)
+            self.sent_at.pop(ws, None)
 
-    async def _handle(self, msg):
+    async def _handle(self, msg, ws=None):
         s = self.session
         if isinstance(msg, bytes):
             raise MimicaError("binary messages are not understood")
@@ -104,6 +110,9 @@ class ViewerServer:
         if not isinstance(m, dict) or not isinstance(m.get("type"), str):
             raise MimicaError("a message is a JSON object with a 'type'")
         t = m["type"]
+        if t == "ack":                                             # the page showed a frame
+            self.waiting.discard(ws)
+            return None
         self.last_input = time.monotonic()
         if t == "set":
             s.set(m.get("name"), m.get("value"))
@@ -137,26 +146,37 @@ class ViewerServer:
         return {"type": "loaded", "name": Path(name).name, "n_vertices": mesh.n_vertices}
 
     async def _simulate(self):
+        """The simulation advances in real time; a frame is computed and sent only to pages
+        that have shown the previous one ("ack"), so a slow page never queues stale frames
+        and the server spends nothing on frames nobody will see."""
         s = self.session
         dt = 1.0 / s.fps
         nxt = time.monotonic()
         while True:
             nxt += dt
-            active = time.monotonic() - self.last_input < 3.0
             if self.clients:
-                x = s.tick()
-                if active or s.moving(x):
+                s.step()
+                ready = [ws for ws in self.clients if ws not in self.waiting]
+                active = time.monotonic() - self.last_input < 3.0
+                if ready and (active or self._still_moving):
+                    x = s.positions()
+                    self._still_moving = s.moving(x)
                     s._prev = x
                     data = _frame(0, x)
                     second = s.second_positions() if s.second is not None else None
-                    for ws in list(self.clients):
+                    for ws in ready:
+                        self.waiting.add(ws)                  # before sending: the ack may come first
+                        self.sent_at[ws] = time.monotonic()
                         try:
-                            await ws.send(data)
                             if second is not None:
                                 await ws.send(_frame(1, second))
+                            await ws.send(data)
                         except Exception:
                             self.clients.discard(ws)
                     self.frames_sent += 1
+                for ws in list(self.waiting):              # a page that never acks still gets frames
+                    if time.monotonic() - self.sent_at.get(ws, 0) > 0.5:
+                        self.waiting.discard(ws)
             await asyncio.sleep(max(0.0, nxt - time.monotonic()))
             if time.monotonic() - nxt > 1.0:                       # fell behind: do not try to catch up
                 nxt = time.monotonic()

@@ -71,16 +71,23 @@ class ViewerSession:
         return np.clip(a, -1.0, 1.0)
 
     # -- simulation -----------------------------------------------------------------------------
-    def tick(self) -> np.ndarray:
-        """One displayed frame: the simulator's substeps, then the skin (with wrinkles), float32."""
+    def step(self) -> None:
+        """Advance the simulation by one displayed frame (its substeps); cheap."""
         a = self.activations()
         for _ in range(self.sim.substeps):
             self.sim.step(a)
+
+    def positions(self) -> np.ndarray:
+        """The skin now (with wrinkles), float32: the summed fields, the costly part."""
         x = self.rest + self.sim.displacement()
         if self.layer is not None:
             x = self.layer.apply(x, self.age)
         self._last = x
         return x.astype(np.float32)
+
+    def tick(self) -> np.ndarray:
+        self.step()
+        return self.positions()
 
     def moving(self, x, tol=1e-4) -> bool:
         return self._prev is None or float(np.abs(x - self._prev).max()) > tol

@@ -124,6 +124,7 @@ function applyPending() {
     faceFramed = true;
     pendingFace = null;
     state.framesApplied++; state.version++; tickFps();
+    send({ type: 'ack' });
   }
   if (pendingSecond) {
     const arr = pendingSecond;
