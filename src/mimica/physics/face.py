@@ -46,6 +46,52 @@ class _MuscleSystem:
         self.h, self.w = h, muscle.omega
         self.q = self.v = 0.0
 
+    def state(self) -> np.ndarray:
+        sv = self.solver
+        return np.r_[self.q, self.v, sv.q, sv.v]
+
+    def set_state(self, x):
+        sv = self.solver
+        r = len(sv.q)
+        self.q, self.v = float(x[0]), float(x[1])
+        sv.q, sv.v = np.array(x[2:2 + r]), np.array(x[2 + r:])
+
+    def output_subspace(self, tol: float):
+        """The few skin shapes this system's output can take (model reduction, §VI speed).
+
+        The system is linear with one input, the activation: x' = A x + B a.  Its reachability
+        Gramian W (discrete Lyapunov equation) says which states unit-energy activations
+        reach; the output u = Phi q then lives, up to a relative RMS error tol, in the span
+        of the leading left singular vectors of Phi L (W_qq = L L^T).  Returns (U (3n_free, k)
+        in the output's rows, R (r, k)) with U^T Phi = R^T Phi^T Phi."""
+        import scipy.linalg as sl
+        saved = self.state()
+        n = len(saved)
+        A = np.empty((n, n))
+        for i in range(n):                              # the step is linear: its matrix, column by column
+            e = np.zeros(n)
+            e[i] = 1.0
+            self.set_state(e)
+            self.step(0.0)
+            A[:, i] = self.state()
+        self.set_state(np.zeros(n))
+        self.step(1.0)
+        B = self.state()
+        self.set_state(saved)
+        W = sl.solve_discrete_lyapunov(A, np.outer(B, B))
+        r = len(self.solver.q)
+        Wq = 0.5 * (W[2:2 + r, 2:2 + r] + W[2:2 + r, 2:2 + r].T)
+        w, V = np.linalg.eigh(Wq)
+        L = V * np.sqrt(np.maximum(w, 0.0))
+        phi = self.solver.b.phi
+        G = phi.T @ phi
+        s2, Y = np.linalg.eigh(L.T @ G @ L)             # (Phi L)^T (Phi L): its SVD without the tall matrix
+        s2, Y = np.maximum(s2[::-1], 0.0), Y[:, ::-1]
+        tail = np.r_[np.cumsum(s2[::-1])[::-1][1:], 0.0] / max(s2.sum(), 1e-300)
+        k = int(np.argmax(tail <= tol * tol)) + 1
+        R = L @ Y[:, :k] / np.sqrt(s2[:k])              # U = Phi R has orthonormal columns
+        return phi @ R, R
+
     def step(self, a):
         h, w = self.h, self.w
         # the muscle's stretch mode follows its activation, critically damped (Kim eq. 13)
@@ -75,12 +121,20 @@ class FaceSimulator:
     """Step a rig's muscles (activations in [-1, 1]: contraction > 0, relaxation < 0)."""
 
     def __init__(self, rig, fps: float = 60.0, substeps: int = 4, spring: float = 4.0,
-                 frequency: float = 4.0, damping: float = 1.6, zeta: float = 0.0005, warp: bool = False):
+                 frequency: float = 4.0, damping: float = 1.6, zeta: float = 0.0005, warp: bool = False,
+                 reduced: float | None = None):
         """warp: rotate each node's modal displacement by its linearized rotation (modal
         warping, Kim §III.B).  Off by default: for muscle-driven displacements of a
         centimetre over a few centimetres the rotation estimated from the curl overshoots
-        and creases the skin (see docs/benchmarks.md); the linear field looks right."""
+        and creases the skin (see docs/benchmarks.md); the linear field looks right.
+
+        reduced: a relative RMS tolerance (e.g. 1e-4): the muscles' summed output is then
+        drawn from a few shapes per muscle (output_subspace, about 12 each instead of ~116
+        modes): one small matrix product per frame instead of one per muscle.  The state
+        and `fields()` stay exact."""
         self.warp = warp
+        self.reduced = reduced
+        self._joint = None
         if "mean_edge" not in rig.params:
             raise MimicaError("rig: built by an older mimica; rebuild it with `mimica rig`")
         self.rig, self.fps, self.substeps = rig, fps, substeps
@@ -132,9 +186,34 @@ class FaceSimulator:
             g.v = (g.v + g.h * (self.gravity_scale * self._g_fq - g.lam * g.q)) / g.denom
             g.q = g.q + g.h * g.v
 
+    def _joint_output(self):
+        """[U_1 ... U_m] padded to every node (float32) and the blocks R_m^T Phi_m^T Phi_m."""
+        if self._joint is None:
+            n = self.rig.skin.n_vertices
+            cols, proj = [], []
+            for sm in self.systems:
+                U, R = sm.output_subspace(self.reduced)
+                b = sm.solver.b
+                full = np.zeros((3 * n, U.shape[1]), np.float32)
+                full[(3 * b.free[:, None] + np.arange(3)).ravel()] = U
+                cols.append(full)
+                proj.append(R.T @ (b.phi.T @ b.phi))
+            self._joint = (np.ascontiguousarray(np.concatenate(cols, 1)), proj)
+        return self._joint
+
     def displacement(self) -> np.ndarray:
         """The skin's displacement: the sum over force types (Kim eq. 21), (n, 3)."""
         u = np.zeros_like(self.rig.skin.vertices)
+        if self.reduced and not self.warp:
+            U, proj = self._joint_output()
+            z = np.concatenate([p @ sm.solver.q for p, sm in zip(proj, self.systems)]).astype(np.float32)
+            u.reshape(-1)[:] = U @ z
+            solvers = [sv for sv, _ in self.pulls]
+            if self._g_fq is not None:
+                solvers.append(self.gravity)
+            for sv in solvers:
+                sv.add_displacement(u, False)
+            return u
         solvers = [s.solver for s in self.systems] + [sv for sv, _ in self.pulls]
         if self._g_fq is not None:
             solvers.append(self.gravity)

@@ -14,6 +14,7 @@ alpha_max and solves for a (§5.1).  Lengths are in table units: divide by `unit
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -96,10 +97,27 @@ class ArcLengthTable:
         return ((s[j, k] * (1 - fl) + s[j, k + 1] * fl) * (1 - fr)
                 + (s[j + 1, k] * (1 - fl) + s[j + 1, k + 1] * fl) * fr)
 
+    @cached_property
+    def _corners(self):
+        """Per cell its four corner values [s00, s01 - s00, s10 - s00, s11 - s10 - s01 + s00]
+        (bilinear coefficients), one row per cell: a lookup is one gather of four numbers."""
+        s = self.s
+        c = np.stack([s[:-1, :-1], s[:-1, 1:] - s[:-1, :-1], s[1:, :-1] - s[:-1, :-1],
+                      s[1:, 1:] - s[1:, :-1] - s[:-1, 1:] + s[:-1, :-1]], -1)
+        return np.ascontiguousarray(c.reshape(-1, 4))
+
     def lookup(self, d, a, alpha):
-        """Eq. 14 (see the class note on the d axis), vectorized over the arguments."""
+        """Eq. 14 (see the class note on the d axis), vectorized over the arguments: the cell
+        of (a / d, alpha), its bilinear coefficients in one gather, times d."""
         d = np.asarray(d, float)
-        return d * self._s(np.asarray(a, float) / d, np.asarray(alpha, float))
+        nr, na = len(self.rho) - 1, len(self.alpha) - 1
+        r = np.clip(np.asarray(a, float) / d * (nr / (self.rho[-1] - self.rho[0])), 0.0, nr - 1e-9)
+        t = np.clip(np.asarray(alpha, float) * (na / (self.alpha[-1] - self.alpha[0])), 0.0, na - 1e-9)
+        j = r.astype(np.intp)
+        k = t.astype(np.intp)
+        fr, fl = r - j, t - k
+        c = self._corners.take(j * na + k, axis=0)
+        return d * (c[..., 0] + c[..., 1] * fl + fr * (c[..., 2] + c[..., 3] * fl))
 
     def solve(self, d, d_real, a0, alpha_max=np.pi / 2, iterations=40):
         """§5.1: (a, alpha) with S(d, a, alpha) = d_real; alpha first (a = a0), then a."""
