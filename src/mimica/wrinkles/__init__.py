@@ -37,7 +37,9 @@ class WrinkledSkin:
         return self.refined.carry(X) if self.refined is not None else X
 
     def frame(self, X, age: float) -> np.ndarray:
-        return self.layer.apply(self.carry(X), age)
+        if self.refined is not None:                      # carry makes a new array: bulge it in place
+            return self.layer.apply(self.refined.carry(X), age, inplace=True)
+        return self.layer.apply(X, age)
 
 
 __all__ = ["ArcLengthTable", "arc_length", "dilation", "CylinderFit", "fit_cylinder", "flatten",

@@ -192,8 +192,12 @@ class WrinkleLayer:
         return Q[:, 0], Q[:, 1], Q[:, 2]
 
     def _normals(self, P0, P1, C):
-        n = -np.cross(P1 - P0, C[self.next] - C[self.prev])
-        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+        a, b = P1 - P0, C[self.next] - C[self.prev]
+        n = np.empty_like(a)                                      # -(a x b), written out
+        n[:, 0] = a[:, 2] * b[:, 1] - a[:, 1] * b[:, 2]
+        n[:, 1] = a[:, 0] * b[:, 2] - a[:, 2] * b[:, 0]
+        n[:, 2] = a[:, 1] * b[:, 0] - a[:, 0] * b[:, 1]
+        return n / np.maximum(np.sqrt(np.einsum("ij,ij->i", n, n)), 1e-30)[:, None]
 
     def bind(self, points) -> Binding:
         """Tie points (m, 3) on the rest surface to the sections whose band holds them."""
@@ -284,10 +288,10 @@ class WrinkleLayer:
         out[b.point] = self._offsets(X, age, b)
         return out
 
-    def apply(self, X, age: float) -> np.ndarray:
-        """Positions X with the wrinkles' bulges added."""
+    def apply(self, X, age: float, inplace: bool = False) -> np.ndarray:
+        """Positions X with the wrinkles' bulges added (into X itself when inplace)."""
         b = self.vertex_binding
-        Y = X.copy()
+        Y = X if inplace else X.copy()
         Y[b.point] += self._offsets(X, age, b)
         return Y
 
