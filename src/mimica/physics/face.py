@@ -56,19 +56,12 @@ class _MuscleSystem:
         self.q, self.v = float(x[0]), float(x[1])
         sv.q, sv.v = np.array(x[2:2 + r]), np.array(x[2 + r:])
 
-    def output_subspace(self, tol: float):
-        """The few skin shapes this system's output can take (model reduction, §VI speed).
-
-        The system is linear with one input, the activation: x' = A x + B a.  Its reachability
-        Gramian W (discrete Lyapunov equation) says which states unit-energy activations
-        reach; the output u = Phi q then lives, up to a relative RMS error tol, in the span
-        of the leading left singular vectors of Phi L (W_qq = L L^T).  Returns (U (3n_free, k)
-        in the output's rows, R (r, k)) with U^T Phi = R^T Phi^T Phi."""
-        import scipy.linalg as sl
+    def transition(self):
+        """The step is linear in (state, activation): x' = A x + B a; A and B, column by column."""
         saved = self.state()
         n = len(saved)
         A = np.empty((n, n))
-        for i in range(n):                              # the step is linear: its matrix, column by column
+        for i in range(n):
             e = np.zeros(n)
             e[i] = 1.0
             self.set_state(e)
@@ -78,6 +71,18 @@ class _MuscleSystem:
         self.step(1.0)
         B = self.state()
         self.set_state(saved)
+        return A, B
+
+    def output_subspace(self, tol: float):
+        """The few skin shapes this system's output can take (model reduction, §VI speed).
+
+        The system is linear with one input, the activation: x' = A x + B a.  Its reachability
+        Gramian W (discrete Lyapunov equation) says which states unit-energy activations
+        reach; the output u = Phi q then lives, up to a relative RMS error tol, in the span
+        of the leading left singular vectors of Phi L (W_qq = L L^T).  Returns (U (3n_free, k)
+        in the output's rows, R (r, k)) with U^T Phi = R^T Phi^T Phi."""
+        import scipy.linalg as sl
+        A, B = self.transition()
         W = sl.solve_discrete_lyapunov(A, np.outer(B, B))
         r = len(self.solver.q)
         Wq = 0.5 * (W[2:2 + r, 2:2 + r] + W[2:2 + r, 2:2 + r].T)
@@ -185,6 +190,37 @@ class FaceSimulator:
             g = self.gravity
             g.v = (g.v + g.h * (self.gravity_scale * self._g_fq - g.lam * g.q)) / g.denom
             g.q = g.q + g.h * g.v
+
+    def advance(self, activations: np.ndarray):
+        """One displayed frame (all its substeps) with the activations held over it: every
+        muscle's state goes through its substep transition raised to the number of substeps,
+        x <- A^s x + (A^{s-1} + ... + 1) B a, all muscles in one batched product.  The same
+        arithmetic as `substeps` calls of step() up to rounding; pulls and gravity step as usual."""
+        a = np.asarray(activations, float)[:len(self.systems)]
+        fr = self.__dict__.get("_frame_tr")
+        if fr is None:
+            fr = []
+            for sm in self.systems:
+                A, B = sm.transition()
+                Ak, acc = np.eye(len(B)), np.zeros(len(B))
+                for _ in range(self.substeps):
+                    acc = A @ acc + B
+                    Ak = A @ Ak
+                fr.append((Ak, acc))
+            self._frame_tr = fr
+        for (Ak, Bk), sm, ai in zip(fr, self.systems, a):
+            sv = sm.solver
+            r = len(sv.q)
+            x = Ak @ np.concatenate(((sm.q, sm.v), sv.q, sv.v)) + Bk * ai
+            sm.q, sm.v = float(x[0]), float(x[1])
+            sv.q, sv.v = x[2:2 + r], x[2 + r:]
+        if self.pulls or self._g_fq is not None:
+            keep, self.systems = self.systems, []
+            try:
+                for _ in range(self.substeps):
+                    self.step(a)
+            finally:
+                self.systems = keep
 
     def _joint_output(self):
         """[U_1 ... U_m] padded to every node (float32) and the blocks R_m^T Phi_m^T Phi_m."""

@@ -73,9 +73,7 @@ class ViewerSession:
     # -- simulation -----------------------------------------------------------------------------
     def step(self) -> None:
         """Advance the simulation by one displayed frame (its substeps); cheap."""
-        a = self.activations()
-        for _ in range(self.sim.substeps):
-            self.sim.step(a)
+        self.sim.advance(self.activations())
 
     def positions(self) -> np.ndarray:
         """The skin now (with wrinkles), float32: the summed fields, the costly part."""
