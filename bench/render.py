@@ -51,14 +51,10 @@ def best(f, n=3):
     return min(t)
 
 
-def render_png(mesh, cull=True):
-    if not cull:
-        mesh.__dict__["outward_oriented"] = False
-    img = render_mesh(mesh, size=(1024, 1024))
+def render_png(mesh, cull=None):
+    img = render_mesh(mesh, size=(1024, 1024), cull=cull)
     buf = io.BytesIO()
     Image.fromarray(img).save(buf, format="PNG", compress_level=3)
-    if not cull:
-        del mesh.__dict__["outward_oriented"]
 
 
 def main():

@@ -37,11 +37,12 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from mimica.data import ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel, data_dir  # noqa: E402
 from mimica.image import ImageAnalogy, psnr, read_image  # noqa: E402
+from mimica.image.io import luminance  # noqa: E402
 from mimica.image.ictphotos import LIGHT_LEFT, LIGHT_RIGHT, ICTPhotos  # noqa: E402
 from mimica.image.landmarks2d import Tracker, detect  # noqa: E402
 from mimica.image.landmarks3d import detect_mesh  # noqa: E402
 from mimica.image.video import VideoWriter, frame_source  # noqa: E402
-from mimica.image.warp import STABLE, Similarity2D, sample  # noqa: E402
+from mimica.image.warp import align_to  # noqa: E402
 from mimica.render import contact_sheet, save_png  # noqa: E402
 
 FIG = ROOT / "docs" / "figures"
@@ -54,15 +55,6 @@ def hull_mask(points, shape):
     h = ConvexHull(points)
     ImageDraw.Draw(im).polygon([tuple(p) for p in points[h.vertices]], fill=1)
     return np.asarray(im) > 0
-
-
-def aligned_to(img, pts, ref_pts):
-    """img resampled into the frame of ref_pts by a similarity on the stable points."""
-    b = Similarity2D.fit(pts[STABLE], ref_pts[STABLE]).inverse()
-    h, w = img.shape[:2]
-    yy, xx = np.mgrid[0:h, 0:w]
-    q = b(np.stack([xx.ravel(), yy.ravel()], 1))
-    return sample(img, q[:, 0].reshape(h, w), q[:, 1].reshape(h, w))
 
 
 def u8(img):
@@ -114,7 +106,7 @@ def self_transfer(yale, quick):
         for e in ("happiness", "surprise", "disgust", "anger", "sadness", "fear"):
             x, xp = ph.photo(ident, e)
             r = an.transfer(s, sp, x, xp)
-            ict.append(psnr(r.image, aligned_to(x, xp, sp), r.mask > 0.5))
+            ict.append(psnr(r.image, align_to(x, xp, sp), r.mask > 0.5))
     vals = []
     for i in range(1, 11 if not quick else 4):
         s, sp = yale(f"subject{i:02d}.normal")
@@ -122,7 +114,7 @@ def self_transfer(yale, quick):
         for e in YALE_EXPR:
             x, xp = yale(f"subject{i:02d}.{e}")
             r = an.transfer(s, sp, x, xp)
-            vals.append(psnr(r.image, aligned_to(x, xp, sp), r.mask > 0.5))
+            vals.append(psnr(r.image, align_to(x, xp, sp), r.mask > 0.5))
     print(f"self-transfer S' onto S, face region: rendered ICT ({len(ict)} pairs) median {np.median(ict):.2f} dB "
           f"(min {np.min(ict):.2f}); Yale photos ({len(vals)} pairs) median {np.median(vals):.2f} dB "
           f"(min {np.min(vals):.2f})")
@@ -173,7 +165,7 @@ def yale_pairs(yale, quick):
             x, xp = yale(f"{a}.{e}")
             t, tp = yale(f"{b}.normal")
             tx, txp = yale(f"{b}.{e}")
-            truth = aligned_to(tx, txp, tp)
+            truth = align_to(tx, txp, tp)
             mask = hull_mask(tp, t.shape)
             an = ImageAnalogy(t, tp)
             r = {m: an.transfer(s, sp, x, xp, method=m).image for m in ("vtc", "eri", "warp")}
@@ -217,9 +209,10 @@ def video(quick):
         track = Tracker()
         count, frames = 0, []
         _, fps, it = frame_source(drv)
+        src_y = luminance(src)
         with VideoWriter(out, fps) as vw:
             for f in it:
-                r = an.transfer(src, sp, f, track(f))
+                r = an.transfer(src_y, sp, f, track(f))
                 vw.write(r.image)
                 if count in keep:
                     frames += [f, r.image]

@@ -14,7 +14,7 @@ from mimica.errors import MimicaError
 from mimica.image import ImageAnalogy, psnr, read_image
 from mimica.image import landmarks2d
 from mimica.image.ictphotos import LIGHT_LEFT, LIGHT_RIGHT, ICTPhotos
-from mimica.image.warp import STABLE, PiecewiseAffine, Similarity2D, sample, triangulate
+from mimica.image.warp import STABLE, PiecewiseAffine, Similarity2D, align_to, sample, triangulate
 
 YALE = data_dir() / "yalefaces"
 
@@ -22,14 +22,6 @@ YALE = data_dir() / "yalefaces"
 @pytest.fixture(scope="module")
 def photos():
     return ICTPhotos()
-
-
-def aligned_to(img, pts, ref_pts):
-    b = Similarity2D.fit(pts[STABLE], ref_pts[STABLE]).inverse()
-    h, w = img.shape[:2]
-    yy, xx = np.mgrid[0:h, 0:w]
-    q = b(np.stack([xx.ravel(), yy.ravel()], 1))
-    return sample(img, q[:, 0], q[:, 1]).reshape(img.shape)
 
 
 def test_unchanged_source_gives_the_target_back(photos):
@@ -49,7 +41,7 @@ def test_self_transfer_reproduces_the_expression(photos):
     s, sp = photos.photo("identity009")
     x, xp = photos.photo("identity009", "happiness")
     an = ImageAnalogy(s, sp)
-    truth = aligned_to(x, xp, sp)
+    truth = align_to(x, xp, sp)
     r = an.transfer(s, sp, x, xp)
     w = an.transfer(s, sp, x, xp, method="warp")
     m = r.mask > 0.5

@@ -100,9 +100,6 @@ def test_table_lookup_and_inversion_within_one_percent():
 # ---------------------------------------------------------------- the mask (§3)
 import json  # noqa: E402
 
-import pytest  # noqa: E402
-
-from mimica import MimicaError  # noqa: E402
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel  # noqa: E402
 from mimica.mesh.query import TriangleLocator  # noqa: E402
 from mimica.rig.muscles import MUSCLES  # noqa: E402

@@ -387,11 +387,13 @@ def cmd_transfer_image(a):
         if out.suffix.lower() != ".mp4":
             raise MimicaError(f"{out}: with --driving the output is a video; name it .mp4")
         n, fps, frames = frame_source(a.driving)
+        from .image.io import luminance
         track = Tracker(what=str(a.driving))
+        src_y = luminance(src)                         # the same source for every frame
         t1 = time.perf_counter()
         with VideoWriter(out, fps) as vw:
             for f in _progress(frames, n, "frames"):
-                vw.write(an.transfer(src, sp, f, track(f), method=a.method).image)
+                vw.write(an.transfer(src_y, sp, f, track(f), method=a.method).image)
         dt = time.perf_counter() - t1
         _say(f"{vw.n} frames -> {out} ({vw.n / max(dt, 1e-9):.1f} frames/s, landmarks tracked)")
         return 0
@@ -427,6 +429,7 @@ def _tile(img, like):
 
 def cmd_landmarks(a):
     from .image import landmarks2d, read_image, write_image
+    from .image.io import to_uint8
     from .mesh import MESH_SUFFIXES
     path = Path(a.face)
     if path.suffix.lower() in MESH_SUFFIXES:
@@ -447,7 +450,7 @@ def cmd_landmarks(a):
     img = read_image(path)
     pts = landmarks2d.detect(img, str(path))
     if a.show:
-        write_image(Path(a.show), _draw_points((img * 255).astype(np.uint8), pts) / 255.0)
+        write_image(Path(a.show), _draw_points(to_uint8(img), pts))
     landmarks2d.write_points(a.out, pts, image=path.name, size=(img.shape[1], img.shape[0]))
     _say(f"68 points -> {a.out} (pixel coordinates; edit and rerun `transfer-image`, which reads "
          f"PHOTO.landmarks.json beside each photo)")
@@ -551,7 +554,7 @@ def cmd_render(a):
 
 
 def cmd_export(a):
-    from .mesh import MESH_SUFFIXES, atomic_path, read_mesh, read_vertices, write_glb, write_mesh
+    from .mesh import atomic_path, read_mesh, read_vertices, write_glb, write_mesh
     paths = _expand_frames([Path(p) for p in a.frames])
     mesh = read_mesh(paths[0])
     frames = [read_vertices(p) for p in _progress(paths, len(paths), "reading")]

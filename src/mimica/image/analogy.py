@@ -25,7 +25,7 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import MimicaError
-from .io import rgb_to_yuv, yuv_to_rgb
+from .io import luminance, rgb_to_yuv, yuv_to_rgb
 from .warp import (FOREHEAD_BROW, Bilinear, FOREHEAD_FOLLOW, STABLE, PiecewiseAffine, Similarity2D, border_points,
                    forehead_points, sample, triangulate)
 
@@ -157,20 +157,36 @@ class ImageAnalogy:
         """Steps 2-3: both sources resampled onto the target's grid (crop), and the warp of step 5."""
         p_s, p_x, p_tw = self._controls(s_pts, x_pts)
         hw = (self.h, self.w)
-        s_r = sample(_y(source), *self.grid.map(p_s)).reshape(hw)
-        x_r = sample(_y(expressive), *self.grid.map(p_x)).reshape(hw)
+        s_r = sample(luminance(source), *self.grid.map(p_s)).reshape(hw)
+        x_r = sample(luminance(expressive), *self.grid.map(p_x)).reshape(hw)
         warp = Bilinear(*PiecewiseAffine(p_tw, self.tris, self.w, self.h).map(self.ctrl_t), self.h, self.w)
         off = np.array(self.box[:2], float)
         return s_r, x_r, warp, p_tw[:68] + off
 
     # -- appearance ----------------------------------------------------------------------------
-    def vtc_luminance(self, t_l, s_l, x_l, mask) -> np.ndarray:
-        """Eq. 2 per pixel, then eq. 4 for the luminance alone (DCT solve). Inputs are Y in [0, 1]."""
-        from scipy.fft import dctn, idctn
+    @cached_property
+    def _target_terms(self):
+        """What the solve needs of the target alone, once: its height field, its tents'
+        neighbour differences, and the right-hand side of the held pixels next to the face."""
+        t = self.crop_yuv[..., 0] * np.float32(self.height)
+        out_ = np.where(self.inside, 0, t)
+        known = np.zeros_like(t)
+        known[:, 1:] += out_[:, :-1]
+        known[:, :-1] += out_[:, 1:]
+        known[1:, :] += out_[:-1, :]
+        known[:-1, :] += out_[1:, :]
+        return t, _diffs(t), known[self.inside]
+
+    def vtc_luminance(self, s_l, x_l) -> np.ndarray:
+        """The target's new luminance from the sources' (both on the target's grid, Y in
+        [0, 1]): eq. 2 per pixel, then eq. 4 for the luminance alone (the face's pixels unknown,
+        the rest held: one back-substitution of the per-target factor)."""
         k = np.float32(self.height)
-        t, s, x = t_l * k, s_l * k, x_l * k
+        mask = self.mask_t
+        t, dt, known = self._target_terms
+        s, x = s_l * k, x_l * k
         # neighbour differences right/left/down/up (edge-replicated: zero across the border)
-        ds, dx_, dt = _diffs(s), _diffs(x), _diffs(t)
+        ds, dx_ = _diffs(s), _diffs(x)
         ns, nx = _tip(s), _tip(x)
         r, l, d, u = ds
         # M = w w^T (symmetric) and the z row of N = w' w^T; columns (1,0,r) (-1,0,l) (0,1,d) (0,-1,u), tip n
@@ -210,15 +226,9 @@ class ImageAnalogy:
         div[:, :-1] -= eh
         div[1:, :] += ev
         div[:-1, :] -= ev
-        # known neighbours (outside the face) move to the right-hand side
-        out_ = np.where(self.inside, 0, t)
-        known = np.zeros_like(t)
-        known[:, 1:] += out_[:, :-1]
-        known[:, :-1] += out_[:, 1:]
-        known[1:, :] += out_[:-1, :]
-        known[:-1, :] += out_[1:, :]
+        # known neighbours (outside the face) are on the right-hand side
         sol = t.copy()
-        sol[self.inside] = self._solver.solve((div + known)[self.inside])
+        sol[self.inside] = self._solver.solve(div[self.inside] + known)
         return sol / k
 
     def eri_ratio(self, s_l, x_l, mask, small=None, large=None) -> np.ndarray:
@@ -237,27 +247,22 @@ class ImageAnalogy:
         return (mask * rr + (1 - mask)).astype(np.float32)
 
     def transfer(self, source, s_pts, expressive, x_pts, method="vtc") -> Result:
-        """The target with the expression of (source -> expressive). Images RGB in [0, 1]."""
+        """The target with the expression of (source -> expressive).  Images in [0, 1]: RGB, or
+        for the sources their luminance (only Y is read from them; a video's fixed source neutral
+        can be converted once)."""
         if method not in ("vtc", "eri", "warp"):
             raise MimicaError(f"unknown method {method!r}; use vtc, eri or warp")
         s_r, x_r, look, pts = self.prepare(source, s_pts, expressive, x_pts)
         yuv = self.crop_yuv
         if method == "vtc":
             yuv = yuv.copy()
-            yuv[..., 0] = self.vtc_luminance(yuv[..., 0], s_r, x_r, self.mask_t)
+            yuv[..., 0] = self.vtc_luminance(s_r, x_r)
         elif method == "eri":
             yuv = yuv * self.eri_ratio(s_r, x_r, self.mask_t)[..., None]   # Y, U, V all scale with RGB
         x0, y0, x1, y1 = self.box
         out = self.target.copy()
         out[y0:y1, x0:x1] = np.clip(yuv_to_rgb(look(yuv).reshape(self.h, self.w, 3)), 0, 1)
         return Result(out, pts, self, look)
-
-
-def _y(img) -> np.ndarray:
-    img = np.asarray(img, np.float32)
-    if img.ndim == 2:
-        return img
-    return img[..., 0] * np.float32(0.299) + img[..., 1] * np.float32(0.587) + img[..., 2] * np.float32(0.114)
 
 
 def _diffs(a):

@@ -34,11 +34,14 @@ def read_image(path) -> np.ndarray:
 
 
 def to_uint8(img) -> np.ndarray:
-    return (np.clip(np.asarray(img), 0, 1) * 255 + 0.5).astype(np.uint8)
+    img = np.asarray(img)
+    if img.dtype == np.uint8:
+        return img
+    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
 
 
 def write_image(path, img) -> Path:
-    """Write float RGB (or grey) in [0, 1] atomically; the format follows the suffix."""
+    """Write float RGB (or grey) in [0, 1], or uint8, atomically; the format follows the suffix."""
     from PIL import Image
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -55,6 +58,9 @@ def yuv_to_rgb(yuv) -> np.ndarray:
     return np.asarray(yuv, np.float32) @ _YUV2RGB.T.astype(np.float32)
 
 
-def luminance(rgb) -> np.ndarray:
-    rgb = np.asarray(rgb, np.float32)
-    return rgb[..., 0] * np.float32(0.299) + rgb[..., 1] * np.float32(0.587) + rgb[..., 2] * np.float32(0.114)
+def luminance(img) -> np.ndarray:
+    """Y of an RGB image, float32; a single-channel image is already its own luminance."""
+    img = np.asarray(img, np.float32)
+    if img.ndim == 2:
+        return img
+    return img[..., 0] * np.float32(0.299) + img[..., 1] * np.float32(0.587) + img[..., 2] * np.float32(0.114)

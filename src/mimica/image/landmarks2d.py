@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MimicaError
-from ..mesh import atomic_path, read_json
+from ..mesh import atomic_path
 
 SCHEME = "ibug68-image"
 N = 68
@@ -38,12 +38,11 @@ def _models():
 
 
 def _grey8(img) -> np.ndarray:
+    from .io import luminance, to_uint8
     a = np.asarray(img)
-    if a.dtype != np.uint8:
-        a = (np.clip(a, 0, 1) * 255 + 0.5).astype(np.uint8)
-    if a.ndim == 3:
-        a = (a[..., 0] * 0.299 + a[..., 1] * 0.587 + a[..., 2] * 0.114 + 0.5).astype(np.uint8)
-    return np.ascontiguousarray(a)
+    if a.dtype == np.uint8:
+        a = a.astype(np.float32) / 255.0
+    return np.ascontiguousarray(to_uint8(luminance(a)))
 
 
 def detect_faces(img, upsample=None) -> list:
@@ -107,19 +106,8 @@ class Tracker:
 
 def read_points(path, size=None) -> np.ndarray:
     """Read a 2D landmark file, (68, 2); checked against the image size when given."""
-    path = Path(path)
-    doc = read_json(path, "landmark file")
-    if not isinstance(doc, dict) or doc.get("scheme") != SCHEME:
-        raise MimicaError(f"{path}: expected {{\"scheme\": \"{SCHEME}\", \"points\": [[x, y], ...]}}")
-    pts = doc.get("points")
-    if not isinstance(pts, list) or len(pts) != N:
-        raise MimicaError(f"{path}: 'points' must list {N} [x, y] pairs")
-    out = np.empty((N, 2))
-    for i, q in enumerate(pts):
-        if (not isinstance(q, list) or len(q) != 2
-                or not all(isinstance(c, (int, float)) and not isinstance(c, bool) and np.isfinite(c) for c in q)):
-            raise MimicaError(f"{path}: point {i} must be [x, y] with finite numbers")
-        out[i] = q
+    from ..landmarks import read_point_file
+    out = read_point_file(path, SCHEME, 2, allow_null=False, example="[x, y], ...")
     if size is not None:
         w, h = size
         bad = np.nonzero((out[:, 0] < -0.5 * w) | (out[:, 0] > 1.5 * w) | (out[:, 1] < -0.5 * h) | (out[:, 1] > 1.5 * h))[0]

@@ -27,8 +27,8 @@ def _frame(v, view):
 
 def render_for_detection(mesh: Mesh, vertices=None, view=(0, 0), size=640, frame=None):
     """A front picture for the detector (grey, lit from the front and a little above), the
-    framing used and the rasterized triangle/barycentric buffers."""
-    from ..render import project, rasterize, render_mesh
+    framing used, and the vertices' pixel (xy) and camera-space positions."""
+    from ..render import project, render_mesh
     v = mesh.vertices if vertices is None else np.asarray(vertices)
     frame = frame or _frame(v, view)
     img = render_mesh(mesh, v, size=(size, size), yaw=view[0], pitch=view[1], frame=frame,

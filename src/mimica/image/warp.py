@@ -40,6 +40,16 @@ class Similarity2D:
         return cls(s, r, cb - s * r @ ca)
 
 
+def align_to(img, pts, ref_pts) -> np.ndarray:
+    """img resampled into the frame of ref_pts by the similarity on the stable points: how the
+    analogy removes the head motion between a neutral and an expressive photo (for truths)."""
+    b = Similarity2D.fit(np.asarray(pts)[STABLE], np.asarray(ref_pts)[STABLE]).inverse()
+    h, w = img.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w]
+    q = b(np.stack([xx.ravel(), yy.ravel()], 1))
+    return sample(img, q[:, 0].reshape(h, w), q[:, 1].reshape(h, w))
+
+
 def forehead_points(lm) -> np.ndarray:
     """Two rows of points above the brows (the 68-point markup stops at the brows), (12, 2):
     brow points 17, 19, 21, 22, 24, 26 moved up along the face's vertical by 0.4 and 0.8 of

@@ -111,24 +111,33 @@ def ict_landmarks(mesh: Mesh) -> Landmarks:
     return Landmarks.from_vertex_indices(mesh, ICT_LANDMARKS_68)
 
 
-def read_landmarks(path, mesh: Mesh | None = None):
-    """Read a landmark JSON file; returns (68,3) positions (NaN = missing), or Landmarks if mesh."""
+def read_point_file(path, scheme: str, dim: int, allow_null: bool, example: str = "...") -> np.ndarray:
+    """The 68 points of a landmark JSON file of the given scheme, (68, dim); null entries
+    (when allowed) are NaN rows.  Every problem is one line naming the file."""
     path = Path(path)
     doc = read_json(path, "landmark file")
-    if not isinstance(doc, dict) or doc.get("scheme") != SCHEME:
-        raise MimicaError(f"{path}: expected {{\"scheme\": \"{SCHEME}\", \"points\": [...]}}")
+    if not isinstance(doc, dict) or doc.get("scheme") != scheme:
+        raise MimicaError(f"{path}: expected {{\"scheme\": \"{scheme}\", \"points\": [{example}]}}")
     pts = doc.get("points")
     if not isinstance(pts, list) or len(pts) != N_POINTS:
         raise MimicaError(f"{path}: 'points' must list {N_POINTS} entries, got "
                           f"{len(pts) if isinstance(pts, list) else type(pts).__name__}")
-    out = np.full((N_POINTS, 3), np.nan)
+    out = np.full((N_POINTS, dim), np.nan)
+    coords = "[" + ", ".join("xyz"[:dim]) + "]"
     for i, q in enumerate(pts):
-        if q is None:
+        if q is None and allow_null:
             continue
-        if (not isinstance(q, list) or len(q) != 3
-                or not all(isinstance(c, (int, float)) and np.isfinite(c) for c in q)):
-            raise MimicaError(f"{path}: point {i} must be [x, y, z] with finite numbers, or null")
+        if (not isinstance(q, list) or len(q) != dim
+                or not all(isinstance(c, (int, float)) and not isinstance(c, bool) and np.isfinite(c) for c in q)):
+            raise MimicaError(f"{path}: point {i} must be {coords} with finite numbers"
+                              + (", or null" if allow_null else ""))
         out[i] = q
+    return out
+
+
+def read_landmarks(path, mesh: Mesh | None = None):
+    """Read a landmark JSON file; returns (68,3) positions (NaN = missing), or Landmarks if mesh."""
+    out = read_point_file(path, SCHEME, 3, allow_null=True)
     if np.isfinite(out).all(axis=1).sum() < 4:
         raise MimicaError(f"{path}: at least 4 points are needed, {int(np.isfinite(out).all(1).sum())} given")
     return Landmarks.snap(mesh, out) if mesh is not None else out

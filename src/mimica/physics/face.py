@@ -11,7 +11,6 @@ Per step and per muscle i (all vectorized over the muscle's spring nodes):
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..errors import MimicaError
 from .modal import ModalWarpingSolver
@@ -179,17 +178,21 @@ class FaceSimulator:
         f[nodes] = weights[:, None] * np.asarray(force, float)[None, :]
         self.pulls.append((solver, basis.phi.T @ f[basis.free].ravel() / self.rho))
 
-    def step(self, activations: np.ndarray):
-        """One time step with activations (n_muscles,)."""
+    def _step_forces(self):
+        """One time step of the force types that are not muscles: user pulls and gravity."""
         for solver, fq in self.pulls:
             solver.v = (solver.v + solver.h * (self.pull_scale * fq - solver.lam * solver.q)) / solver.denom
             solver.q = solver.q + solver.h * solver.v
-        for s, a in zip(self.systems, activations):
-            s.step(float(a))
         if self._g_fq is not None:
             g = self.gravity
             g.v = (g.v + g.h * (self.gravity_scale * self._g_fq - g.lam * g.q)) / g.denom
             g.q = g.q + g.h * g.v
+
+    def step(self, activations: np.ndarray):
+        """One time step with activations (n_muscles,)."""
+        self._step_forces()
+        for s, a in zip(self.systems, activations):
+            s.step(float(a))
 
     def advance(self, activations: np.ndarray):
         """One displayed frame (all its substeps) with the activations held over it: every
@@ -215,12 +218,8 @@ class FaceSimulator:
             sm.q, sm.v = float(x[0]), float(x[1])
             sv.q, sv.v = x[2:2 + r], x[2 + r:]
         if self.pulls or self._g_fq is not None:
-            keep, self.systems = self.systems, []
-            try:
-                for _ in range(self.substeps):
-                    self.step(a)
-            finally:
-                self.systems = keep
+            for _ in range(self.substeps):
+                self._step_forces()
 
     def _joint_output(self):
         """[U_1 ... U_m] padded to every node (float32) and the blocks R_m^T Phi_m^T Phi_m."""

@@ -113,13 +113,16 @@ def rasterize(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, width: int, heigh
 
 
 def render_mesh(mesh: Mesh, vertices=None, size=(512, 512), yaw=0.0, pitch=0.0, colors=None,
-                background=(255, 255, 255), frame=None, base_color=(0.82, 0.72, 0.64), light=None) -> np.ndarray:
+                background=(255, 255, 255), frame=None, base_color=(0.82, 0.72, 0.64), light=None,
+                cull=None) -> np.ndarray:
     """Shaded picture of a mesh, (h, w, 3) uint8.
 
     colors: optional (n, 3) per-vertex RGB in [0, 1] (heat maps); shading still applied.
     frame: optional (center (3,), half_extent) so several meshes share one framing.
     light: optional camera-space direction (x right, y up, z to the viewer) of a single key
     light with a little ambient, instead of the default key + fill.
+    cull: skip back faces; by default when the mesh is consistently oriented and outward
+    (`Mesh.outward_oriented`), where they are hidden anyway.
     """
     v = mesh.vertices if vertices is None else np.asarray(vertices)
     w, h = size
@@ -127,8 +130,7 @@ def render_mesh(mesh: Mesh, vertices=None, size=(512, 512), yaw=0.0, pitch=0.0, 
     frame = frame or framing(v, yaw, pitch)
     xy, cam = project(v, frame, size, yaw, pitch)
     tris = mesh.triangles
-    if mesh.outward_oriented:
-        # back faces are hidden on a consistently oriented, outward-facing mesh: skip them
+    if mesh.outward_oriented if cull is None else cull:
         q = xy[tris]
         area = ((q[:, 1, 0] - q[:, 0, 0]) * (q[:, 2, 1] - q[:, 0, 1])
                 - (q[:, 2, 0] - q[:, 0, 0]) * (q[:, 1, 1] - q[:, 0, 1]))

@@ -15,7 +15,7 @@ VIEWS = {"front": (0.0, 0.0), "three-quarter": (-35.0, 0.0), "profile": (-90.0, 
 def shared_frame_all_views(v, views, margin=1.08):
     """One framing (centre, half extent) that fits the mesh in every view."""
     c = 0.5 * (v.min(0) + v.max(0))
-    half = max(framing(v, *VIEWS.get(w, w) if isinstance(w, str) else w, margin)[1] for w in views)
+    half = max(framing(v, *(VIEWS[w] if isinstance(w, str) else w), margin)[1] for w in views)
     return c, half
 
 

@@ -18,7 +18,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from ..align import Similarity, fit_similarity
+from ..align import fit_similarity
 from ..correspond import Correspondence, correspond
 from ..errors import MimicaError
 from ..landmarks import Landmarks

@@ -46,7 +46,6 @@ class ViewerServer:
         self.clients = set()
         self.waiting = set()          # pages that have not yet shown the last frame sent to them
         self.sent_at = {}
-        self._still_moving = True
         self.last_input = 0.0
         self.frames_sent = 0
 
@@ -158,10 +157,8 @@ class ViewerServer:
                 s.step()
                 ready = [ws for ws in self.clients if ws not in self.waiting]
                 active = time.monotonic() - self.last_input < 3.0
-                if ready and (active or self._still_moving):
+                if ready and (active or s.moved):
                     x = s.positions()
-                    self._still_moving = s.moving(x)
-                    s._prev = x
                     data = _frame(0, x)
                     second = s.second_positions() if s.second is not None else None
                     for ws in ready:

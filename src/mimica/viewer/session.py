@@ -32,7 +32,8 @@ class ViewerSession:
             self.layer = WrinkledSkin.build(rig.skin, mask, refine=False).layer
         self.rest = rig.skin.vertices
         self.second = None            # (mesh, ExpressionTransfer)
-        self._last = None
+        self._last = None             # the skin of the last frame computed (float64)
+        self.moved = True             # whether that frame differs from the one before
 
     # -- controls ------------------------------------------------------------------------------
     def controls(self) -> dict:
@@ -78,22 +79,15 @@ class ViewerSession:
         """Advance the simulation by one displayed frame (its substeps); cheap."""
         self.sim.advance(self.activations())
 
-    def positions(self) -> np.ndarray:
-        """The skin now (with wrinkles), float32: the summed fields, the costly part."""
+    def positions(self, tol=1e-4) -> np.ndarray:
+        """The skin now (with wrinkles), float32: the summed fields, the costly part.  Sets
+        `moved`: whether any node moved more than tol since the last call."""
         x = self.rest + self.sim.displacement()
         if self.layer is not None:
             x = self.layer.apply(x, self.age)
+        self.moved = self._last is None or float(np.abs(x - self._last).max()) > tol
         self._last = x
         return x.astype(np.float32)
-
-    def tick(self) -> np.ndarray:
-        self.step()
-        return self.positions()
-
-    def moving(self, x, tol=1e-4) -> bool:
-        return self._prev is None or float(np.abs(x - self._prev).max()) > tol
-
-    _prev = None
 
     # -- a second face ----------------------------------------------------------------------------
     def load_second(self, mesh):
