@@ -518,8 +518,11 @@ def cmd_render(a):
             if len(vals) != mesh.n_vertices:
                 raise MimicaError(f"{hp}: {len(vals)} vertices; {src} has {mesh.n_vertices}")
             vals = np.linalg.norm(vals - frames[0], axis=1)
+            label = f"distance to {hp.name}"
+        else:
+            label = hp.name
         vmax = float(np.max(vals)) if np.max(vals) > 0 else 1.0
-        colors, legend = heat_colors(np.clip(vals, 0, None)), (0.0, vmax, hp.name)
+        colors, legend = heat_colors(np.clip(vals, 0, None)), (0.0, vmax, label)
     frame = shared_frame_all_views(np.concatenate(frames), views if not a.turntable else
                                    [(y, 0.0) for y in turntable_angles(8)])
     size = a.size
