@@ -247,3 +247,48 @@ def test_frame_advance_equals_its_substeps(rig):
     for sa, sb in zip(a.systems, b.systems):
         np.testing.assert_allclose(sb.state(), sa.state(), rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(b.displacement(), a.displacement(), atol=1e-9)
+
+
+def test_lyapunov_doubling_matches_scipy(rig):
+    """The Gramians of the model reduction (Smith's doubling) solve X = A X A^T + Q, as
+    SciPy's Schur-based solver does, for the substep and for the frame (A^4, transposed)."""
+    import scipy.linalg as sl
+
+    from mimica.physics.face import _Lyapunov
+    sm = FaceSimulator(rig, fps=60).systems[0]
+    A, B = sm.transition()
+    ly = _Lyapunov(A)
+    Q = np.outer(B, B)
+    X = ly.solve(Q)
+    np.testing.assert_allclose(X, sl.solve_discrete_lyapunov(A, Q), atol=1e-6 * np.abs(X).max())
+    M = np.linalg.matrix_power(A, 4).T
+    Q = np.diag(np.arange(len(B), dtype=float))
+    X = ly.solve(Q, 4, transpose=True)
+    assert np.abs(M @ X @ M.T + Q - X).max() < 1e-9 * np.abs(X).max()
+
+
+def test_reduced_frames_match_the_exact_frames(rig):
+    """advance() with `reduced`: the muscles step in their balanced truncations (far fewer
+    states); the skin stays within 0.05% of the largest displacement of the exact frames for a
+    ramp, random activations and a release, and step() after it carries on from the same skin."""
+    full = FaceSimulator(rig, fps=60)
+    red = FaceSimulator(rig, fps=60, reduced=1e-4).prepare()
+    rng = np.random.default_rng(11)
+    worst = peak = 0.0
+    for i in range(150):
+        a = (np.full(len(rig.muscles), min(1.0, i / 30)) if i < 50 else
+             rng.uniform(-1, 1, len(rig.muscles)) if i < 100 else np.zeros(len(rig.muscles)))
+        full.advance(a)
+        red.advance(a)
+        uf = full.displacement()
+        worst = max(worst, float(np.abs(red.displacement() - uf).max()))
+        peak = max(peak, float(np.abs(uf).max()))
+        if i == 75:
+            assert red._xr is not None and len(red._xr) < 0.5 * sum(len(s.state()) for s in full.systems)
+    assert peak > 0.1 and worst < 5e-4 * peak
+    a = np.full(len(rig.muscles), 0.7)
+    for sim in (full, red):
+        for _ in range(sim.substeps):
+            sim.step(a)                                   # the reduced one syncs its full state first
+    assert red._xr is None
+    assert np.abs(red.displacement() - full.displacement()).max() < 5e-4 * peak

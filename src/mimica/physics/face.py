@@ -16,6 +16,30 @@ from ..errors import MimicaError
 from .modal import ModalWarpingSolver
 
 
+class _Lyapunov:
+    """Discrete Lyapunov equations X = M X M^T + Q for M a power of one stable A (or its
+    transpose), by Smith's doubling: X = sum_k M^k Q M^kT summed in doublings,
+    X <- X + M_j X M_j^T, M_j+1 = M_j^2, a few dozen n x n products.  (An eigenvector
+    solution is not safe here: the muscles' critically damped stretch mode makes A
+    defective.)"""
+
+    def __init__(self, A):
+        self.A = A
+
+    def solve(self, Q, power: int = 1, transpose: bool = False):
+        M = np.linalg.matrix_power(self.A, power)
+        if transpose:
+            M = M.T
+        X = np.array(Q, float)
+        for _ in range(64):
+            X += M @ X @ M.T
+            M = M @ M
+            if np.abs(M).max() < 1e-18:
+                return 0.5 * (X + X.T)
+        from ..errors import MimicaError
+        raise MimicaError("simulation: a muscle system is not stable at this time step")
+
+
 class _MuscleSystem:
     """One muscle's skin system: its ROI's modes, coupled to the muscle by springs.
 
@@ -55,8 +79,19 @@ class _MuscleSystem:
         self.q, self.v = float(x[0]), float(x[1])
         sv.q, sv.v = np.array(x[2:2 + r]), np.array(x[2 + r:])
 
+    def lyapunov(self) -> _Lyapunov:
+        if self.__dict__.get("_ly") is None:
+            self._ly = _Lyapunov(self.transition()[0])
+        return self._ly
+
     def transition(self):
-        """The step is linear in (state, activation): x' = A x + B a; A and B, column by column."""
+        """The step is linear in (state, activation): x' = A x + B a; A and B, column by column
+        (computed once)."""
+        if self.__dict__.get("_tr") is None:
+            self._tr = self._transition()
+        return self._tr
+
+    def _transition(self):
         saved = self.state()
         n = len(saved)
         A = np.empty((n, n))
@@ -80,9 +115,8 @@ class _MuscleSystem:
         reach; the output u = Phi q then lives, up to a relative RMS error tol, in the span
         of the leading left singular vectors of Phi L (W_qq = L L^T).  Returns (U (3n_free, k)
         in the output's rows, R (r, k)) with U^T Phi = R^T Phi^T Phi."""
-        import scipy.linalg as sl
         A, B = self.transition()
-        W = sl.solve_discrete_lyapunov(A, np.outer(B, B))
+        W = self.lyapunov().solve(np.outer(B, B))
         r = len(self.solver.q)
         Wq = 0.5 * (W[2:2 + r, 2:2 + r] + W[2:2 + r, 2:2 + r].T)
         w, V = np.linalg.eigh(Wq)
@@ -95,6 +129,36 @@ class _MuscleSystem:
         k = int(np.argmax(tail <= tol * tol)) + 1
         R = L @ Y[:, :k] / np.sqrt(s2[:k])              # U = Phi R has orthonormal columns
         return phi @ R, R
+
+    def frame_model(self, substeps: int, proj: np.ndarray, tol: float):
+        """Balanced truncation (Moore 1981) of one displayed frame of this system,
+        x <- A^s x + (A^{s-1} + ... + 1) B a with output z = proj q (the reduced output's
+        coordinates): the Gramians P (reachability) and Q (observability) from discrete
+        Lyapunov equations, the square-root method, the states whose Hankel singular values
+        carry the response kept (2 * the dropped sum <= tol * the largest, the H-infinity
+        error bound).  Returns (Ar, Br, Cr, T, Ti): xr = T x, x ~ Ti xr, T Ti = I."""
+        A, B = self.transition()
+        Af, Bf = np.eye(len(B)), np.zeros(len(B))
+        for _ in range(substeps):
+            Bf = A @ Bf + B
+            Af = A @ Af
+        r = len(self.solver.q)
+        ly = self.lyapunov()
+        C = np.zeros((proj.shape[0], len(B)))
+        C[:, 2:2 + r] = proj
+
+        def root(G):                                   # G = L L^T, G symmetric semi-definite
+            w, V = np.linalg.eigh(0.5 * (G + G.T))
+            return V * np.sqrt(np.maximum(w, 0.0))
+        Lp = root(ly.solve(np.outer(Bf, Bf), substeps))
+        Lq = root(ly.solve(C.T @ C, substeps, transpose=True))
+        U, hsv, Vt = np.linalg.svd(Lq.T @ Lp)
+        tail = np.r_[np.cumsum(hsv[::-1])[::-1][1:], 0.0]
+        k = int(np.argmax(2.0 * tail <= tol * hsv[0])) + 1
+        si = 1.0 / np.sqrt(hsv[:k])
+        T = si[:, None] * (U[:, :k].T @ Lq.T)
+        Ti = (Lp @ Vt[:k].T) * si[None, :]
+        return T @ Af @ Ti, T @ Bf, C @ Ti, T, Ti
 
     def step(self, a):
         h, w = self.h, self.w
@@ -134,11 +198,12 @@ class FaceSimulator:
 
         reduced: a relative RMS tolerance (e.g. 1e-4): the muscles' summed output is then
         drawn from a few shapes per muscle (output_subspace, about 12 each instead of ~116
-        modes): one small matrix product per frame instead of one per muscle.  The state
-        and `fields()` stay exact."""
+        modes): one small matrix product per frame instead of one per muscle; advance()
+        then steps each muscle's balanced truncation at the same tolerance.  step() and
+        `fields()` stay exact."""
         self.warp = warp
         self.reduced = reduced
-        self._joint = None
+        self._joint = self._fm = self._xr = None
         if "mean_edge" not in rig.params:
             raise MimicaError("rig: built by an older mimica; rebuild it with `mimica rig`")
         self.rig, self.fps, self.substeps = rig, fps, substeps
@@ -188,8 +253,44 @@ class FaceSimulator:
             g.v = (g.v + g.h * (self.gravity_scale * self._g_fq - g.lam * g.q)) / g.denom
             g.q = g.q + g.h * g.v
 
+    def prepare(self) -> "FaceSimulator":
+        """Build what advance() and displacement() use (the reduced output and frame model,
+        or the exact frame transitions) now rather than inside the first frames."""
+        if self.reduced and not self.warp:
+            self._frame_model()
+        else:
+            self._frame_transitions()
+        return self
+
+    def _sync(self):
+        """After reduced frames: the muscles' full states again, from the reduced one (x = Ti xr)."""
+        if self._xr is not None:
+            _, _, _, Ts, Tis, offs = self._frame_model()
+            for sm, Ti, o0, o1 in zip(self.systems, Tis, offs[:-1], offs[1:]):
+                sm.set_state(Ti @ self._xr[o0:o1])
+            self._xr = None
+
+    def _frame_model(self):
+        """The reduced frame model of every muscle, block-diagonal: xr <- Ar xr + Br a,
+        z = Cr xr (the reduced output's coordinates); with each muscle's T, Ti and offsets."""
+        if self._fm is None:
+            U, proj = self._joint_output()
+            blocks = [sm.frame_model(self.substeps, p, self.reduced) for sm, p in zip(self.systems, proj)]
+            sizes = [b[0].shape[0] for b in blocks]
+            offs = np.r_[0, np.cumsum(sizes)]
+            kz = np.r_[0, np.cumsum([p.shape[0] for p in proj])]
+            n = int(offs[-1])
+            Ar, Br, Cr = np.zeros((n, n)), np.zeros((n, len(blocks))), np.zeros((int(kz[-1]), n))
+            for i, (a, b, c, _, _) in enumerate(blocks):
+                Ar[offs[i]:offs[i + 1], offs[i]:offs[i + 1]] = a
+                Br[offs[i]:offs[i + 1], i] = b
+                Cr[kz[i]:kz[i + 1], offs[i]:offs[i + 1]] = c
+            self._fm = (Ar, Br, Cr, [b[3] for b in blocks], [b[4] for b in blocks], offs)
+        return self._fm
+
     def step(self, activations: np.ndarray):
         """One time step with activations (n_muscles,)."""
+        self._sync()
         self._step_forces()
         for s, a in zip(self.systems, activations):
             s.step(float(a))
@@ -198,8 +299,33 @@ class FaceSimulator:
         """One displayed frame (all its substeps) with the activations held over it: every
         muscle's state goes through its substep transition raised to the number of substeps,
         x <- A^s x + (A^{s-1} + ... + 1) B a, all muscles in one batched product.  The same
-        arithmetic as `substeps` calls of step() up to rounding; pulls and gravity step as usual."""
+        arithmetic as `substeps` calls of step() up to rounding; pulls and gravity step as usual.
+        With `reduced`, the muscles step in their balanced-truncated frame model instead
+        (`_MuscleSystem.frame_model`): a few states each, all in one small product; their
+        full states come back (x = Ti xr) when step() or fields() needs them."""
         a = np.asarray(activations, float)[:len(self.systems)]
+        if self.reduced and not self.warp:
+            # the reduced frame model (balanced truncation): one small product for all muscles
+            Ar, Br, _, Ts, _, offs = self._frame_model()
+            if self._xr is None:
+                self._xr = np.concatenate([T @ sm.state() for T, sm in zip(Ts, self.systems)])
+            self._xr = Ar @ self._xr + Br @ a
+            if self.pulls or self._g_fq is not None:
+                for _ in range(self.substeps):
+                    self._step_forces()
+            return
+        for (Ak, Bk), sm, ai in zip(self._frame_transitions(), self.systems, a):
+            sv = sm.solver
+            r = len(sv.q)
+            x = Ak @ np.concatenate(((sm.q, sm.v), sv.q, sv.v)) + Bk * ai
+            sm.q, sm.v = float(x[0]), float(x[1])
+            sv.q, sv.v = x[2:2 + r], x[2 + r:]
+        if self.pulls or self._g_fq is not None:
+            for _ in range(self.substeps):
+                self._step_forces()
+
+    def _frame_transitions(self):
+        """Per muscle, a displayed frame's transition (A^s, (A^{s-1} + ... + 1) B)."""
         fr = self.__dict__.get("_frame_tr")
         if fr is None:
             fr = []
@@ -211,15 +337,7 @@ class FaceSimulator:
                     Ak = A @ Ak
                 fr.append((Ak, acc))
             self._frame_tr = fr
-        for (Ak, Bk), sm, ai in zip(fr, self.systems, a):
-            sv = sm.solver
-            r = len(sv.q)
-            x = Ak @ np.concatenate(((sm.q, sm.v), sv.q, sv.v)) + Bk * ai
-            sm.q, sm.v = float(x[0]), float(x[1])
-            sv.q, sv.v = x[2:2 + r], x[2 + r:]
-        if self.pulls or self._g_fq is not None:
-            for _ in range(self.substeps):
-                self._step_forces()
+        return fr
 
     def _joint_output(self):
         """[U_1 ... U_m] padded to every node (float32) and the blocks R_m^T Phi_m^T Phi_m."""
@@ -241,7 +359,10 @@ class FaceSimulator:
         u = np.zeros_like(self.rig.skin.vertices)
         if self.reduced and not self.warp:
             U, proj = self._joint_output()
-            z = np.concatenate([p @ sm.solver.q for p, sm in zip(proj, self.systems)]).astype(np.float32)
+            if self._xr is not None:
+                z = (self._frame_model()[2] @ self._xr).astype(np.float32)
+            else:
+                z = np.concatenate([p @ sm.solver.q for p, sm in zip(proj, self.systems)]).astype(np.float32)
             u.reshape(-1)[:] = U @ z
             solvers = [sv for sv, _ in self.pulls]
             if self._g_fq is not None:
@@ -249,6 +370,7 @@ class FaceSimulator:
             for sv in solvers:
                 sv.add_displacement(u, False)
             return u
+        self._sync()
         solvers = [s.solver for s in self.systems] + [sv for sv, _ in self.pulls]
         if self._g_fq is not None:
             solvers.append(self.gravity)
@@ -258,6 +380,8 @@ class FaceSimulator:
 
     def fields(self) -> dict:
         """Each force type's own displacement field (Kim Fig. 14)."""
+        self._sync()
+
         def field(sv):
             u = np.zeros_like(self.rig.skin.vertices)
             sv.add_displacement(u, self.warp)

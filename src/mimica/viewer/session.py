@@ -14,10 +14,8 @@ class ViewerSession:
         from ..physics.face import FaceSimulator
         from ..physics.sprung import FACIAL_ACTIONS
         self.rig, self.fps = rig, fps
-        self.sim = FaceSimulator(rig, fps=fps, reduced=1e-4)   # display: reduced output, 0.004% off
-        # build the reduced output and the frame transitions now, not inside the first frames
-        self.sim._joint_output()
-        self.sim.advance(np.zeros(len(self.sim.systems)))
+        # display: reduced output and frame model (0.007% off), built now, not inside the first frames
+        self.sim = FaceSimulator(rig, fps=fps, reduced=1e-4).prepare()
         self.muscles = list(self.sim.names)
         self.base = np.array([n.rsplit("_", 1)[0] if n.endswith(("_L", "_R")) else n for n in self.muscles])
         # facial actions that reach at least one muscle of this rig

@@ -26,7 +26,14 @@ class WrinkledSkin:
     @classmethod
     def build(cls, skin, mask: WrinkleMask, refine: bool = True) -> "WrinkledSkin":
         r = refine_along(skin, mask) if refine else None
-        return cls(r, WrinkleLayer(r.mesh if r else skin, mask))
+        layer = WrinkleLayer(r.mesh if r else skin, mask)
+        if r is not None:                 # the refined mesh is ours to order: the bound points
+            b = layer.vertex_binding      # last and consecutive, so a frame adds to a slice
+            rest = np.ones(r.mesh.n_vertices, bool)
+            rest[b.point] = False
+            r, new_index = r.reordered(np.r_[np.nonzero(rest)[0], b.point])
+            layer.relabel(r.mesh, new_index)
+        return cls(r, layer)
 
     @property
     def mesh(self):

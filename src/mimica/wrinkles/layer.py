@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from functools import cache
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from ..errors import MimicaError
@@ -60,19 +61,41 @@ class ProfileTable:
         t = np.linspace(0.0, 1.0, nt)
         alpha, rho = np.interp(q, qq, al), np.interp(q, qq, rr)
         self.y = profile(t[None, :], rho[:, None], alpha[:, None], skew, 12).ravel()
+        self.dy = np.r_[np.diff(self.y), 0.0]         # y[k + 1] - y[k]: the step across, per cell
+
+    def column(self, t):
+        """The part of a lookup that depends on t alone (fixed for a point bound to a
+        wrinkle): the cell's column and the weight across it."""
+        tt = np.asarray(t, float) * (self.nt - 1)
+        j = np.minimum(tt.astype(np.intp), self.nt - 2)
+        return j, tt - j
+
+    def at(self, q, j, ft):
+        """y(q, t) with t given by `column(t)`: bilinear in (sqrt(q - 1), t)."""
+        x = q - 1.0
+        x *= 1.0 / (Q_MAX - 1.0)
+        np.clip(x, 0.0, 1.0, out=x)
+        np.sqrt(x, out=x)
+        x *= self.nq - 1
+        i = np.minimum(x.astype(np.intp), self.nq - 2)
+        x -= i                                      # the weight along q
+        k = i * self.nt
+        k += j
+        y, dy = self.y, self.dy
+        lo = dy[k]
+        lo *= ft
+        lo += y[k]
+        k += self.nt
+        hi = dy[k]
+        hi *= ft
+        hi += y[k]
+        hi -= lo
+        hi *= x
+        hi += lo
+        return hi
 
     def __call__(self, q, t):
-        x = np.sqrt(np.clip((q - 1.0) / (Q_MAX - 1.0), 0.0, 1.0)) * (self.nq - 1)
-        i = np.minimum(x.astype(np.intp), self.nq - 2)
-        fx = x - i
-        tt = t * (self.nt - 1)
-        j = np.minimum(tt.astype(np.intp), self.nt - 2)
-        ft = tt - j
-        k = i * self.nt + j
-        y = self.y
-        lo = y[k] + ft * (y[k + 1] - y[k])
-        hi = y[k + self.nt] + ft * (y[k + self.nt + 1] - y[k + self.nt])
-        return lo + fx * (hi - lo)
+        return self.at(np.array(q, float), *self.column(t))
 
 
 @cache
@@ -115,6 +138,21 @@ class Binding:
     kn: np.ndarray            # the nearer of the two sections (its normal is used)
     groups: list              # [(skew, slice)]: points sorted by section profile
     n_points: int
+    col: np.ndarray = None    # the profile table's column of t and the weight across it
+    ft: np.ndarray = None
+    span: slice | None = None  # the points as a slice, when they are consecutive
+
+    def __post_init__(self):
+        j, ft = [], []
+        for sk, sl in self.groups:
+            a, b = _profiles(sk).column(self.t[sl])
+            j.append(a)
+            ft.append(b)
+        self.col = np.concatenate(j) if j else np.zeros(0, np.intp)
+        self.ft = np.concatenate(ft) if ft else np.zeros(0)
+        p = self.point
+        if len(p) and p[-1] - p[0] == len(p) - 1 and np.all(np.diff(p) == 1):
+            self.span = slice(int(p[0]), int(p[-1]) + 1)
 
 
 class WrinkleLayer:
@@ -145,6 +183,7 @@ class WrinkleLayer:
             n_centre.append(n)
         self.sec_vid = tris[np.concatenate(sec_tri)]            # (K, 3 points, 3 vertices)
         self.sec_bary = np.concatenate(sec_bary)                 # (K, 3, 3)
+        self._relabel_sections(mesh.n_vertices)
         self.sec_wrinkle = np.concatenate(wid)
         self.starts = np.array(starts)
         K = len(self.sec_wrinkle)
@@ -186,13 +225,30 @@ class WrinkleLayer:
         self.gain = np.array([w.emphasis * (-1.0 if w.fold == "in" else 1.0) for w in mask.wrinkles])
         self.vertex_binding = self.bind(X0)
 
+    def _relabel_sections(self, n):
+        K = len(self.sec_vid)
+        rows = np.broadcast_to(np.arange(3 * K).reshape(3, K).T[:, :, None], self.sec_vid.shape)
+        self._sec_op = sp.csr_matrix((self.sec_bary.ravel(), (rows.ravel(), self.sec_vid.ravel())),
+                                     shape=(3 * K, n))      # rows: every P0, then every P1, every C
+        self._sec_op.sort_indices()
+
+    def relabel(self, mesh: Mesh, new_index: np.ndarray) -> None:
+        """The same layer on `mesh`, whose vertex i was this mesh's vertex j with new_index[j] = i."""
+        self.mesh = mesh
+        self.sec_vid = new_index[self.sec_vid]
+        self._relabel_sections(mesh.n_vertices)
+        b = self.vertex_binding
+        self.vertex_binding = Binding(new_index[b.point], b.k0, b.k1, b.f, b.t, b.gain, b.rest, b.kn,
+                                      b.groups, b.n_points)
+
     # ------------------------------------------------------------------ geometry
     def _points(self, X):
-        Q = np.einsum("kpj,kpjc->kpc", self.sec_bary, X[self.sec_vid])
-        return Q[:, 0], Q[:, 1], Q[:, 2]
+        Q = (self._sec_op @ X).reshape(3, -1, 3)
+        return Q[0], Q[1], Q[2]
 
-    def _normals(self, P0, P1, C):
-        a, b = P1 - P0, C[self.next] - C[self.prev]
+    def _normals(self, P0, P1, C, a=None):
+        a = P1 - P0 if a is None else a
+        b = np.take(C, self.next, axis=0) - np.take(C, self.prev, axis=0)
         n = np.empty_like(a)                                      # -(a x b), written out
         n[:, 0] = a[:, 2] * b[:, 1] - a[:, 1] * b[:, 2]
         n[:, 1] = a[:, 0] * b[:, 2] - a[:, 2] * b[:, 0]
@@ -247,13 +303,16 @@ class WrinkleLayer:
         must reach (never below the rest section's: a stretched section stays flat), and the
         unit normal."""
         P0, P1, C = self._points(X)
-        d = np.linalg.norm(P1 - P0, axis=1)
-        s_real = dilation(self.s0 * self.d0, age)                  # eq. 10 on the rest arc length
-        r = s_real / np.maximum(d * self.s0, 1e-30)        # length over the rest section's
+        a = P1 - P0
+        d = np.sqrt(np.einsum("ij,ij->i", a, a))
+        # eq. 10 on the rest arc length S0 = s0 d0, over the rest section's length s0 d now
+        r = float(dilation(1.0, age)) * self.d0 / np.maximum(d, 1e-30)
         for _ in range(2):                  # smooth along the line: a fold is even along its length
             r = 0.5 * r + 0.25 * (r[self.prev] + r[self.next])
         q = np.maximum(r, 1.0) * self.s0
-        return d, q, self._normals(P0, P1, C) * self.orient[:, None]
+        n = self._normals(P0, P1, C, a)
+        n *= self.orient[:, None]
+        return d, q, n
 
     def bulge(self, X, age: float):
         """Per section: (d, a, alpha) of the cubic whose arc length is d_real (eqs. 10-14)."""
@@ -270,16 +329,29 @@ class WrinkleLayer:
         """Signed height (along the normal) of every bound point, (len(binding.point),)."""
         d, q, _ = state
         b = binding
-        qv = q[b.k0] + b.f * (q[b.k1] - q[b.k0])
+        q0 = q[b.k0]
+        qv = q[b.k1]
+        qv -= q0
+        qv *= b.f
+        qv += q0
         y = np.empty_like(qv)
         for sk, sl in b.groups:
-            y[sl] = _profiles(sk)(qv[sl], b.t[sl])
+            y[sl] = _profiles(sk).at(qv[sl], b.col[sl], b.ft[sl])
         y -= b.rest
-        return b.gain * (d[b.k0] + b.f * (d[b.k1] - d[b.k0])) * y
+        d0 = d[b.k0]
+        dv = d[b.k1]
+        dv -= d0
+        dv *= b.f
+        dv += d0
+        y *= dv
+        y *= b.gain
+        return y
 
     def _offsets(self, X, age, b):
         st = self.state(X, age)
-        return self.heights(b, st)[:, None] * st[2][b.kn]
+        out = np.take(st[2], b.kn, axis=0)
+        out *= self.heights(b, st)[:, None]
+        return out
 
     def displacement(self, X, age: float, binding: Binding | None = None) -> np.ndarray:
         """(n, 3) displacement of the bound points at positions X (the mesh's vertices)."""
@@ -292,7 +364,10 @@ class WrinkleLayer:
         """Positions X with the wrinkles' bulges added (into X itself when inplace)."""
         b = self.vertex_binding
         Y = X if inplace else X.copy()
-        Y[b.point] += self._offsets(X, age, b)
+        if b.span is not None:
+            Y[b.span] += self._offsets(X, age, b)
+        else:
+            Y[b.point] += self._offsets(X, age, b)
         return Y
 
     def compression(self, X) -> np.ndarray:

@@ -30,6 +30,15 @@ class Refined:
     def carry(self, X: np.ndarray) -> np.ndarray:
         return self.W @ X
 
+    def reordered(self, order: np.ndarray) -> tuple["Refined", np.ndarray]:
+        """The same refinement with its vertices in `order` (old indices, new order), and the
+        map old index -> new index."""
+        new_index = np.empty(len(order), np.intp)
+        new_index[order] = np.arange(len(order))
+        m = self.mesh
+        mesh = Mesh(m.vertices[order], new_index[m.face_indices], m.face_starts, m.uv, m.face_uv_indices, m.name)
+        return Refined(mesh, self.W[order].tocsr()), new_index
+
 
 def _split(tris, marked_edge_of, mid_of):
     """One red-green pass: tris (F, 3); marked_edge_of (F, 3) bool for edges (v_i, v_i+1);
