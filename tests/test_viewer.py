@@ -124,6 +124,8 @@ def test_page_in_headless_chromium(server, tmp_path):
         (ARTIFACTS / "viewer_fps.json").write_text(json.dumps({"viewer_fps": fps}) + "\n")
         assert pg.evaluate("window.mimica.checksum()") != c0
         assert fps * 3 >= 3                                      # frames kept coming while dragging
+        # a software GL draws at a lower resolution while frames stream, sharp again once still
+        pg.wait_for_function("window.mimica.scale().scale === 1", timeout=5000)
         pg.screenshot(path=str(ARTIFACTS / "viewer_slider.png"))
         # the timeline: keys drawn with the mouse on the curve editor, then played
         pg.select_option("#channel", "frontalis_L")

@@ -11,7 +11,9 @@ import threading
 import time
 from contextlib import contextmanager
 
-SOFTWARE_GL = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--no-sandbox"]
+# WebGL on SwiftShader, the page composited in software (what Chromium does without a GPU;
+# compositing through SwiftShader as well cost a third of the frame rate, measured)
+SOFTWARE_GL = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-gpu-compositing", "--no-sandbox"]
 
 
 def chromium_path():
@@ -44,7 +46,7 @@ def viewer_process(face, rig, extra=(), timeout=180):
 
 
 @contextmanager
-def browser_page(url, size=(960, 640)):
+def browser_page(url, size=(960, 640), query="software"):
     from playwright.sync_api import sync_playwright
     with sync_playwright() as p:
         b = p.chromium.launch(executable_path=chromium_path(), args=SOFTWARE_GL)
@@ -52,7 +54,7 @@ def browser_page(url, size=(960, 640)):
             pg = b.new_page(viewport={"width": size[0], "height": size[1]})
             pg.errors = []
             pg.on("pageerror", lambda e: pg.errors.append(str(e)))
-            pg.goto(url + "?software")
+            pg.goto(url + "?" + query)
             pg.wait_for_function("window.mimica && window.mimica.ready && window.mimica.framesApplied > 0",
                                  timeout=30000)
             yield pg

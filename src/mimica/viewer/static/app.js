@@ -43,6 +43,45 @@ state.checksum = (which) => {
   return s;
 };
 
+// Interactive resolution.  A draw on a software GL (no GPU: SwiftShader, llvmpipe) costs in
+// proportion to its pixels; while frames stream the canvas is drawn at the scale that keeps
+// the page at 30+ draws a second, and at full resolution once the face has been still for
+// 0.4 s (never below half resolution).  A GPU keeps up at full scale and never lowers it.
+const MIN_SCALE = 0.5;
+let scale = 1;                 // the scale drawn now
+let liveScale = 1;             // the scale used while frames stream (tuned)
+let lastTick = 0, gapAvg = 0, lastChange = 0, lastScale = 1;
+state.scale = () => ({ scale, liveScale, gapAvg });   // for tests: the resolution drawn now
+function setScale(s) {
+  s = Math.max(MIN_SCALE, Math.min(1, s));
+  if (Math.abs(s - scale) < 0.02) return;
+  scale = s;
+  renderer.setPixelRatio(window.devicePixelRatio * s);
+  renderer.setSize(view.clientWidth, view.clientHeight, false);
+  dirty = true;
+}
+const adaptive = !new URLSearchParams(location.search).has('fullres');   // ?fullres: always sharp
+function tune(now, drew) {
+  if (!adaptive) return;
+  // the animation-frame gap after a draw: long gaps mean the draws are what holds the page back
+  if (drew && lastTick && now - lastTick < 250 && lastScale === liveScale) {
+    const gap = now - lastTick;
+    gapAvg = gapAvg ? 0.8 * gapAvg + 0.2 * gap : gap;
+    lastChange = now;
+    if (now - (tune.at || 0) > 250) {            // adjust at most 4 times a second
+      tune.at = now;
+      if (gapAvg > 30) liveScale = Math.max(MIN_SCALE, liveScale * Math.sqrt(28 / gapAvg));
+      else if (gapAvg < 20) liveScale = Math.min(1, liveScale * 1.1);
+      setScale(liveScale);
+      liveScale = scale;
+    }
+  } else if (!drew && scale < 1 && now - lastChange > 400) {
+    setScale(1);                                 // still: one sharp draw
+    gapAvg = 0;
+  }
+  if (drew) { lastTick = now; lastScale = scale; }
+}
+
 function resize() {
   const w = view.clientWidth, h = view.clientHeight;
   renderer.setSize(w, h);
@@ -64,6 +103,35 @@ function frameCamera(...meshes) {
   orbit.update();
 }
 
+// area-weighted vertex normals in one pass over the triangles (three's computeVertexNormals
+// does the same through Vector3 objects, ~8x slower on a 9,409-vertex face)
+function vertexNormals(g) {
+  const pos = g.getAttribute('position').array;
+  if (!g.index) { g.computeVertexNormals(); return; }
+  const idx = g.index.array;
+  let attr = g.getAttribute('normal');
+  if (!attr || attr.array.length !== pos.length) {
+    attr = new THREE.BufferAttribute(new Float32Array(pos.length), 3);
+    g.setAttribute('normal', attr);
+  }
+  const n = attr.array;
+  n.fill(0);
+  for (let t = 0; t < idx.length; t += 3) {
+    const a = 3 * idx[t], b = 3 * idx[t + 1], c = 3 * idx[t + 2];
+    const ux = pos[b] - pos[a], uy = pos[b + 1] - pos[a + 1], uz = pos[b + 2] - pos[a + 2];
+    const vx = pos[c] - pos[a], vy = pos[c + 1] - pos[a + 1], vz = pos[c + 2] - pos[a + 2];
+    const x = uy * vz - uz * vy, y = uz * vx - ux * vz, z = ux * vy - uy * vx;
+    n[a] += x; n[a + 1] += y; n[a + 2] += z;
+    n[b] += x; n[b + 1] += y; n[b + 2] += z;
+    n[c] += x; n[c + 1] += y; n[c + 2] += z;
+  }
+  for (let i = 0; i < n.length; i += 3) {
+    const l = Math.hypot(n[i], n[i + 1], n[i + 2]) || 1;
+    n[i] /= l; n[i + 1] /= l; n[i + 2] /= l;
+  }
+  attr.needsUpdate = true;
+}
+
 function setPositions(mesh, arr, first) {
   const g = mesh.geometry;
   const attr = g.getAttribute('position');
@@ -73,7 +141,7 @@ function setPositions(mesh, arr, first) {
     attr.array.set(arr);
     attr.needsUpdate = true;
   }
-  g.computeVertexNormals();
+  vertexNormals(g);
   if (first) frameCamera(mesh);
   dirty = true;
 }
@@ -87,11 +155,13 @@ function tickFps() {
 
 // draw only when something changed (a new frame, the camera): software GL stays cheap
 orbit.addEventListener('change', () => { dirty = true; });
-renderer.setAnimationLoop(() => {
+renderer.setAnimationLoop((now) => {
   orbit.update();
   if (state.playing) advance();
   applyPending();
+  const drew = dirty;
   if (dirty) { renderer.render(scene, camera); dirty = false; state.draws = (state.draws || 0) + 1; }
+  tune(now, drew);
 });
 
 // ---------------------------------------------------------------- socket
