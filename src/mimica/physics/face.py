@@ -36,7 +36,6 @@ class _Lyapunov:
             M = M @ M
             if np.abs(M).max() < 1e-18:
                 return 0.5 * (X + X.T)
-        from ..errors import MimicaError
         raise MimicaError("simulation: a muscle system is not stable at this time step")
 
 
