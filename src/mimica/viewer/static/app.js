@@ -50,7 +50,9 @@ state.checksum = (which) => {
 const MIN_SCALE = 0.5;
 let scale = 1;                 // the scale drawn now
 let liveScale = 1;             // the scale used while frames stream (tuned)
-let lastTick = 0, gapAvg = 0, lastChange = 0, lastScale = 1;
+let lastTick = 0, gapAvg = 0, lastChange = 0, adjusted = 0;
+let sharp = true;              // drawn at full resolution because the face is still
+let moving = false;            // a new frame or a camera move since the last animation frame
 state.scale = () => ({ scale, liveScale, gapAvg });   // for tests: the resolution drawn now
 function setScale(s) {
   s = Math.max(MIN_SCALE, Math.min(1, s));
@@ -61,25 +63,31 @@ function setScale(s) {
   dirty = true;
 }
 const adaptive = !new URLSearchParams(location.search).has('fullres');   // ?fullres: always sharp
-function tune(now, drew) {
+function tune(now, moved) {
   if (!adaptive) return;
-  // the animation-frame gap after a draw: long gaps mean the draws are what holds the page back
-  if (drew && lastTick && now - lastTick < 250 && lastScale === liveScale) {
-    const gap = now - lastTick;
-    gapAvg = gapAvg ? 0.8 * gapAvg + 0.2 * gap : gap;
-    lastChange = now;
-    if (now - (tune.at || 0) > 250) {            // adjust at most 4 times a second
-      tune.at = now;
-      if (gapAvg > 30) liveScale = Math.max(MIN_SCALE, liveScale * Math.sqrt(28 / gapAvg));
-      else if (gapAvg < 20) liveScale = Math.min(1, liveScale * 1.1);
+  if (moved) {
+    if (sharp) {                                 // moving again: back to the live scale
+      sharp = false;
       setScale(liveScale);
-      liveScale = scale;
+    } else if (lastTick && now - lastTick < 250) {
+      // the animation-frame gap between drawn frames: long gaps mean the draws hold the page back
+      const gap = now - lastTick;
+      gapAvg = gapAvg ? 0.8 * gapAvg + 0.2 * gap : gap;
+      if (now - adjusted > 250) {                // adjust at most 4 times a second
+        adjusted = now;
+        if (gapAvg > 30) liveScale = Math.max(MIN_SCALE, liveScale * Math.sqrt(28 / gapAvg));
+        else if (gapAvg < 20) liveScale = Math.min(1, liveScale * 1.1);
+        setScale(liveScale);
+        liveScale = scale;
+      }
     }
-  } else if (!drew && scale < 1 && now - lastChange > 400) {
-    setScale(1);                                 // still: one sharp draw
-    gapAvg = 0;
+    lastTick = now;
+    lastChange = now;
+  } else if (!sharp && now - lastChange > 400) {
+    sharp = true;                                // still: one sharp draw
+    lastTick = 0;
+    setScale(1);
   }
-  if (drew) { lastTick = now; lastScale = scale; }
 }
 
 function resize() {
@@ -154,14 +162,15 @@ function tickFps() {
 }
 
 // draw only when something changed (a new frame, the camera): software GL stays cheap
-orbit.addEventListener('change', () => { dirty = true; });
+orbit.addEventListener('change', () => { dirty = true; moving = true; });
 renderer.setAnimationLoop((now) => {
   orbit.update();
   if (state.playing) advance();
   applyPending();
-  const drew = dirty;
+  const moved = moving && dirty;
+  moving = false;
   if (dirty) { renderer.render(scene, camera); dirty = false; state.draws = (state.draws || 0) + 1; }
-  tune(now, drew);
+  tune(now, moved);
 });
 
 // ---------------------------------------------------------------- socket
@@ -194,6 +203,7 @@ function applyPending() {
     faceFramed = true;
     pendingFace = null;
     state.framesApplied++; state.version++; tickFps();
+    moving = true;
     send({ type: 'ack' });
   }
   if (pendingSecond) {
