@@ -129,6 +129,16 @@ class _MuscleSystem:
         R = L @ Y[:, :k] / np.sqrt(s2[:k])              # U = Phi R has orthonormal columns
         return phi @ R, R
 
+    def frame_transition(self, substeps: int):
+        """A displayed frame of `substeps` steps with the activation held:
+        x <- A^s x + (A^{s-1} + ... + 1) B a; returns (A^s, (A^{s-1} + ... + 1) B)."""
+        A, B = self.transition()
+        Af, Bf = np.eye(len(B)), np.zeros(len(B))
+        for _ in range(substeps):
+            Bf = A @ Bf + B
+            Af = A @ Af
+        return Af, Bf
+
     def frame_model(self, substeps: int, proj: np.ndarray, tol: float):
         """Balanced truncation (Moore 1981) of one displayed frame of this system,
         x <- A^s x + (A^{s-1} + ... + 1) B a with output z = proj q (the reduced output's
@@ -136,14 +146,10 @@ class _MuscleSystem:
         Lyapunov equations, the square-root method, the states whose Hankel singular values
         carry the response kept (2 * the dropped sum <= tol * the largest, the H-infinity
         error bound).  Returns (Ar, Br, Cr, T, Ti): xr = T x, x ~ Ti xr, T Ti = I."""
-        A, B = self.transition()
-        Af, Bf = np.eye(len(B)), np.zeros(len(B))
-        for _ in range(substeps):
-            Bf = A @ Bf + B
-            Af = A @ Af
+        Af, Bf = self.frame_transition(substeps)
         r = len(self.solver.q)
         ly = self.lyapunov()
-        C = np.zeros((proj.shape[0], len(B)))
+        C = np.zeros((proj.shape[0], len(Bf)))
         C[:, 2:2 + r] = proj
 
         def root(G):                                   # G = L L^T, G symmetric semi-definite
@@ -327,15 +333,7 @@ class FaceSimulator:
         """Per muscle, a displayed frame's transition (A^s, (A^{s-1} + ... + 1) B)."""
         fr = self.__dict__.get("_frame_tr")
         if fr is None:
-            fr = []
-            for sm in self.systems:
-                A, B = sm.transition()
-                Ak, acc = np.eye(len(B)), np.zeros(len(B))
-                for _ in range(self.substeps):
-                    acc = A @ acc + B
-                    Ak = A @ Ak
-                fr.append((Ak, acc))
-            self._frame_tr = fr
+            fr = self._frame_tr = [sm.frame_transition(self.substeps) for sm in self.systems]
         return fr
 
     def _joint_output(self):
