@@ -16,27 +16,19 @@ from ..errors import MimicaError
 from .modal import ModalWarpingSolver
 
 
-class _Lyapunov:
-    """Discrete Lyapunov equations X = M X M^T + Q for M a power of one stable A (or its
-    transpose), by Smith's doubling: X = sum_k M^k Q M^kT summed in doublings,
-    X <- X + M_j X M_j^T, M_j+1 = M_j^2, a few dozen n x n products.  (An eigenvector
-    solution is not safe here: the muscles' critically damped stretch mode makes A
-    defective.)"""
-
-    def __init__(self, A):
-        self.A = A
-
-    def solve(self, Q, power: int = 1, transpose: bool = False):
-        M = np.linalg.matrix_power(self.A, power)
-        if transpose:
-            M = M.T
-        X = np.array(Q, float)
-        for _ in range(64):
-            X += M @ X @ M.T
-            M = M @ M
-            if np.abs(M).max() < 1e-18:
-                return 0.5 * (X + X.T)
-        raise MimicaError("simulation: a muscle system is not stable at this time step")
+def _dlyap(M, Q):
+    """X with X = M X M^T + Q, M stable, by Smith's doubling: X = sum_k M^k Q M^kT summed in
+    doublings, X <- X + M_j X M_j^T, M_j+1 = M_j^2 (a few dozen n x n products).  An
+    eigenvector solution is not safe here: the muscles' critically damped stretch mode makes
+    the step matrix defective."""
+    X = np.array(Q, float)
+    M = np.array(M, float)
+    for _ in range(64):
+        X += M @ X @ M.T
+        M = M @ M
+        if np.abs(M).max() < 1e-18:
+            return 0.5 * (X + X.T)
+    raise MimicaError("simulation: a muscle system is not stable at this time step")
 
 
 class _MuscleSystem:
@@ -78,11 +70,6 @@ class _MuscleSystem:
         self.q, self.v = float(x[0]), float(x[1])
         sv.q, sv.v = np.array(x[2:2 + r]), np.array(x[2 + r:])
 
-    def lyapunov(self) -> _Lyapunov:
-        if self.__dict__.get("_ly") is None:
-            self._ly = _Lyapunov(self.transition()[0])
-        return self._ly
-
     def transition(self):
         """The step is linear in (state, activation): x' = A x + B a; A and B, column by column
         (computed once)."""
@@ -115,7 +102,7 @@ class _MuscleSystem:
         of the leading left singular vectors of Phi L (W_qq = L L^T).  Returns (U (3n_free, k)
         in the output's rows, R (r, k)) with U^T Phi = R^T Phi^T Phi."""
         A, B = self.transition()
-        W = self.lyapunov().solve(np.outer(B, B))
+        W = _dlyap(A, np.outer(B, B))
         r = len(self.solver.q)
         Wq = 0.5 * (W[2:2 + r, 2:2 + r] + W[2:2 + r, 2:2 + r].T)
         w, V = np.linalg.eigh(Wq)
@@ -148,15 +135,14 @@ class _MuscleSystem:
         error bound).  Returns (Ar, Br, Cr, T, Ti): xr = T x, x ~ Ti xr, T Ti = I."""
         Af, Bf = self.frame_transition(substeps)
         r = len(self.solver.q)
-        ly = self.lyapunov()
         C = np.zeros((proj.shape[0], len(Bf)))
         C[:, 2:2 + r] = proj
 
         def root(G):                                   # G = L L^T, G symmetric semi-definite
             w, V = np.linalg.eigh(0.5 * (G + G.T))
             return V * np.sqrt(np.maximum(w, 0.0))
-        Lp = root(ly.solve(np.outer(Bf, Bf), substeps))
-        Lq = root(ly.solve(C.T @ C, substeps, transpose=True))
+        Lp = root(_dlyap(Af, np.outer(Bf, Bf)))
+        Lq = root(_dlyap(Af.T, C.T @ C))
         U, hsv, Vt = np.linalg.svd(Lq.T @ Lp)
         tail = np.r_[np.cumsum(hsv[::-1])[::-1][1:], 0.0]
         k = int(np.argmax(2.0 * tail <= tol * hsv[0])) + 1
@@ -339,28 +325,24 @@ class FaceSimulator:
     def _joint_output(self):
         """[U_1 ... U_m] padded to every node (float32) and the blocks R_m^T Phi_m^T Phi_m."""
         if self._joint is None:
-            n = self.rig.skin.n_vertices
             cols, proj = [], []
             for sm in self.systems:
                 U, R = sm.output_subspace(self.reduced)
                 b = sm.solver.b
-                full = np.zeros((3 * n, U.shape[1]), np.float32)
-                full[(3 * b.free[:, None] + np.arange(3)).ravel()] = U
-                cols.append(full)
+                cols.append(b.padded32(U))
                 proj.append(R.T @ (b.phi.T @ b.phi))
             self._joint = (np.ascontiguousarray(np.concatenate(cols, 1)), proj)
         return self._joint
 
     def displacement(self) -> np.ndarray:
         """The skin's displacement: the sum over force types (Kim eq. 21), (n, 3)."""
-        u = np.zeros_like(self.rig.skin.vertices)
         if self.reduced and not self.warp:
             U, proj = self._joint_output()
             if self._xr is not None:
                 z = (self._frame_model()[2] @ self._xr).astype(np.float32)
             else:
                 z = np.concatenate([p @ sm.solver.q for p, sm in zip(proj, self.systems)]).astype(np.float32)
-            u.reshape(-1)[:] = U @ z
+            u = (U @ z).astype(np.float64).reshape(-1, 3)
             solvers = [sv for sv, _ in self.pulls]
             if self._g_fq is not None:
                 solvers.append(self.gravity)
@@ -368,6 +350,7 @@ class FaceSimulator:
                 sv.add_displacement(u, False)
             return u
         self._sync()
+        u = np.zeros_like(self.rig.skin.vertices)
         solvers = [s.solver for s in self.systems] + [sv for sv, _ in self.pulls]
         if self._g_fq is not None:
             solvers.append(self.gravity)

@@ -122,10 +122,14 @@ class ModalBasis:
         """Phi in single precision for the skin output, and whether it is padded with zero rows
         to every node (when the free nodes are most of the skin: no scatter needed)."""
         if len(self.free) > 0.4 * self.n:
-            full = np.zeros((3 * self.n, self.phi.shape[1]), np.float32)
-            full[(3 * self.free[:, None] + np.arange(3)).ravel()] = self.phi
-            return full, True
+            return self.padded32(self.phi), True
         return np.ascontiguousarray(self.phi, dtype=np.float32), False
+
+    def padded32(self, rows: np.ndarray) -> np.ndarray:
+        """Rows over the free nodes' dofs (3 n_free, k) -> (3 n, k) float32, zero at fixed nodes."""
+        full = np.zeros((3 * self.n, rows.shape[1]), np.float32)
+        full[(3 * self.free[:, None] + np.arange(3)).ravel()] = rows
+        return full
 
     @classmethod
     def compute(cls, energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, r: int = 20,
