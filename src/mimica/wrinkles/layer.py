@@ -98,6 +98,15 @@ class ProfileTable:
         return self.at(np.array(q, float), *self.column(t))
 
 
+def _between(v, k0, k1, f):
+    """Per point, v of its two sections interpolated: v[k0] + f (v[k1] - v[k0])."""
+    out = v[k1]
+    out -= v[k0]
+    out *= f.reshape(f.shape + (1,) * (v.ndim - 1))
+    out += v[k0]
+    return out
+
+
 @cache
 def _profiles(skew):
     return ProfileTable(skew)
@@ -266,8 +275,7 @@ class WrinkleLayer:
         k0, f = self._dense_k[j], self._dense_f[j]
         w = self.sec_wrinkle[k0]
         k1 = np.minimum(k0 + 1, self.starts[w + 1] - 1)
-        lerp = lambda a: a[k0] * (1 - f[:, None]) + a[k1] * f[:, None]  # noqa: E731
-        c, a0, a1 = lerp(C), lerp(P0), lerp(P1)
+        c, a0, a1 = (_between(v, k0, k1, f) for v in (C, P0, P1))
         across = a1 - a0
         dd = np.linalg.norm(across, axis=1)
         rel = p[cand] - c
@@ -281,14 +289,14 @@ class WrinkleLayer:
         ok = (t > 0) & (t < 1) & (along <= step + 0.05 * self.width[w]) & (height < 0.5 * self.width[w])
         cand, k0, k1, f, t, w = cand[ok], k0[ok], k1[ok], f[ok], t[ok], w[ok]
         # taper the ends of the line (smoothstep over `taper` of its length)
-        s = self._arc[k0] * (1 - f) + self._arc[k1] * f
+        s = _between(self._arc, k0, k1, f)
         L = self._length[w]
         e = np.clip(np.minimum(s, L - s) / np.maximum(self.taper * L, 1e-12), 0, 1)
         taper = e * e * (3 - 2 * e)
         skew = self.skew[k0]
         o = np.argsort(skew, kind="stable")
         cand, k0, k1, f, t, w, taper, skew = (a[o] for a in (cand, k0, k1, f, t, w, taper, skew))
-        s0 = self.s0[k0] + f * (self.s0[k1] - self.s0[k0])
+        s0 = _between(self.s0, k0, k1, f)
         groups, rest = [], np.empty(len(t))
         for sk in np.unique(skew):
             idx = np.nonzero(skew == sk)[0]
@@ -329,21 +337,12 @@ class WrinkleLayer:
         """Signed height (along the normal) of every bound point, (len(binding.point),)."""
         d, q, _ = state
         b = binding
-        q0 = q[b.k0]
-        qv = q[b.k1]
-        qv -= q0
-        qv *= b.f
-        qv += q0
+        qv = _between(q, b.k0, b.k1, b.f)
         y = np.empty_like(qv)
         for sk, sl in b.groups:
             y[sl] = _profiles(sk).at(qv[sl], b.col[sl], b.ft[sl])
         y -= b.rest
-        d0 = d[b.k0]
-        dv = d[b.k1]
-        dv -= d0
-        dv *= b.f
-        dv += d0
-        y *= dv
+        y *= _between(d, b.k0, b.k1, b.f)
         y *= b.gain
         return y
 
