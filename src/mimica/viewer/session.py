@@ -82,7 +82,7 @@ class ViewerSession:
         `moved`: whether any node moved more than tol since the last call."""
         x = self.rest + self.sim.displacement()
         if self.layer is not None:
-            x = self.layer.apply(x, self.age)
+            x = self.layer.apply(x, self.age, inplace=True)      # x is this frame's own array
         self.moved = self._last is None or float(np.abs(x - self._last).max()) > tol
         self._last = x
         return x.astype(np.float32)
