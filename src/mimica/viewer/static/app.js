@@ -167,7 +167,7 @@ renderer.setAnimationLoop((now) => {
   orbit.update();
   if (state.playing) advance();
   applyPending();
-  const moved = moving && dirty;
+  const moved = moving;             // a new frame or camera move (each also set dirty)
   moving = false;
   if (dirty) { renderer.render(scene, camera); dirty = false; state.draws = (state.draws || 0) + 1; }
   tune(now, moved);
