@@ -381,15 +381,15 @@ def cmd_transfer_image(a):
     sp = _image_points(src, a.source_neutral, "source neutral")
     tp = _image_points(tgt, a.target, "target")
     an = ImageAnalogy(tgt, tp)
+    from .image.io import luminance
+    src_y = luminance(src)                             # the same source for every expression / frame
     out = Path(a.out)
     if a.driving:
         from .image.video import VideoWriter, frame_source
         if out.suffix.lower() != ".mp4":
             raise MimicaError(f"{out}: with --driving the output is a video; name it .mp4")
         n, fps, frames = frame_source(a.driving)
-        from .image.io import luminance
         track = Tracker(what=str(a.driving))
-        src_y = luminance(src)                         # the same source for every frame
         t1 = time.perf_counter()
         with VideoWriter(out, fps) as vw:
             for f in _progress(frames, n, "frames"):
@@ -404,7 +404,7 @@ def cmd_transfer_image(a):
     exprs = [(p, read_image(p)) for p in paths]
     pts = [_image_points(img, p, str(p)) for p, img in exprs]
     t1 = time.perf_counter()
-    results = [an.transfer(src, sp, img, xp, method=a.method) for (_, img), xp in zip(exprs, pts)]
+    results = [an.transfer(src_y, sp, img, xp, method=a.method) for (_, img), xp in zip(exprs, pts)]
     t2 = time.perf_counter()
     for (p, _), r in zip(exprs, results):
         write_image(out / f"{p.stem}.png", r.image)
