@@ -7,7 +7,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MimicaError
-from ..mesh import atomic_path
+from ..render.sheet import save_png as write_image, to_uint8  # one image writer for the project
+
+__all__ = ["read_image", "write_image", "to_uint8", "rgb_to_yuv", "yuv_to_rgb", "luminance"]
 
 # BT.601 (the YUV of Song et al. §VI.A): Y = luminance, U/V = colour differences
 _RGB2YUV = np.array([[0.299, 0.587, 0.114],
@@ -31,23 +33,6 @@ def read_image(path) -> np.ndarray:
     if arr.shape[0] < 16 or arr.shape[1] < 16:
         raise MimicaError(f"{path}: image is {arr.shape[1]}x{arr.shape[0]}; a face needs at least 16x16 pixels")
     return arr
-
-
-def to_uint8(img) -> np.ndarray:
-    img = np.asarray(img)
-    if img.dtype == np.uint8:
-        return img
-    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
-
-
-def write_image(path, img) -> Path:
-    """Write float RGB (or grey) in [0, 1], or uint8, atomically; the format follows the suffix."""
-    from PIL import Image
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        Image.fromarray(to_uint8(img)).save(tmp, format=Image.registered_extensions().get(path.suffix.lower(), "PNG"))
-    return path
 
 
 def rgb_to_yuv(rgb) -> np.ndarray:
