@@ -696,7 +696,7 @@ def build_parser():
                         "'pull' channel scales all pulls)")
     s.add_argument("--engine", choices=["shell", "sprung"], default="shell",
                    help="shell: Kim 2020 shells in modal coordinates; sprung: Viaud & Yahia 1992 force fields")
-    s.add_argument("--warp", action="store_true", help="apply modal warping rotations to the output (experimental)")
+    s.add_argument("--warp", action="store_true", help="modal warping of the output (Choi & Ko): for large bending; on a face it folds a strong smile")
     s.add_argument("--wrinkles", metavar="MASK", help="wrinkle mask of this face (`mimica wrinkle-mask`): "
                    "bulges follow the skin's compression and the age")
     s.add_argument("--age", type=float, default=50.0, help="age in years for the wrinkles (a timeline's "

@@ -234,3 +234,17 @@ def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
             vn[:, c] += np.bincount(triangles[:, k], weights=fn[:, c], minlength=len(v))
     ln = np.linalg.norm(vn, axis=-1, keepdims=True)
     return np.divide(vn, ln, out=np.zeros_like(vn), where=ln > 0)
+
+
+def plane_grid(nx: int, ny: int, length: float, width: float) -> Mesh:
+    """A flat length x width rectangle in the z = 0 plane, nx x ny cells, each cut into two
+    triangles along alternating diagonals (no preferred direction)."""
+    xs, ys = np.meshgrid(np.linspace(0, length, nx + 1), np.linspace(0, width, ny + 1), indexing="ij")
+    v = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], 1)
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    a = (i * (ny + 1) + j).ravel()
+    b, c, d = a + ny + 1, a + ny + 2, a + 1
+    odd = ((i + j) % 2).ravel().astype(bool)
+    t1 = np.where(odd[:, None], np.stack([a, b, c], 1), np.stack([a, b, d], 1))
+    t2 = np.where(odd[:, None], np.stack([a, c, d], 1), np.stack([b, c, d], 1))
+    return Mesh.from_faces(v, np.stack([t1, t2], 1).reshape(-1, 3))

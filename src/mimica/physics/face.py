@@ -182,10 +182,12 @@ class FaceSimulator:
     def __init__(self, rig, fps: float = 60.0, substeps: int = 4, spring: float = 4.0,
                  frequency: float = 4.0, damping: float = 1.6, zeta: float = 0.0005, warp: bool = False,
                  reduced: float | None = None):
-        """warp: rotate each node's modal displacement by its linearized rotation (modal
-        warping, Kim §III.B).  Off by default: for muscle-driven displacements of a
-        centimetre over a few centimetres the rotation estimated from the curl overshoots
-        and creases the skin (see docs/benchmarks.md); the linear field looks right.
+        """warp: modal warping of the output (Kim §III.B, Choi & Ko's integrated rotation).
+        Off by default: it pays off where thin parts bend through large angles (a bent
+        strip: 4x closer to the full solver than the linear modes, tests/test_simulate.py),
+        but a muscle slides the skin along itself, and the curl of that sliding is shear
+        more than rotation: at full activation the warped smile folds into itself and the
+        anatomy cosines drop (0.70-0.82 vs 0.71-0.80 linear, docs/benchmarks.md).
 
         reduced: a relative RMS tolerance (e.g. 1e-4): the muscles' summed output is then
         drawn from a few shapes per muscle (output_subspace, about 12 each instead of ~116
