@@ -97,13 +97,16 @@ class TriangleLocator:
 
 
 def barycentric_2d(p, a, b, c):
-    """Barycentric coordinates of 2D points p in triangles (a, b, c), all (m, 2)."""
+    """Barycentric coordinates of 2D points p in triangles (a, b, c), all (m, 2); NaN rows for
+    triangles of zero area."""
     v0, v1, v2 = b - a, c - a, p - a
     den = v0[:, 0] * v1[:, 1] - v1[:, 0] * v0[:, 1]
     with np.errstate(divide="ignore", invalid="ignore"):
         v = (v2[:, 0] * v1[:, 1] - v1[:, 0] * v2[:, 1]) / den
         w = (v0[:, 0] * v2[:, 1] - v2[:, 0] * v0[:, 1]) / den
-    return np.stack([1 - v - w, v, w], axis=1)
+        bc = np.stack([1 - v - w, v, w], axis=1)
+    bc[~np.isfinite(bc).all(1)] = np.nan                         # triangles seen edge-on: no coordinates
+    return bc
 
 
 class SurfaceMap:
