@@ -229,15 +229,18 @@ class ModalWarpingSolver:
         self.v[:] = 0
         self.rot[:] = np.eye(3)
 
-    def step(self, force: np.ndarray) -> np.ndarray:
-        """force: (n, 3) external nodal forces in world space; returns displacements (n, 3)."""
+    def step(self, force: np.ndarray, warp: bool = True) -> np.ndarray:
+        """force: (n, 3) external nodal forces in world space; returns displacements (n, 3).
+        warp=False: plain linear modal analysis (forces not rotated, u = Phi q)."""
         b = self.b
-        f_loc = np.einsum("kji,kj->ki", self.rot, force[b.free])        # R^T F per node
-        fq = b.phi.T @ f_loc.ravel() / self.density                     # Phi^T R^T F
+        f = force[b.free]
+        if warp:
+            f = np.einsum("kji,kj->ki", self.rot, f)                    # R^T F per node
+        fq = b.phi.T @ f.ravel() / self.density                         # Phi^T R^T F
         # implicit Euler per mode: v' = (v + h (f - lam q)) / (1 + h c + h^2 lam)
         self.v = (self.v + self.h * (fq - self.lam * self.q)) / self.denom
         self.q = self.q + self.h * self.v
-        return self.displacement()
+        return self.displacement(warp)
 
     def rows(self, nodes: np.ndarray) -> np.ndarray:
         """Mode shapes at some nodes, (k, 3, r); zero at fixed nodes."""
@@ -335,8 +338,7 @@ def against_full(energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, force
         ms = ModalWarpingSolver(basis, h, **damping)
         t = time.perf_counter()
         for _ in range(steps):
-            ms.step(force)
-            um = ms.displacement(warp)
+            um = ms.step(force, warp)
         if warp:
             out["modal_steps_per_s"] = steps / (time.perf_counter() - t)
         out[name] = float(np.linalg.norm(um - uf, axis=1).max() / scale)
