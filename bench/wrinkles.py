@@ -134,8 +134,7 @@ def animate():
     coarse = WrinkledSkin.build(rig.skin, reference_mask(), refine=False)
 
     def run(layer):
-        sim = FaceSimulator(rig, fps=60, reduced=1e-4)
-        sim._joint, sim._fm = reduced._joint, reduced._fm   # the reduced model, computed once
+        sim = reduced.reset()                                # the reduced model, computed once
         out = np.empty((layer.mesh.n_vertices if layer else rig.skin.n_vertices, 3))
         t0 = time.perf_counter()
         for i in range(n):
@@ -157,6 +156,7 @@ def animate():
         print(f"wrinkle layer alone, {name} skin ({w.mesh.n_vertices} nodes, "
               f"{len(w.layer.vertex_binding.point)} in bands): {1000 * el:.2f} ms/frame = {1 / el:.0f} frames/s")
     full = FaceSimulator(rig, fps=60)
+    reduced.reset()
     err = peak = 0.0
     rng = np.random.default_rng(5)
     for i in range(2 * n):              # the reduced model against the exact one: the clip, then random
@@ -175,10 +175,11 @@ def animate():
     for i in range(n):
         reduced.advance(acts[i])
     red_ms = 1000 * (time.perf_counter() - t0) / n
-    print(f"reduced simulator (tolerance 1e-4, built in {reduce_s:.1f}s): output from {reduced._joint[0].shape[1]} "
-          f"shapes instead of {sum(len(x.solver.q) for x in full.systems)} modes, muscles stepped in "
-          f"{reduced._fm[0].shape[0]} balanced-truncation states instead of "
-          f"{sum(len(x.state()) for x in full.systems)} ({red_ms:.3f} vs {exact_ms:.3f} ms a frame); "
+    (shapes, states), (modes, full_states) = reduced.reduced_size, full.reduced_size
+    print(f"reduced simulator (tolerance 1e-4, built in {reduce_s:.1f}s): output from {shapes} "
+          f"shapes instead of {modes} modes, muscles stepped in "
+          f"{states} balanced-truncation states instead of "
+          f"{full_states} ({red_ms:.3f} vs {exact_ms:.3f} ms a frame); "
           f"max error {100 * err:.4f}% of the largest displacement over the clip and 240 random frames")
     print(f"animated ICT face (11,248 skin nodes, 8 muscles, 4 substeps/frame): simulation alone "
           f"{best[False]:.0f} frames/s; with 21 wrinkles on the refined skin ({ws.mesh.n_vertices} nodes, "

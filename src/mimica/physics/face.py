@@ -246,6 +246,23 @@ class FaceSimulator:
             g.v = (g.v + g.h * (self.gravity_scale * self._g_fq - g.lam * g.q)) / g.denom
             g.q = g.q + g.h * g.v
 
+    def reset(self) -> "FaceSimulator":
+        """Every force system back at rest (the face undeformed), keeping what prepare() built:
+        a second clip, or a second timing run, without rebuilding the reduced model."""
+        for sm in self.systems:
+            sm.set_state(np.zeros_like(sm.state()))
+        for sv in [sv for sv, _ in self.pulls] + ([self.gravity] if self.gravity is not None else []):
+            sv.reset()
+        self._xr = None
+        return self
+
+    @property
+    def reduced_size(self) -> tuple[int, int]:
+        """(output shapes, frame-model states) of the reduced model; (modes, states) exactly."""
+        if self.reduced and not self.warp:
+            return self._joint_output()[0].shape[1], self._frame_model()[0].shape[0]
+        return sum(len(s.solver.q) for s in self.systems), sum(len(s.state()) for s in self.systems)
+
     def prepare(self) -> "FaceSimulator":
         """Build what advance() and displacement() use (the reduced output and frame model,
         or the exact frame transitions) now rather than inside the first frames."""
