@@ -380,7 +380,7 @@ def cmd_transfer_image(a):
     tgt = read_image(a.target)
     sp = _image_points(src, a.source_neutral, "source neutral")
     tp = _image_points(tgt, a.target, "target")
-    an = ImageAnalogy(tgt, tp)
+    an = ImageAnalogy(tgt, tp, mouth=not a.no_mouth)
     from .image.io import luminance
     src_y = luminance(src)                             # the same source for every expression / frame
     out = Path(a.out)
@@ -739,6 +739,8 @@ def build_parser():
     ti.add_argument("--method", choices=["vtc", "eri", "warp"], default="vtc",
                     help="vtc: vertex-tent luminance transfer (Song); eri: expression ratio images (Liu 2001); "
                          "warp: feature-point warp only")
+    ti.add_argument("--no-mouth", action="store_true", help="keep the target's own mouth when the source opens "
+                    "its mouth (default: the source's teeth and mouth interior, Song's teeth template)")
     ti.add_argument("--out", required=True, help="output folder (photos), or an .mp4 with --driving")
     ti.set_defaults(func=cmd_transfer_image)
 
