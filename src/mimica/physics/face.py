@@ -251,10 +251,16 @@ class FaceSimulator:
         a second clip, or a second timing run, without rebuilding the reduced model."""
         for sm in self.systems:
             sm.set_state(np.zeros_like(sm.state()))
-        for sv in [sv for sv, _ in self.pulls] + ([self.gravity] if self.gravity is not None else []):
+        for sv, _ in self.pulls:
             sv.reset()
+        if self.gravity is not None:                   # at rest even while switched off
+            self.gravity.reset()
         self._xr = None
         return self
+
+    def _other_solvers(self) -> list:
+        """The force systems besides the muscles that are on: user pulls, gravity when set."""
+        return [sv for sv, _ in self.pulls] + ([self.gravity] if self._g_fq is not None else [])
 
     @property
     def reduced_size(self) -> tuple[int, int]:
@@ -362,18 +368,12 @@ class FaceSimulator:
             else:
                 z = np.concatenate([p @ sm.solver.q for p, sm in zip(proj, self.systems)]).astype(np.float32)
             u = (U @ z).astype(np.float64).reshape(-1, 3)
-            solvers = [sv for sv, _ in self.pulls]
-            if self._g_fq is not None:
-                solvers.append(self.gravity)
-            for sv in solvers:
+            for sv in self._other_solvers():
                 sv.add_displacement(u, False)
             return u
         self._sync()
         u = np.zeros_like(self.rig.skin.vertices)
-        solvers = [s.solver for s in self.systems] + [sv for sv, _ in self.pulls]
-        if self._g_fq is not None:
-            solvers.append(self.gravity)
-        for sv in solvers:
+        for sv in [s.solver for s in self.systems] + self._other_solvers():
             sv.add_displacement(u, self.warp)
         return u
 
