@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageDraw
+from PIL import Image
 from scipy.spatial import ConvexHull
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,8 +42,9 @@ from mimica.image.ictphotos import LIGHT_LEFT, LIGHT_RIGHT, ICTPhotos  # noqa: E
 from mimica.image.landmarks2d import Tracker, detect  # noqa: E402
 from mimica.image.landmarks3d import detect_mesh  # noqa: E402
 from mimica.image.video import VideoWriter, frame_source  # noqa: E402
-from mimica.image.warp import align_to  # noqa: E402
+from mimica.image.warp import align_to, polygon_mask  # noqa: E402
 from mimica.render import contact_sheet, save_png  # noqa: E402
+from mimica.render.sheet import to_uint8  # noqa: E402
 
 FIG = ROOT / "docs" / "figures"
 LOCAL_FIG = ROOT / "out" / "figures"          # ignored by git
@@ -51,14 +52,10 @@ YALE_EXPR = ["happy", "surprised", "sad", "sleepy", "wink"]
 
 
 def hull_mask(points, shape):
-    im = Image.new("L", (shape[1], shape[0]), 0)
-    h = ConvexHull(points)
-    ImageDraw.Draw(im).polygon([tuple(p) for p in points[h.vertices]], fill=1)
-    return np.asarray(im) > 0
-
-
-def u8(img):
-    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+    inside, (x0, y0, x1, y1) = polygon_mask(points[ConvexHull(points).vertices], shape)
+    m = np.zeros(shape[:2], bool)
+    m[y0:y1, x0:x1] = inside
+    return m
 
 
 class Yale:
@@ -148,7 +145,7 @@ def ict_pairs(quick):
           + f"; ours - ERI: mean {np.mean(gains):+.2f} dB, min {np.min(gains):+.2f} dB over {len(gains)} pairs")
     FIG.mkdir(parents=True, exist_ok=True)
     save_png(FIG / "transfer_image_ict.png", contact_sheet(
-        [u8(c) for row in rows for c in row], columns=6,
+        [to_uint8(c) for row in rows for c in row], columns=6,
         labels=["source", "source expr.", "target (other light)", "ERI", "ours (VTC)", "truth"] * len(rows),
         title="ICT-FaceKit renders: expression onto another identity under another light"))
     return float(np.mean(gains))
@@ -187,7 +184,7 @@ def yale_pairs(yale, quick):
     if rows:
         LOCAL_FIG.mkdir(parents=True, exist_ok=True)
         save_png(LOCAL_FIG / "transfer_image_yale.png", contact_sheet(
-            [u8(c) for row in rows for c in row], columns=6,
+            [to_uint8(c) for row in rows for c in row], columns=6,
             labels=["A neutral", "A expression", "B neutral", "ERI", "ours (VTC)", "B's own photo"] * len(rows),
             title="Yale faces: A's expression onto B"))
 
@@ -227,8 +224,8 @@ def video(quick):
     print(f"video: {count} frames 640x480 (decode, track, transfer onto the 512x512 astronaut, encode) in "
           f"{dt:.2f}s = {vfps:.1f} frames/s (per-target setup and first detections included; model file read before)")
     x0, y0, x1, y1 = an.box
-    crop = lambda im: np.asarray(Image.fromarray(u8(im[y0:y1, x0:x1])).resize((300, 300)))      # noqa: E731
-    dr = lambda im: np.asarray(Image.fromarray(u8(im[60:420, 140:500])).resize((300, 300)))     # noqa: E731
+    crop = lambda im: np.asarray(Image.fromarray(to_uint8(im[y0:y1, x0:x1])).resize((300, 300)))      # noqa: E731
+    dr = lambda im: np.asarray(Image.fromarray(to_uint8(im[60:420, 140:500])).resize((300, 300)))     # noqa: E731
     tiles = [dr(src), crop(tgt), dr(frames[0]), crop(frames[1]), dr(frames[2]), crop(frames[3])]
     save_png(FIG / "transfer_image_astronaut.png", contact_sheet(
         tiles, columns=6, labels=["driving: neutral", "astronaut", "driving: smile", "astronaut",

@@ -67,14 +67,17 @@ def test_an_opening_mouth_gets_the_source_mouth_interior(photos):
     """Song §VII's teeth template: a closed target mouth opened by the source's surprise is
     filled with the source's mouth interior, much closer to the rendered truth there than the
     stretched lips (measured 20.2 vs 17.7 dB); a closed mouth (happiness here) is left alone."""
-    from mimica.image.analogy import MOUTH, _polygon_mask
+    from mimica.image.analogy import MOUTH
+    from mimica.image.warp import polygon_mask
     s, sp = photos.photo("identity001")
     t, tp = photos.photo("identity004")
     on, off = ImageAnalogy(t, tp), ImageAnalogy(t, tp, mouth=False)
     x, xp = photos.photo("identity001", "surprise")
     truth, _ = photos.photo("identity004", "surprise")
     r1, r0 = on.transfer(s, sp, x, xp), off.transfer(s, sp, x, xp)
-    m = _polygon_mask(r1.points[MOUTH], t.shape[:2])
+    inside, (x0, y0, x1, y1) = polygon_mask(r1.points[MOUTH], t.shape)
+    m = np.zeros(t.shape[:2], bool)
+    m[y0:y1, x0:x1] = inside
     assert m.sum() > 300
     assert psnr(r1.image, truth, m) > psnr(r0.image, truth, m) + 1.5
     x, xp = photos.photo("identity001", "happiness")

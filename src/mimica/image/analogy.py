@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import MimicaError
 from .io import luminance, rgb_to_yuv, yuv_to_rgb
 from .warp import (FOREHEAD_BROW, Bilinear, FOREHEAD_FOLLOW, STABLE, PiecewiseAffine, Similarity2D, border_points,
-                   forehead_points, sample, triangulate)
+                   forehead_points, polygon_mask, sample, triangulate)
 
 
 def psnr(a, b, mask=None) -> float:
@@ -263,69 +263,51 @@ class ImageAnalogy:
         x0, y0, x1, y1 = self.box
         out = self.target.copy()
         out[y0:y1, x0:x1] = np.clip(yuv_to_rgb(look(yuv).reshape(self.h, self.w, 3)), 0, 1)
-        if self.mouth and self._mouth_closed:
-            fill_mouth(out, pts, expressive, x_pts, self._target_lightness / max(_lightness(source, s_pts), 1e-3))
+        if self.mouth and self._mouth_closed and mouth_open(pts) and mouth_open(x_pts):
+            gain = self._target_lightness / max(_lightness(source, s_pts), 1e-3)
+            fill_mouth(out, pts, expressive, x_pts, gain)
         return Result(out, pts, self, look)
 
     @cached_property
     def _mouth_closed(self) -> bool:
         """The target shows no mouth interior of its own (else its own teeth are warped open)."""
-        eye = np.linalg.norm(self.points[36:42].mean(0) - self.points[42:48].mean(0))
-        return _area(self.points[MOUTH]) < 0.01 * eye * eye
+        return not mouth_open(self.points)
 
     @cached_property
     def _target_lightness(self) -> float:
         return _lightness(self.target, self.points)
 
 
-def _lightness(img, pts) -> float:
-    """Mean luminance of the nose (points 27, 31, 33, 35): skin, no hair, lit like the face."""
-    poly = np.asarray(pts, float)[[27, 35, 33, 31]]
-    h, w = np.shape(img)[:2]
-    x0, y0 = np.clip(np.floor(poly.min(0)).astype(int), 0, [w, h])
-    x1, y1 = np.clip(np.ceil(poly.max(0)).astype(int) + 1, 0, [w, h])
-    if x1 - x0 < 1 or y1 - y0 < 1:
-        return 1.0
-    m = _polygon_mask(poly, (h, w), (x0, y0, x1, y1))
-    return float(luminance(np.asarray(img)[y0:y1, x0:x1])[m].mean()) if m.any() else 1.0
-
-
 MOUTH = np.arange(60, 68)                  # the inner lip outline
 
 
-def _polygon_mask(poly, shape, box=None) -> np.ndarray:
-    """Pixels (row, col) inside a polygon, over `box` = (x0, y0, x1, y1) or the whole image."""
-    from PIL import Image, ImageDraw
-    x0, y0, x1, y1 = box or (0, 0, shape[1], shape[0])
-    im = Image.new("L", (x1 - x0, y1 - y0), 0)
-    ImageDraw.Draw(im).polygon([(float(x - x0), float(y - y0)) for x, y in poly], fill=1)
-    return np.asarray(im) > 0
+def mouth_open(pts) -> bool:
+    """The inner lip outline encloses more than 1 % of the squared eye distance."""
+    pts = np.asarray(pts, float)
+    x, y = pts[MOUTH, 0], pts[MOUTH, 1]
+    area = 0.5 * abs(float(x @ np.roll(y, 1) - y @ np.roll(x, 1)))
+    eye = np.linalg.norm(pts[36:42].mean(0) - pts[42:48].mean(0))
+    return area > 0.01 * eye * eye
 
 
-def _area(poly) -> float:
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * abs(float(x @ np.roll(y, 1) - y @ np.roll(x, 1)))
+def _lightness(img, pts) -> float:
+    """Mean luminance of the nose (points 27, 31, 33, 35): skin, no hair, lit like the face."""
+    m, (x0, y0, x1, y1) = polygon_mask(np.asarray(pts, float)[[27, 35, 33, 31]], np.shape(img)[:2])
+    return float(luminance(np.asarray(img)[y0:y1, x0:x1])[m].mean()) if m.any() else 1.0
 
 
 def fill_mouth(out, pts, expressive, x_pts, gain: float = 1.0) -> None:
     """Song et al. §VII's remedy for an opening mouth, "a 2D teeth template": inside the
-    result's inner lip outline, the expressive source's own mouth interior (teeth, tongue,
-    the dark of the mouth), mapped by the affine fit between the two inner lip outlines and
-    scaled by `gain` (the target's lightness over the source's); feathered over 1.5 pixels.
-    A closed mouth (outline area under 1 % of the squared eye distance) is left alone, and
-    ImageAnalogy only calls this for a target whose own mouth is closed."""
+    result's inner lip outline (pts), the expressive source's own mouth interior (teeth,
+    tongue, the dark of the mouth), mapped by the affine fit between the two inner lip
+    outlines and scaled by `gain` (the target's lightness over the source's); feathered over
+    1.5 pixels.  For open outlines (mouth_open); ImageAnalogy calls it only for a target
+    whose own mouth is closed."""
     from scipy.ndimage import distance_transform_edt
-    pts, x_pts = np.asarray(pts, float), np.asarray(x_pts, float)
-    poly, src = pts[MOUTH], x_pts[MOUTH]
-    eye = np.linalg.norm(pts[36:42].mean(0) - pts[42:48].mean(0))
-    if _area(poly) < 0.01 * eye * eye or _area(src) < 0.01 * eye * eye:
+    poly, src = np.asarray(pts, float)[MOUTH], np.asarray(x_pts, float)[MOUTH]
+    inside, (x0, y0, x1, y1) = polygon_mask(poly, out.shape[:2], pad=2)
+    if not inside.any():
         return
-    h, w = out.shape[:2]
-    x0, y0 = np.maximum(np.floor(poly.min(0)).astype(int) - 2, 0)
-    x1, y1 = np.minimum(np.ceil(poly.max(0)).astype(int) + 3, [w, h])
-    if x1 - x0 < 2 or y1 - y0 < 2:
-        return
-    inside = _polygon_mask(poly, (h, w), (x0, y0, x1, y1))
     alpha = np.clip(distance_transform_edt(inside) / 1.5, 0, 1)[..., None].astype(np.float32)
     a = np.c_[np.r_[poly, poly.mean(0, keepdims=True)], np.ones(len(poly) + 1)]
     m, *_ = np.linalg.lstsq(a, np.r_[src, src.mean(0, keepdims=True)], rcond=None)   # [x y 1] @ m

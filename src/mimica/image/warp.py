@@ -50,6 +50,19 @@ def align_to(img, pts, ref_pts) -> np.ndarray:
     return sample(img, q[:, 0].reshape(h, w), q[:, 1].reshape(h, w))
 
 
+def polygon_mask(poly, shape, pad: int = 0) -> tuple[np.ndarray, tuple]:
+    """The pixels inside a polygon (x, y points) over its bounding box grown by `pad` and
+    clipped to an image of `shape` (h, w): (mask (y1 - y0, x1 - x0) bool, (x0, y0, x1, y1))."""
+    from PIL import Image, ImageDraw
+    poly = np.asarray(poly, float)
+    h, w = shape[:2]
+    x0, y0 = np.clip(np.floor(poly.min(0)).astype(int) - pad, 0, [w, h])
+    x1, y1 = np.clip(np.ceil(poly.max(0)).astype(int) + 1 + pad, 0, [w, h])
+    im = Image.new("L", (max(int(x1 - x0), 0), max(int(y1 - y0), 0)), 0)
+    ImageDraw.Draw(im).polygon([(float(x - x0), float(y - y0)) for x, y in poly], fill=1)
+    return np.asarray(im) > 0, (int(x0), int(y0), int(x1), int(y1))
+
+
 def forehead_points(lm) -> np.ndarray:
     """Two rows of points above the brows (the 68-point markup stops at the brows), (12, 2):
     brow points 17, 19, 21, 22, 24, 26 moved up along the face's vertical by 0.4 and 0.8 of
