@@ -184,7 +184,7 @@ class FaceSimulator:
                  reduced: float | None = None):
         """warp: modal warping of the output (Kim §III.B, Choi & Ko's integrated rotation).
         Off by default: it pays off where thin parts bend through large angles (a bent
-        strip: 4x closer to the full solver than the linear modes, tests/test_simulate.py),
+        strip: 3-4x closer to the full solver than plain linear modes, tests/test_simulate.py),
         but a muscle slides the skin along itself, and the curl of that sliding is shear
         more than rotation: at full activation the warped smile folds into itself and the
         anatomy cosines drop (0.70-0.82 vs 0.71-0.80 linear, docs/benchmarks.md).

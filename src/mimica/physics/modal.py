@@ -11,6 +11,7 @@ Choi & Ko's rotation integrated along the path of the linearized rotation field 
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -326,7 +327,6 @@ def against_full(energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, force
     """Run the full Newton solver and the modal solver side by side under a constant force:
     {'full': u, 'linear': dev, 'warped': dev, 'full_steps_per_s', 'modal_steps_per_s'}, dev the
     largest nodal distance from the full solver's displacement over its largest displacement."""
-    import time
     full = FullSolver(energy, mass, fixed, h, **damping)
     t = time.perf_counter()
     for _ in range(steps):
