@@ -175,8 +175,14 @@ def cmd_simulate(a):
     if a.engine == "sprung":
         from .physics.sprung import SprungFace
         sim = SprungFace(rig, fps=a.fps)
-        if a.gravity or a.pull:
-            raise MimicaError("--gravity and --pull work with --engine shell only")
+        if a.gravity or a.pull or a.solver == "full":
+            raise MimicaError("--gravity, --pull and --solver full work with --engine shell only")
+    elif a.solver == "full":
+        from .physics.fullface import FullFaceSimulator
+        if a.gravity or a.pull or a.warp or {"gravity", "pull"} & set(tl.channels):
+            raise MimicaError("--solver full simulates the muscles only; --gravity, --pull and --warp "
+                              "work with the modal solver")
+        sim = FullFaceSimulator(rig, fps=a.fps)
     else:
         sim = FaceSimulator(rig, fps=a.fps, warp=a.warp)
         if a.gravity or "gravity" in tl.channels:
@@ -213,7 +219,8 @@ def cmd_simulate(a):
     frame = shared_frame([frames[i] for i in pick])
     tiles = [render_mesh(skin, frames[i], size=(320, 320), frame=frame) for i in pick]
     save_png(out / "strip.png", contact_sheet(tiles, [f"t = {i / a.fps:.2f}s" for i in pick],
-                                              title=f"{title} ({a.engine})"))
+                                              title=f"{title} ({a.engine}"
+                                              + (", full solver)" if a.solver == "full" else ")")))
     steps = (len(frames) - 1) * sim.substeps
     _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {steps} steps in {el:.2f}s"
          + wrinkle_note)
@@ -696,6 +703,9 @@ def build_parser():
                         "'pull' channel scales all pulls)")
     s.add_argument("--engine", choices=["shell", "sprung"], default="shell",
                    help="shell: Kim 2020 shells in modal coordinates; sprung: Viaud & Yahia 1992 force fields")
+    s.add_argument("--solver", choices=["modal", "full"], default="modal",
+                   help="modal: Kim's modal systems, one per force (real time); full: the whole skin as one "
+                        "nonlinear shell, implicit Euler + Newton (reference quality, about a second a frame)")
     s.add_argument("--warp", action="store_true", help="modal warping of the output (Choi & Ko): for large bending; on a face it folds a strong smile")
     s.add_argument("--wrinkles", metavar="MASK", help="wrinkle mask of this face (`mimica wrinkle-mask`): "
                    "bulges follow the skin's compression and the age")

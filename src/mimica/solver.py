@@ -39,6 +39,18 @@ class SPDSolver:
             self._f = spla.splu(m, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                                 options={"SymmetricMode": True})
 
+    def refactor(self, m: sp.spmatrix) -> "SPDSolver":
+        """Factor a new matrix of the same sparsity pattern, reusing CHOLMOD's symbolic
+        analysis (the fill-reducing ordering); SuperLU starts over."""
+        m = sp.csc_matrix(m)
+        with self._lock:
+            if self.kind == "cholmod":
+                self._f.cholesky_inplace(m)
+            else:
+                self._f = spla.splu(m, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                                    options={"SymmetricMode": True})
+        return self
+
     def solve(self, b: np.ndarray) -> np.ndarray:
         b = np.asarray(b, dtype=np.float64)
         # one solve at a time per factor: CHOLMOD keeps workspace in its common object, so

@@ -287,38 +287,101 @@ class FullSolver:
     """Reference: implicit Euler on the full nonlinear shell, Newton at every step.
 
     M (v' - v) / h = F - grad E(x + h v') - C v',  C = xi M + zeta K_rest.
+    springs: optional per-node stiffness of linear springs to the rest position (the face's
+    tethers and subcutaneous springs), added to E.
     """
 
     def __init__(self, energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, h: float,
-                 xi: float = 2.0, zeta: float = 0.01, newton_iters: int = 8, tol: float = 1e-9):
+                 xi: float = 2.0, zeta: float = 0.01, newton_iters: int = 8, tol: float = 1e-9,
+                 springs: np.ndarray | None = None, refactor: int = 0):
+        """refactor: 0 for Newton proper (the Jacobian at every iterate); k > 0 for a chord
+        method: the Jacobian factored (CHOLMOD when it is SPD) and kept for k steps, or until a
+        step fails to converge with it — the same fixed point, for a fraction of the cost."""
         self.E, self.h = energy, h
         self.fixed = np.asarray(fixed, bool)
         self.free = np.nonzero(~self.fixed)[0]
         self.dof = (3 * self.free[:, None] + np.arange(3)).ravel()
         self.m = np.repeat(mass, 3)
-        self.K0 = energy.hessian(energy.rest)
+        self.ks = np.zeros(3 * energy.n) if springs is None else np.repeat(np.asarray(springs, float), 3)
+        self.K0 = (energy.hessian(energy.rest) + sp.diags(self.ks)).tocsr()
         self.C = (xi * sp.diags(self.m) + zeta * self.K0).tocsr()       # Rayleigh damping
         self.iters, self.tol = newton_iters, tol
+        self.refactor, self._fac, self._age = refactor, None, 0
         self.u = np.zeros((energy.n, 3))
         self.v = np.zeros((energy.n, 3))
 
+    def _factor(self, x):
+        """A solver for the step's Jacobian at x (free dofs)."""
+        d, h = self.dof, self.h
+        J = (sp.diags(self.m / h + h * self.ks) + self.C + h * self.E.hessian(x.reshape(-1, 3)))[d][:, d].tocsc()
+        if not self.refactor:
+            return lambda r: spla.spsolve(J, r)
+        try:
+            return SPDSolver(J).solve
+        except Exception:                       # not positive definite here: a general LU
+            return spla.splu(J).solve
+
+    def advance(self, force: np.ndarray, depth: int = 4) -> np.ndarray:
+        """step(), halving the time step (down to 1/2^depth) where Newton finds no descent."""
+        try:
+            return self.step(force)
+        except MimicaError:
+            if depth == 0:
+                raise
+        self.h, self._fac = self.h / 2, None
+        try:
+            self.advance(force, depth - 1)
+            self.advance(force, depth - 1)
+        finally:
+            self.h, self._fac = self.h * 2, None
+        return self.u.copy()
+
+    def _residual(self, v, x0, f):
+        x = x0 + self.h * v
+        g = self.E.gradient(x.reshape(-1, 3)).ravel() + self.ks * (x - self.E.rest.ravel())
+        return self.m * (v - self.v.ravel()) / self.h - f + g + self.C @ v, x
+
     def step(self, force: np.ndarray) -> np.ndarray:
-        h, d, C = self.h, self.dof, self.C
-        x0 = self.E.rest + self.u
+        d = self.dof
+        x0 = (self.E.rest + self.u).ravel()
         v = self.v.ravel().copy()
         f = force.ravel()
+        if self.refactor and self._age >= self.refactor:
+            self._fac = None
+        tol = self.tol * max(1.0, np.abs(f).max())
+        res, x = self._residual(v, x0, f)
+        norm = norm0 = np.linalg.norm(res[d])
+        converged = False
         for _ in range(self.iters):
-            x = x0.ravel() + h * v
-            g = self.E.gradient(x.reshape(-1, 3)).ravel()
-            res = self.m * (v - self.v.ravel()) / h - f + g + C @ v
-            if np.abs(res[d]).max() < self.tol * max(1.0, np.abs(f).max()):
+            if np.abs(res[d]).max() < tol:
+                converged = True
                 break
-            J = sp.diags(self.m / h) + C + h * self.E.hessian(x.reshape(-1, 3))
-            dv = spla.spsolve(J[d][:, d].tocsc(), -res[d])
-            v[d] += dv
+            if self._fac is None or not self.refactor:
+                self._fac, self._age = self._factor(x), 0
+            dv = self._fac(-res[d])
+            # backtracking: a full Newton step can overshoot into inverted triangles
+            for alpha in (1.0, 0.5, 0.25, 0.125, 0.0625):
+                vt = v.copy()
+                vt[d] += alpha * dv
+                rt, xt = self._residual(vt, x0, f)
+                nt = np.linalg.norm(rt[d])
+                if np.isfinite(nt) and nt < norm:
+                    break
+            else:
+                if norm < 1e-5 * norm0:         # at the precision the residual can reach
+                    converged = True
+                    break
+                if not self.refactor or self._age == 0:
+                    raise MimicaError("full solver: Newton found no descent (try a higher --fps)")
+                self._fac = None                # a stale Jacobian: refactor and try again
+                continue
+            v, res, x, norm = vt, rt, xt, nt
+        self._age += 1
+        if not converged:
+            self._fac = None                    # the next step starts from a fresh Jacobian
         self.v = v.reshape(-1, 3)
         self.v[self.fixed] = 0
-        self.u = self.u + h * self.v
+        self.u = self.u + self.h * self.v
         return self.u.copy()
 
 

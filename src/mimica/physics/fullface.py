@@ -1,0 +1,94 @@
+"""The face without modes: `mimica simulate --solver full` (issue 3, the reference solver).
+
+The skin is one nonlinear shell (Kim eq. 4, the rig's stiffnesses), held where no muscle's
+region of interest reaches (eq. 19) and tethered to its rest as in the modal rig; every
+muscle's stretch mode (eqs. 11-13, critically damped to its activation) pulls the skin
+through its springs (eqs. 14-16, k (u_m - u_s)), all muscles at once on the same skin rather
+than one system per force (eqs. 20-21).  Each step is implicit Euler with Newton on the full
+energy (FullSolver): slower by orders of magnitude, free of the modal truncation, the
+linearization at rest and the decomposition, the figure the modal face is checked against.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import MimicaError
+from .face import skin_density
+from .modal import FullSolver
+from .shell import ShellEnergy, lumped_mass
+
+
+class FullFaceSimulator:
+    """Step a rig's muscles on the full nonlinear skin; the interface of FaceSimulator.run."""
+
+    def __init__(self, rig, fps: float = 60.0, substeps: int = 8, spring: float = 4.0, frequency: float = 4.0,
+                 damping: float = 1.6, zeta: float = 0.0005, newton_iters: int = 8, tol: float = 1e-6,
+                 refactor: int = 10):
+        if "mean_edge" not in rig.params:
+            raise MimicaError("rig: built by an older mimica; rebuild it with `mimica rig`")
+        self.rig, self.fps, self.substeps = rig, fps, substeps
+        # Newton converges in a few iterations at 480 steps/s on the ICT face at full
+        # activation; at 60 it does not converge at all (the mouth corners' small triangles)
+        self.h = h = 1.0 / (fps * substeps)
+        p, skin = rig.params, rig.skin
+        n = skin.n_vertices
+        free = np.zeros(n, bool)
+        for m in rig.muscles:
+            free |= m.roi
+        # the shell on the free nodes and two rings around them: every energy term that
+        # touches a free node, with its held neighbours as boundary
+        t = skin.triangles
+        near = free.copy()
+        for _ in range(2):
+            near[t[near[t].any(1)].ravel()] = True
+        tris = t[near[t].all(1)]
+        self.nodes = np.unique(tris)
+        remap = np.full(n, -1)
+        remap[self.nodes] = np.arange(len(self.nodes))
+        energy = ShellEnergy(skin.vertices[self.nodes], remap[tris], p["k_area"], p["k_length"], p["k_bend"])
+        mass = lumped_mass(skin)
+        rho = skin_density(rig, frequency)
+        k_tether = p.get("tether", 0.0) * 2 * p["k_length"] / p["mean_edge"] * mass / mass.mean()
+        self.k = spring * 2.0 * p["k_length"] / p["mean_edge"]
+        springs = k_tether.copy()
+        for m in rig.muscles:
+            np.add.at(springs, m.attach, self.k)
+        self.solver = FullSolver(energy, rho * mass[self.nodes], ~free[self.nodes], h,
+                                 xi=damping * 2 * np.pi * frequency, zeta=zeta, newton_iters=newton_iters,
+                                 tol=tol, springs=springs[self.nodes], refactor=refactor)
+        self.attach = [remap[m.attach] for m in rig.muscles]
+        self.stretch = [m.stretch for m in rig.muscles]
+        self.omega = np.array([m.omega for m in rig.muscles])
+        self.q = np.zeros(len(rig.muscles))
+        self.v = np.zeros(len(rig.muscles))
+        self.names = [m.name for m in rig.muscles]
+
+    def step(self, activations) -> None:
+        a = np.asarray(activations, float)[:len(self.q)]
+        h, w = self.h, self.omega
+        # each muscle's stretch mode follows its activation, critically damped (Kim eq. 13)
+        self.v = (self.v + h * w * w * (a - self.q)) / (1 + 2 * h * w + h * h * w * w)
+        self.q = self.q + h * self.v
+        f = np.zeros((len(self.nodes), 3))
+        for q, at, st in zip(self.q, self.attach, self.stretch):
+            np.add.at(f, at, self.k * q * st)              # k u_m; the -k u_s part is in the springs
+        self.solver.advance(f)
+
+    def displacement(self) -> np.ndarray:
+        u = np.zeros_like(self.rig.skin.vertices)
+        u[self.nodes] = self.solver.u
+        return u
+
+    def run(self, activation_at, duration: float, progress=None) -> np.ndarray:
+        """Frames (F, n, 3) of skin positions; activation_at(t) -> (n_muscles,)."""
+        n_frames = int(round(duration * self.fps)) + 1
+        frames = np.empty((n_frames, self.rig.skin.n_vertices, 3))
+        frames[0] = self.rig.skin.vertices + self.displacement()
+        for f in range(1, n_frames):
+            for k in range(self.substeps):
+                self.step(activation_at(((f - 1) * self.substeps + k + 1) * self.h))
+            frames[f] = self.rig.skin.vertices + self.displacement()
+            if progress:
+                progress(f, n_frames)
+        return frames
