@@ -222,6 +222,10 @@ def cmd_simulate(a):
                                               title=f"{title} ({a.engine}"
                                               + (", full solver)" if a.solver == "full" else ")")))
     steps = (len(frames) - 1) * sim.substeps
+    if a.solver == "full":
+        st = sim.solver.stats
+        wrinkle_note += (f"; Newton: {st['iterations'] / max(st['steps'], 1):.1f} iterations a step"
+                         + (f", {st['unconverged']} steps stopped at the iteration cap" if st["unconverged"] else ""))
     _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {steps} steps in {el:.2f}s"
          + wrinkle_note)
     return 0
@@ -705,7 +709,8 @@ def build_parser():
                    help="shell: Kim 2020 shells in modal coordinates; sprung: Viaud & Yahia 1992 force fields")
     s.add_argument("--solver", choices=["modal", "full"], default="modal",
                    help="modal: Kim's modal systems, one per force (real time); full: the whole skin as one "
-                        "nonlinear shell, implicit Euler + Newton (reference quality, about a second a frame)")
+                        "nonlinear shell, implicit Euler + projected Newton (folds where the skin "
+                        "compresses; 0.3-3 s a frame)")
     s.add_argument("--warp", action="store_true", help="modal warping of the output (Choi & Ko): for large bending; on a face it folds a strong smile")
     s.add_argument("--wrinkles", metavar="MASK", help="wrinkle mask of this face (`mimica wrinkle-mask`): "
                    "bulges follow the skin's compression and the age")

@@ -5,13 +5,16 @@ region of interest reaches (eq. 19) and tethered to its rest as in the modal rig
 muscle's stretch mode (eqs. 11-13, critically damped to its activation) pulls the skin
 through its springs (eqs. 14-16, k (u_m - u_s)), all muscles at once on the same skin rather
 than one system per force (eqs. 20-21).  Each step is implicit Euler with Newton on the full
-energy (FullSolver): slower by orders of magnitude, free of the modal truncation, the
-linearization at rest and the decomposition, the figure the modal face is checked against.
+energy (FullSolver: a PSD Hessian and a line search on implicit Euler's potential, so a
+full smile that folds the cheek converges instead of diverging): a few seconds a frame on the
+2-core machine, free of the modal truncation, the linearization at rest and the
+decomposition, the figure the modal face is checked against.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..errors import MimicaError
 from .face import skin_density
@@ -22,14 +25,16 @@ from .shell import ShellEnergy, lumped_mass
 class FullFaceSimulator:
     """Step a rig's muscles on the full nonlinear skin; the interface of FaceSimulator.run."""
 
-    def __init__(self, rig, fps: float = 60.0, substeps: int = 8, spring: float = 4.0, frequency: float = 4.0,
-                 damping: float = 1.6, zeta: float = 0.0005, newton_iters: int = 8, tol: float = 1e-6,
-                 refactor: int = 10):
+    def __init__(self, rig, fps: float = 60.0, substeps: int = 1, spring: float = 4.0, frequency: float = 4.0,
+                 damping: float = 1.6, zeta: float = 0.0005, newton_iters: int = 30, tol: float = 1e-6,
+                 xtol: float = 1e-2, footprint: float = 5.0, engage: float = 0.1):
+        """The physical parameters are FaceSimulator's.  Implicit Euler is stable at any step,
+        so one step a frame (substeps=1); xtol, relative to the rig's mean edge, ends Newton
+        once no node moves further (at 1e-2 the ICT face under a full smile took 2-10
+        iterations a step, and a smaller step did not take fewer)."""
         if "mean_edge" not in rig.params:
             raise MimicaError("rig: built by an older mimica; rebuild it with `mimica rig`")
-        self.rig, self.fps, self.substeps = rig, fps, substeps
-        # Newton converges in a few iterations at 480 steps/s on the ICT face at full
-        # activation; at 60 it does not converge at all (the mouth corners' small triangles)
+        self.rig, self.fps, self.substeps, self.engage = rig, fps, substeps, engage
         self.h = h = 1.0 / (fps * substeps)
         p, skin = rig.params, rig.skin
         n = skin.n_vertices
@@ -52,12 +57,31 @@ class FullFaceSimulator:
         k_tether = p.get("tether", 0.0) * 2 * p["k_length"] / p["mean_edge"] * mass / mass.mean()
         self.k = spring * 2.0 * p["k_length"] / p["mean_edge"]
         springs = k_tether.copy()
+        # each spring's insertion spread over the skin within `footprint` mean edges of its node
+        # (weights (1 - (d/R)^2)^2, summing to 1): the same total pull, without the tent that a
+        # stiff spring pulls up on a single node of the full-resolution skin
+        from scipy.spatial import cKDTree
+        tree = cKDTree(skin.vertices[near])
+        near_ids = np.nonzero(near)[0]
+        R = max(footprint, 1e-9) * p["mean_edge"]
+        self.spread = []
         for m in rig.muscles:
-            np.add.at(springs, m.attach, self.k)
+            rows, cols, vals = [], [], []
+            for i, a in enumerate(m.attach):
+                js = np.asarray(tree.query_ball_point(skin.vertices[a], R), int)
+                js = near_ids[js] if len(js) else np.array([a])
+                w = (1 - np.minimum(np.linalg.norm(skin.vertices[js] - skin.vertices[a], axis=1) / R, 1) ** 2) ** 2
+                w = w / w.sum() if w.sum() > 0 else np.ones(len(js)) / len(js)
+                rows.append(js); cols.append(np.full(len(js), i)); vals.append(w)
+            W = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                              shape=(n, len(m.attach)))
+            self.spread.append(W[self.nodes])
+        self.tether = k_tether[self.nodes]
+        self.spring_sum = [self.k * np.asarray(W.sum(axis=1)).ravel() for W in self.spread]
+        springs = springs[self.nodes] + sum(self.spring_sum)
         self.solver = FullSolver(energy, rho * mass[self.nodes], ~free[self.nodes], h,
                                  xi=damping * 2 * np.pi * frequency, zeta=zeta, newton_iters=newton_iters,
-                                 tol=tol, springs=springs[self.nodes], refactor=refactor)
-        self.attach = [remap[m.attach] for m in rig.muscles]
+                                 tol=tol, xtol=xtol * p["mean_edge"], springs=springs)
         self.stretch = [m.stretch for m in rig.muscles]
         self.omega = np.array([m.omega for m in rig.muscles])
         self.q = np.zeros(len(rig.muscles))
@@ -70,10 +94,16 @@ class FullFaceSimulator:
         # each muscle's stretch mode follows its activation, critically damped (Kim eq. 13)
         self.v = (self.v + h * w * w * (a - self.q)) / (1 + 2 * h * w + h * h * w * w)
         self.q = self.q + h * self.v
+        # a muscle's springs engage as it contracts or relaxes (stiffness ramps in with |q| up
+        # to `engage`): a muscle at rest exerts nothing and does not hold the skin, as in the
+        # modal face, where each muscle's springs are in its own system only (eqs. 20-21)
+        e = np.minimum(np.abs(self.q) / self.engage, 1.0)
         f = np.zeros((len(self.nodes), 3))
-        for q, at, st in zip(self.q, self.attach, self.stretch):
-            np.add.at(f, at, self.k * q * st)              # k u_m; the -k u_s part is in the springs
-        self.solver.advance(f)
+        for ei, q, W, st in zip(e, self.q, self.spread, self.stretch):
+            if ei > 0:
+                f += W @ (ei * self.k * q * st)            # k u_m; the -k u_s part is in the springs
+        self.solver.set_springs(self.tether + sum(ei * s for ei, s in zip(e, self.spring_sum)))
+        self.solver.step(f)
 
     def displacement(self) -> np.ndarray:
         u = np.zeros_like(self.rig.skin.vertices)

@@ -17,7 +17,6 @@ from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ..errors import MimicaError
 from ..solver import SPDSolver
@@ -284,19 +283,25 @@ class ModalWarpingSolver:
 
 
 class FullSolver:
-    """Reference: implicit Euler on the full nonlinear shell, Newton at every step.
+    """Reference: implicit Euler on the full nonlinear shell, projected Newton at every step.
 
     M (v' - v) / h = F - grad E(x + h v') - C v',  C = xi M + zeta K_rest.
+    The step is the minimum over v' of implicit Euler's incremental potential
+        Phi(v') = 1/2 |v' - v|_M^2 - h F.v' + E(x + h v') + h/2 v'^T C v'
+    (its gradient is h times the residual above), found by Newton on a positive semi-definite
+    Hessian (ShellEnergy.hessian(project=True)) with a backtracking (Armijo) line search on
+    Phi: every iterate lowers the potential, so a strong activation that folds the skin slows
+    the solve down instead of making it diverge.
     springs: optional per-node stiffness of linear springs to the rest position (the face's
     tethers and subcutaneous springs), added to E.
+    Converged when the residual force is under tol (relative to the largest applied force) or
+    when an iterate moves no node by more than xtol (a length); `stats` counts the steps, the
+    Newton iterations and the steps that ran out of iterations.
     """
 
     def __init__(self, energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, h: float,
                  xi: float = 2.0, zeta: float = 0.01, newton_iters: int = 8, tol: float = 1e-9,
-                 springs: np.ndarray | None = None, refactor: int = 0):
-        """refactor: 0 for Newton proper (the Jacobian at every iterate); k > 0 for a chord
-        method: the Jacobian factored (CHOLMOD when it is SPD) and kept for k steps, or until a
-        step fails to converge with it — the same fixed point, for a fraction of the cost."""
+                 springs: np.ndarray | None = None, xtol: float = 0.0):
         self.E, self.h = energy, h
         self.fixed = np.asarray(fixed, bool)
         self.free = np.nonzero(~self.fixed)[0]
@@ -305,36 +310,37 @@ class FullSolver:
         self.ks = np.zeros(3 * energy.n) if springs is None else np.repeat(np.asarray(springs, float), 3)
         self.K0 = (energy.hessian(energy.rest) + sp.diags(self.ks)).tocsr()
         self.C = (xi * sp.diags(self.m) + zeta * self.K0).tocsr()       # Rayleigh damping
-        self.iters, self.tol = newton_iters, tol
-        self.refactor, self._fac, self._age = refactor, None, 0
+        self.iters, self.tol, self.xtol = newton_iters, tol, xtol
+        self._spd = None
+        self.stats = {"steps": 0, "iterations": 0, "unconverged": 0}
         self.u = np.zeros((energy.n, 3))
         self.v = np.zeros((energy.n, 3))
 
-    def _factor(self, x):
-        """A solver for the step's Jacobian at x (free dofs)."""
-        d, h = self.dof, self.h
-        J = (sp.diags(self.m / h + h * self.ks) + self.C + h * self.E.hessian(x.reshape(-1, 3)))[d][:, d].tocsc()
-        if not self.refactor:
-            return lambda r: spla.spsolve(J, r)
-        try:
-            return SPDSolver(J).solve
-        except Exception:                       # not positive definite here: a general LU
-            return spla.splu(J).solve
+    def set_springs(self, springs: np.ndarray) -> None:
+        """New per-node spring stiffnesses from the next step on (the damping keeps its own)."""
+        self.ks = np.repeat(np.asarray(springs, float), 3)
 
-    def advance(self, force: np.ndarray, depth: int = 4) -> np.ndarray:
-        """step(), halving the time step (down to 1/2^depth) where Newton finds no descent."""
-        try:
-            return self.step(force)
-        except MimicaError:
-            if depth == 0:
-                raise
-        self.h, self._fac = self.h / 2, None
-        try:
-            self.advance(force, depth - 1)
-            self.advance(force, depth - 1)
-        finally:
-            self.h, self._fac = self.h * 2, None
-        return self.u.copy()
+    def _direction(self, x, res):
+        """The Newton direction for v: (M/h + C + h (H+ + K_springs)) dv = -res on the free dofs,
+        H+ the PSD Hessian at x; factored by CHOLMOD, its ordering kept from the first step."""
+        d, h = self.dof, self.h
+        J = (sp.diags(self.m / h + h * self.ks) + self.C
+             + h * self.E.hessian(x.reshape(-1, 3), project=True))[d][:, d].tocsc()
+        if self._spd is None:
+            self._spd = SPDSolver(J)
+        else:
+            self._spd.refactor(J)
+        return self._spd.solve(-res[d])
+
+    def _potential(self, v, x0, f) -> float:
+        """Phi(v) of the class docstring; inf where the shell is degenerate."""
+        h, x = self.h, x0 + self.h * v
+        dv = v - self.v.ravel()
+        with np.errstate(all="ignore"):
+            e = self.E.energy(x.reshape(-1, 3))
+        r = x - self.E.rest.ravel()
+        phi = 0.5 * dv @ (self.m * dv) - h * f @ v + e + 0.5 * r @ (self.ks * r) + 0.5 * h * v @ (self.C @ v)
+        return phi if np.isfinite(phi) else np.inf
 
     def _residual(self, v, x0, f):
         x = x0 + self.h * v
@@ -342,46 +348,43 @@ class FullSolver:
         return self.m * (v - self.v.ravel()) / self.h - f + g + self.C @ v, x
 
     def step(self, force: np.ndarray) -> np.ndarray:
-        d = self.dof
+        d, h = self.dof, self.h
         x0 = (self.E.rest + self.u).ravel()
         v = self.v.ravel().copy()
         f = force.ravel()
-        if self.refactor and self._age >= self.refactor:
-            self._fac = None
         tol = self.tol * max(1.0, np.abs(f).max())
         res, x = self._residual(v, x0, f)
-        norm = norm0 = np.linalg.norm(res[d])
+        phi = self._potential(v, x0, f)
         converged = False
         for _ in range(self.iters):
             if np.abs(res[d]).max() < tol:
                 converged = True
                 break
-            if self._fac is None or not self.refactor:
-                self._fac, self._age = self._factor(x), 0
-            dv = self._fac(-res[d])
-            # backtracking: a full Newton step can overshoot into inverted triangles
-            for alpha in (1.0, 0.5, 0.25, 0.125, 0.0625):
+            dv = self._direction(x, res)
+            slope = h * (res[d] @ dv)                  # dPhi/dalpha at 0, < 0 (SPD matrix)
+            self.stats["iterations"] += 1
+            alpha = 1.0
+            while alpha > 1e-10:
                 vt = v.copy()
                 vt[d] += alpha * dv
-                rt, xt = self._residual(vt, x0, f)
-                nt = np.linalg.norm(rt[d])
-                if np.isfinite(nt) and nt < norm:
+                pt = self._potential(vt, x0, f)
+                if pt <= phi + 1e-4 * alpha * slope:   # Armijo
                     break
-            else:
-                if norm < 1e-5 * norm0:         # at the precision the residual can reach
-                    converged = True
-                    break
-                if not self.refactor or self._age == 0:
-                    raise MimicaError("full solver: Newton found no descent (try a higher --fps)")
-                self._fac = None                # a stale Jacobian: refactor and try again
-                continue
-            v, res, x, norm = vt, rt, xt, nt
-        self._age += 1
-        if not converged:
-            self._fac = None                    # the next step starts from a fresh Jacobian
+                alpha *= 0.5
+            else:                                      # Phi no longer resolves a decrease
+                converged = True
+                break
+            v, phi = vt, pt
+            res, x = self._residual(v, x0, f)
+            if alpha * h * np.abs(dv).max() < self.xtol:
+                converged = True
+                break
+        self.stats["steps"] += 1
+        if not converged and np.abs(res[d]).max() >= tol:
+            self.stats["unconverged"] += 1
         self.v = v.reshape(-1, 3)
         self.v[self.fixed] = 0
-        self.u = self.u + self.h * self.v
+        self.u = self.u + h * self.v
         return self.u.copy()
 
 
