@@ -42,7 +42,7 @@ from mimica.image.ictphotos import LIGHT_LEFT, LIGHT_RIGHT, ICTPhotos  # noqa: E
 from mimica.image.landmarks2d import Tracker, detect  # noqa: E402
 from mimica.image.landmarks3d import detect_mesh  # noqa: E402
 from mimica.image.video import VideoWriter, frame_source  # noqa: E402
-from mimica.image.warp import align_to, polygon_mask  # noqa: E402
+from mimica.image.warp import STABLE, Similarity2D, align_to, polygon_mask  # noqa: E402
 from mimica.render import contact_sheet, save_png  # noqa: E402
 from mimica.render.sheet import to_uint8  # noqa: E402
 
@@ -151,6 +151,20 @@ def ict_pairs(quick):
     return float(np.mean(gains))
 
 
+def motion_agreement(yale, subs, e):
+    """Median cosine between two subjects' feature motions (neutral -> e, head motion removed,
+    in one common frame): how alike the subjects pose e.  Where it is near 0, moving B by A's
+    motion adds as much motion away from B's own photo as towards it."""
+    ref = yale(f"{subs[0]}.normal")[1]
+    d = []
+    for a in subs:
+        sp, xp = yale(f"{a}.normal")[1], yale(f"{a}.{e}")[1]
+        head = Similarity2D.fit(xp[STABLE], sp[STABLE])
+        d.append(Similarity2D.fit(sp, ref).linear(head(xp) - sp).ravel())
+    return float(np.median([u @ v / (np.linalg.norm(u) * np.linalg.norm(v) + 1e-12)
+                            for u, v in itertools.combinations(d, 2)]))
+
+
 def yale_pairs(yale, quick):
     subs = [f"subject{i:02d}" for i in range(1, 11 if not quick else 5)]
     tot = {k: [] for k in ("vtc", "eri", "warp", "neutral")}
@@ -178,8 +192,10 @@ def yale_pairs(yale, quick):
                 rows.append([s, x, t, r["eri"], r["vtc"], truth])
         for k in tot:
             tot[k] += res[k]
+        agree = motion_agreement(yale, sorted(set(subs) - same), e)
         print(f"  Yale A->B {e:9s} ({len(res['vtc'])} pairs) median PSNR: "
-              + ", ".join(f"{k} {np.median(v):.2f}" for k, v in res.items()))
+              + ", ".join(f"{k} {np.median(v):.2f}" for k, v in res.items())
+              + f"; A's and B's feature motion agree by cosine {agree:.2f} (median)")
     print("Yale A->B all: median PSNR " + ", ".join(f"{k} {np.median(v):.2f} dB" for k, v in tot.items()))
     if rows:
         LOCAL_FIG.mkdir(parents=True, exist_ok=True)
