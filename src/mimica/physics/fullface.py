@@ -31,7 +31,9 @@ class FullFaceSimulator:
         """The physical parameters are FaceSimulator's.  Implicit Euler is stable at any step,
         so one step a frame (substeps=1); xtol, relative to the rig's mean edge, ends Newton
         once no node moves further (at 1e-2 the ICT face under a full smile took 2-10
-        iterations a step, and a smaller step did not take fewer)."""
+        iterations a step, and a smaller step did not take fewer).  footprint: the radius, in
+        mean edges, over which each spring's insertion is spread (0: on its one skin node, as
+        in the modal face); engage: the muscle stretch |q| at which its springs are fully on."""
         if "mean_edge" not in rig.params:
             raise MimicaError("rig: built by an older mimica; rebuild it with `mimica rig`")
         self.rig, self.fps, self.substeps, self.engage = rig, fps, substeps, engage
@@ -56,7 +58,6 @@ class FullFaceSimulator:
         rho = skin_density(rig, frequency)
         k_tether = p.get("tether", 0.0) * 2 * p["k_length"] / p["mean_edge"] * mass / mass.mean()
         self.k = spring * 2.0 * p["k_length"] / p["mean_edge"]
-        springs = k_tether.copy()
         # each spring's insertion spread over the skin within `footprint` mean edges of its node
         # (weights (1 - (d/R)^2)^2, summing to 1): the same total pull, without the tent that a
         # stiff spring pulls up on a single node of the full-resolution skin
@@ -78,10 +79,10 @@ class FullFaceSimulator:
             self.spread.append(W[self.nodes])
         self.tether = k_tether[self.nodes]
         self.spring_sum = [self.k * np.asarray(W.sum(axis=1)).ravel() for W in self.spread]
-        springs = springs[self.nodes] + sum(self.spring_sum)
         self.solver = FullSolver(energy, rho * mass[self.nodes], ~free[self.nodes], h,
                                  xi=damping * 2 * np.pi * frequency, zeta=zeta, newton_iters=newton_iters,
-                                 tol=tol, xtol=xtol * p["mean_edge"], springs=springs)
+                                 tol=tol, xtol=xtol * p["mean_edge"],
+                                 springs=self.tether + sum(self.spring_sum))
         self.stretch = [m.stretch for m in rig.muscles]
         self.omega = np.array([m.omega for m in rig.muscles])
         self.q = np.zeros(len(rig.muscles))
