@@ -249,7 +249,7 @@ class ShellEnergy:
         to its PSD part (Teran et al. 2005's projected Newton: the negative eigenvalues across a
         compressed edge set to 0), and the area and bending terms by Gauss-Newton,
         2/A0 grad(A) grad(A)^T and 6 w grad(theta) grad(theta)^T (eqs. 1 and 3 without the
-        curvature of A and theta).  A fifth of the exact Hessian's cost; on the ICT face under
+        curvature of A and theta).  A fifteenth of the exact Hessian's cost; on the ICT face under
         a full smile it took fewer Newton iterations than the exact one clamped per element."""
         vals = []
         for k, idx, fn, par in self._terms():
