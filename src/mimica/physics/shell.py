@@ -50,7 +50,7 @@ def _dihedral_sc(vs):
     return hd.dot(hd.cross(n1, n2), e) / hd.norm(e), hd.dot(n1, n2)
 
 
-def _bend_delta(vs, rest_theta, weight=None):
+def _bend_delta(vs, rest_theta):
     """theta - theta_rest as one atan2 of the angle-difference identities, so that it does not
     jump by 2 pi where a sharp rest fold (lips, eyelids: |theta_rest| near pi) crosses pi."""
     s, c = _dihedral_sc(vs)
@@ -63,24 +63,38 @@ def _bend_term(vs, rest_theta, weight):
     return 3.0 * d * d * weight
 
 
-def _local_gradient(fn, xs: np.ndarray, par) -> np.ndarray:
-    """The gradient of one term per element, in closed form (numpy): (m, k) for xs (m, k).
+# -- the same terms in closed form (numpy), for the full solver's every Newton iterate --------
+# Each term is w d^2 with d a residual of its element: edge l - l0 (w = 1/l0), area A - A0
+# (w = 1/A0), bending theta - theta0 (w = 3 |e0|/h_e).  So E = sum w d^2, its gradient is
+# 2 w d grad(d), and Gauss-Newton's PSD Hessian is 2 w grad(d) grad(d)^T.
 
-    Edge: 2 (l - l0) / l0 grad l; area: 2 (A - A0) / A0 grad A with grad_i A = n^ x e_i / 2
-    (e_i the opposite edge); bending: 6 w (theta - theta0) grad theta with Bridson et al.
-    2003's dihedral gradient.  Equal to the hyper-dual derivatives of the term (tested), a
-    tenth of their cost: the full solver takes one every Newton iterate."""
-    m = len(xs)
-    p = xs.reshape(m, -1, 3)
-    if fn is _edge_term:
-        e = p[:, 1] - p[:, 0]
-        l = np.linalg.norm(e, axis=1)
-        g1 = (2.0 * (l - par[0]) / (par[0] * l))[:, None] * e
-        return np.concatenate([-g1, g1], axis=1)
-    if fn is _area_term:
-        a, ga = _area_gradient(p)
-        return (2.0 * (a - par[0]) / par[0])[:, None] * ga
-    return (6.0 * par[1] * _bend_delta_np(p, par[0]))[:, None] * _dihedral_gradient(p)
+def _hinge_normals(p):
+    """Edge x1 - x0 and the two (unnormalized) face normals of hinges p (m, 4, 3)."""
+    e = p[:, 1] - p[:, 0]
+    return e, np.cross(e, p[:, 2] - p[:, 0]), np.cross(p[:, 3] - p[:, 0], e)
+
+
+def _dihedral_np(p, rest_theta=0.0):
+    """theta - rest_theta of hinges p (m, 4, 3), wrap-free as _bend_delta."""
+    e, n1, n2 = _hinge_normals(p)
+    s = np.einsum("ij,ij->i", np.cross(n1, n2), e) / np.linalg.norm(e, axis=1)
+    c = np.einsum("ij,ij->i", n1, n2)
+    cr, sr = np.cos(rest_theta), np.sin(rest_theta)
+    return np.arctan2(s * cr - c * sr, c * cr + s * sr)
+
+
+def _dihedral_gradient(p) -> np.ndarray:
+    """d theta / d(x0, x1, x2, x3), (m, 12): Bridson, Marino & Fedkiw 2003's bending force
+    directions, in this module's hinge order and sign."""
+    e, n1, n2 = _hinge_normals(p)
+    el = np.linalg.norm(e, axis=1)[:, None]
+    u1 = n1 / np.einsum("ij,ij->i", n1, n1)[:, None]
+    u2 = n2 / np.einsum("ij,ij->i", n2, n2)[:, None]
+    et = e / el
+    along = lambda a, b: np.einsum("ij,ij->i", p[:, a] - p[:, b], et)[:, None]   # noqa: E731
+    g0 = along(2, 1) * u1 + along(3, 1) * u2
+    g1 = -along(2, 0) * u1 - along(3, 0) * u2
+    return -np.concatenate([g0, g1, el * u1, el * u2], axis=1)
 
 
 def _area_gradient(p):
@@ -89,6 +103,31 @@ def _area_gradient(p):
     nn = np.linalg.norm(n, axis=1)
     c = 0.5 * n / nn[:, None]
     return 0.5 * nn, np.concatenate([np.cross(c, p[:, (i + 2) % 3] - p[:, (i + 1) % 3]) for i in range(3)], axis=1)
+
+
+def _residual(fn, xs: np.ndarray, par, grad: bool = True):
+    """(w, d, grad d) of one term per element, xs (m, k) stacked coordinates; grad d is None
+    when not asked for."""
+    p = xs.reshape(len(xs), -1, 3)
+    if fn is _edge_term:
+        e = p[:, 1] - p[:, 0]
+        l = np.linalg.norm(e, axis=1)
+        t = e / l[:, None] if grad else None
+        return 1.0 / par[0], l - par[0], (np.concatenate([-t, t], axis=1) if grad else None)
+    if fn is _area_term:
+        if grad:
+            a, ga = _area_gradient(p)
+        else:
+            a, ga = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1), None
+        return 1.0 / par[0], a - par[0], ga
+    return 3.0 * par[1], _dihedral_np(p, par[0]), (_dihedral_gradient(p) if grad else None)
+
+
+def _local_gradient(fn, xs: np.ndarray, par) -> np.ndarray:
+    """The gradient of one term per element, 2 w d grad(d), (m, k): equal to the hyper-dual
+    derivatives of the term (tested), a tenth of their cost."""
+    w, d, g = _residual(fn, xs, par)
+    return (2.0 * w * d)[:, None] * g
 
 
 def _edge_hessian_psd(p, rest_len) -> np.ndarray:
@@ -101,44 +140,6 @@ def _edge_hessian_psd(p, rest_len) -> np.ndarray:
     across = np.maximum(l - rest_len, 0.0) / l
     h = (2.0 / rest_len)[:, None, None] * (tt + across[:, None, None] * (np.eye(3) - tt))
     return np.concatenate([np.concatenate([h, -h], axis=2), np.concatenate([-h, h], axis=2)], axis=1)
-
-
-def _bend_delta_np(p, rest_theta):
-    e = p[:, 1] - p[:, 0]
-    n1 = np.cross(e, p[:, 2] - p[:, 0])
-    n2 = np.cross(p[:, 3] - p[:, 0], e)
-    s = np.einsum("ij,ij->i", np.cross(n1, n2), e) / np.linalg.norm(e, axis=1)
-    c = np.einsum("ij,ij->i", n1, n2)
-    cr, sr = np.cos(rest_theta), np.sin(rest_theta)
-    return np.arctan2(s * cr - c * sr, c * cr + s * sr)
-
-
-def _dihedral_gradient(p) -> np.ndarray:
-    """d theta / d(x0, x1, x2, x3), (m, 12): Bridson, Marino & Fedkiw 2003, eq. for the bending
-    force directions, in this module's hinge order and sign."""
-    e = p[:, 1] - p[:, 0]
-    el = np.linalg.norm(e, axis=1)[:, None]
-    n1 = np.cross(e, p[:, 2] - p[:, 0])
-    n2 = np.cross(p[:, 3] - p[:, 0], e)
-    u1 = n1 / np.einsum("ij,ij->i", n1, n1)[:, None]
-    u2 = n2 / np.einsum("ij,ij->i", n2, n2)[:, None]
-    et = e / el
-    g2 = el * u1
-    g3 = el * u2
-    g0 = np.einsum("ij,ij->i", p[:, 2] - p[:, 1], et)[:, None] * u1 \
-        + np.einsum("ij,ij->i", p[:, 3] - p[:, 1], et)[:, None] * u2
-    g1 = -np.einsum("ij,ij->i", p[:, 2] - p[:, 0], et)[:, None] * u1 \
-        - np.einsum("ij,ij->i", p[:, 3] - p[:, 0], et)[:, None] * u2
-    return -np.concatenate([g0, g1, g2, g3], axis=1)
-
-
-def _numeric_dihedral(x, hinges):
-    x0, x1, x2, x3 = (x[hinges[:, i]] for i in range(4))
-    e = x1 - x0
-    n1 = np.cross(e, x2 - x0)
-    n2 = np.cross(x3 - x0, e)
-    s = np.einsum("ij,ij->i", np.cross(n1, n2), e) / np.linalg.norm(e, axis=1)
-    return np.arctan2(s, np.einsum("ij,ij->i", n1, n2))
 
 
 def hinges_of(triangles: np.ndarray) -> np.ndarray:
@@ -178,7 +179,7 @@ class ShellEnergy:
         a2 = 0.5 * np.linalg.norm(np.cross(x[h[:, 3]] - x[h[:, 0]], x[h[:, 1]] - x[h[:, 0]]), axis=1)
         h_e = (a1 + a2) / el                       # mean of the two heights 2A/|e|
         self.bend_weight = el / h_e
-        self.rest_theta = _numeric_dihedral(x, h)
+        self.rest_theta = _dihedral_np(x[h])
 
     @classmethod
     def default(cls, mesh: Mesh, k_area=1.0, k_length=1.0, k_bend=0.05) -> "ShellEnergy":
@@ -202,16 +203,8 @@ class ShellEnergy:
         for k, idx, fn, par in self._terms():
             if k == 0 or len(idx) == 0:
                 continue
-            p = self._stack(x, idx).reshape(len(idx), -1, 3)
-            if fn is _edge_term:
-                d = np.linalg.norm(p[:, 1] - p[:, 0], axis=1) - par[0]
-                total += k * float(np.sum(d * d / par[0]))
-            elif fn is _area_term:
-                d = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1) - par[0]
-                total += k * float(np.sum(d * d / par[0]))
-            else:
-                d = _bend_delta_np(p, par[0])
-                total += k * float(np.sum(3.0 * d * d * par[1]))
+            w, d, _ = _residual(fn, self._stack(x, idx), par, grad=False)
+            total += k * float(np.sum(w * d * d))
         return total
 
     def gradient(self, x: np.ndarray) -> np.ndarray:
@@ -255,14 +248,11 @@ class ShellEnergy:
         for k, idx, fn, par in self._terms():
             if k == 0 or len(idx) == 0:
                 continue
-            if project and fn is _bend_term:
-                g = _dihedral_gradient(self._stack(x, idx).reshape(len(idx), 4, 3))
-                hl = 6.0 * par[1][:, None, None] * g[:, :, None] * g[:, None, :]
-            elif project and fn is _area_term:
-                _, g = _area_gradient(self._stack(x, idx).reshape(len(idx), 3, 3))
-                hl = (2.0 / par[0])[:, None, None] * g[:, :, None] * g[:, None, :]
-            elif project and fn is _edge_term:
+            if project and fn is _edge_term:
                 hl = _edge_hessian_psd(self._stack(x, idx).reshape(len(idx), 2, 3), par[0])
+            elif project:                                   # Gauss-Newton: 2 w grad(d) grad(d)^T
+                w, _, g = _residual(fn, self._stack(x, idx), par)
+                hl = (2.0 * w)[:, None, None] * g[:, :, None] * g[:, None, :]
             else:
                 _, _, hl = hd.local_derivatives(fn, self._stack(x, idx), par)
             vals.append((k * hl).ravel())
