@@ -25,6 +25,11 @@ def backend() -> str:
     return "scipy"
 
 
+def _splu(m: sp.csc_matrix):
+    """SuperLU in symmetric mode (no pivoting off the diagonal), the fallback factor."""
+    return spla.splu(m, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+
+
 class SPDSolver:
     """Factor a sparse SPD matrix once; `solve(B)` for B of shape (n,) or (n, k)."""
 
@@ -33,11 +38,7 @@ class SPDSolver:
         self._lock = threading.Lock()
         m = sp.csc_matrix(m)
         self.n = m.shape[0]
-        if self.kind == "cholmod":
-            self._f = _cholmod_cholesky(m)
-        else:
-            self._f = spla.splu(m, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                                options={"SymmetricMode": True})
+        self._f = _cholmod_cholesky(m) if self.kind == "cholmod" else _splu(m)
 
     def refactor(self, m: sp.spmatrix) -> "SPDSolver":
         """Factor a new matrix of the same sparsity pattern, reusing CHOLMOD's symbolic
@@ -47,8 +48,7 @@ class SPDSolver:
             if self.kind == "cholmod":
                 self._f.cholesky_inplace(m)
             else:
-                self._f = spla.splu(m, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                                    options={"SymmetricMode": True})
+                self._f = _splu(m)
         return self
 
     def solve(self, b: np.ndarray) -> np.ndarray:
