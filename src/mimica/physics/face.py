@@ -48,7 +48,7 @@ class _MuscleSystem:
         self.solver = sv = ModalWarpingSolver(b, h, xi=xi, zeta=zeta, density=rho)
         uniq, inv = np.unique(muscle.attach, return_inverse=True)
         phi = sv.rows(uniq)                                           # (u, 3, r)
-        k = spring * 2.0 * rig.params["k_length"] / rig.params["mean_edge"]
+        k = spring_stiffness(rig, spring)
         springs_at = np.bincount(inv, minlength=len(uniq)).astype(float)
         pr = phi.reshape(-1, phi.shape[2])
         ks = k * pr.T @ (np.repeat(springs_at, 3)[:, None] * pr) / rho   # Phi_a^T K_s Phi_a
@@ -153,15 +153,50 @@ class _MuscleSystem:
 
     def step(self, a):
         h, w = self.h, self.w
-        # the muscle's stretch mode follows its activation, critically damped (Kim eq. 13)
-        self.v = (self.v + h * w * w * (a - self.q)) / (1 + 2 * h * w + h * h * w * w)
-        self.q = self.q + h * self.v
+        self.q, self.v = follow_activation(self.q, self.v, a, h, w)
         sv = self.solver
         # the spring pull in the modes' frame; the rotation is applied to the displacement
         # (modal warping, see displacement()); rotating the forces too would feed the
         # rotation back into the stiff spring layer and is left out
         sv.v = self.step_inv @ (sv.v + h * (self.q * self.fq_unit - self.stiff @ sv.q))
         sv.q = sv.q + h * sv.v
+
+
+def tether_springs(tether: float, k_length: float, mean_edge: float, mass: np.ndarray) -> np.ndarray:
+    """Per-node stiffness of the subcutaneous tethers to the skull: tether x an edge's
+    stiffness 2 k_L / l, shared out by the nodes' lumped areas."""
+    return tether * 2 * k_length / mean_edge * mass / mass.mean()
+
+
+def spring_stiffness(rig, spring: float) -> float:
+    """The muscle-to-skin spring (Kim eqs. 14-16): `spring` edges' stiffness, 2 k_L / l each."""
+    return spring * 2.0 * rig.params["k_length"] / rig.params["mean_edge"]
+
+
+def follow_activation(q, v, a, h, w):
+    """A muscle's stretch mode following its activation a, critically damped at angular
+    frequency w (Kim eq. 13), one implicit Euler step: (q', v').  Scalars or arrays."""
+    v = (v + h * w * w * (a - q)) / (1 + 2 * h * w + h * h * w * w)
+    return q + h * v, v
+
+
+def run_frames(sim, activation_at, duration: float, progress=None, before_step=None) -> np.ndarray:
+    """Frames (F, n, 3) of skin positions from a simulator with fps, substeps, h, step() and
+    displacement(); activation_at(t) -> (n_muscles,); before_step(t) is called before each step."""
+    n_frames = int(round(duration * sim.fps)) + 1
+    rest = sim.rig.skin.vertices
+    frames = np.empty((n_frames,) + rest.shape)
+    frames[0] = rest + sim.displacement()
+    for f in range(1, n_frames):
+        for k in range(sim.substeps):
+            t = ((f - 1) * sim.substeps + k + 1) * sim.h
+            if before_step is not None:
+                before_step(t)
+            sim.step(activation_at(t))
+        frames[f] = rest + sim.displacement()
+        if progress:
+            progress(f, n_frames)
+    return frames
 
 
 def skin_density(rig, frequency: float) -> float:
@@ -395,19 +430,9 @@ class FaceSimulator:
 
         scales_at(t) -> (gravity_scale, pull_scale), for forces keyed on curves.
         """
-        n_frames = int(round(duration * self.fps)) + 1
-        frames = np.empty((n_frames, self.rig.skin.n_vertices, 3))
-        frames[0] = self.rig.skin.vertices + self.displacement()
-        for f in range(1, n_frames):
-            for k in range(self.substeps):
-                t = ((f - 1) * self.substeps + k + 1) * self.h
-                if scales_at is not None:
-                    self.gravity_scale, self.pull_scale = scales_at(t)
-                self.step(activation_at(t))
-            frames[f] = self.rig.skin.vertices + self.displacement()
-            if progress:
-                progress(f, n_frames)
-        return frames
+        def scales(t):
+            self.gravity_scale, self.pull_scale = scales_at(t)
+        return run_frames(self, activation_at, duration, progress, scales if scales_at is not None else None)
 
 
 def displacement_cosine(u: np.ndarray, reference: np.ndarray, moving: float = 0.05) -> float:

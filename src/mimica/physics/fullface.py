@@ -17,7 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import MimicaError
-from .face import skin_density
+from .face import follow_activation, run_frames, skin_density, spring_stiffness, tether_springs
 from .modal import FullSolver
 from .shell import ShellEnergy, lumped_mass
 
@@ -56,28 +56,27 @@ class FullFaceSimulator:
         energy = ShellEnergy(skin.vertices[self.nodes], remap[tris], p["k_area"], p["k_length"], p["k_bend"])
         mass = lumped_mass(skin)
         rho = skin_density(rig, frequency)
-        k_tether = p.get("tether", 0.0) * 2 * p["k_length"] / p["mean_edge"] * mass / mass.mean()
-        self.k = spring * 2.0 * p["k_length"] / p["mean_edge"]
+        self.k = spring_stiffness(rig, spring)
+        self.tether = tether_springs(p.get("tether", 0.0), p["k_length"], p["mean_edge"], mass)[self.nodes]
         # each spring's insertion spread over the skin within `footprint` mean edges of its node
         # (weights (1 - (d/R)^2)^2, summing to 1): the same total pull, without the tent that a
         # stiff spring pulls up on a single node of the full-resolution skin
         from scipy.spatial import cKDTree
-        tree = cKDTree(skin.vertices[near])
-        near_ids = np.nonzero(near)[0]
+        x = skin.vertices[self.nodes]
+        tree = cKDTree(x)
         R = max(footprint, 1e-9) * p["mean_edge"]
-        self.spread = []
+        self.spread = []                               # per muscle: (sim nodes x muscle nodes)
         for m in rig.muscles:
-            rows, cols, vals = [], [], []
-            for i, a in enumerate(m.attach):
-                js = np.asarray(tree.query_ball_point(skin.vertices[a], R), int)
-                js = near_ids[js] if len(js) else np.array([a])
-                w = (1 - np.minimum(np.linalg.norm(skin.vertices[js] - skin.vertices[a], axis=1) / R, 1) ** 2) ** 2
-                w = w / w.sum() if w.sum() > 0 else np.ones(len(js)) / len(js)
-                rows.append(js); cols.append(np.full(len(js), i)); vals.append(w)
-            W = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                              shape=(n, len(m.attach)))
-            self.spread.append(W[self.nodes])
-        self.tether = k_tether[self.nodes]
+            at = remap[m.attach]
+            if (at < 0).any():
+                raise MimicaError(f"rig: muscle {m.name} is attached outside every region of interest; "
+                                  "rebuild it with `mimica rig`")
+            near_at = tree.query_ball_point(x[at], R)  # each attachment node is among its own
+            cols = np.repeat(np.arange(len(at)), [len(js) for js in near_at])
+            rows = np.concatenate(near_at).astype(int)
+            w = (1 - (np.linalg.norm(x[rows] - x[at[cols]], axis=1) / R) ** 2) ** 2
+            W = sp.csr_matrix((w, (rows, cols)), shape=(len(x), len(at)))
+            self.spread.append(W @ sp.diags(1.0 / np.asarray(W.sum(axis=0)).ravel()))
         self.spring_sum = [self.k * np.asarray(W.sum(axis=1)).ravel() for W in self.spread]
         self.solver = FullSolver(energy, rho * mass[self.nodes], ~free[self.nodes], h,
                                  xi=damping * 2 * np.pi * frequency, zeta=zeta, newton_iters=newton_iters,
@@ -91,10 +90,7 @@ class FullFaceSimulator:
 
     def step(self, activations) -> None:
         a = np.asarray(activations, float)[:len(self.q)]
-        h, w = self.h, self.omega
-        # each muscle's stretch mode follows its activation, critically damped (Kim eq. 13)
-        self.v = (self.v + h * w * w * (a - self.q)) / (1 + 2 * h * w + h * h * w * w)
-        self.q = self.q + h * self.v
+        self.q, self.v = follow_activation(self.q, self.v, a, self.h, self.omega)
         # a muscle's springs engage as it contracts or relaxes (stiffness ramps in with |q| up
         # to `engage`): a muscle at rest exerts nothing and does not hold the skin, as in the
         # modal face, where each muscle's springs are in its own system only (eqs. 20-21)
@@ -113,13 +109,4 @@ class FullFaceSimulator:
 
     def run(self, activation_at, duration: float, progress=None) -> np.ndarray:
         """Frames (F, n, 3) of skin positions; activation_at(t) -> (n_muscles,)."""
-        n_frames = int(round(duration * self.fps)) + 1
-        frames = np.empty((n_frames, self.rig.skin.n_vertices, 3))
-        frames[0] = self.rig.skin.vertices + self.displacement()
-        for f in range(1, n_frames):
-            for k in range(self.substeps):
-                self.step(activation_at(((f - 1) * self.substeps + k + 1) * self.h))
-            frames[f] = self.rig.skin.vertices + self.displacement()
-            if progress:
-                progress(f, n_frames)
-        return frames
+        return run_frames(self, activation_at, duration, progress)

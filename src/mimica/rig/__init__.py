@@ -19,6 +19,7 @@ from ..correspond import face_cylinder
 from ..errors import MimicaError
 from ..mesh import Mesh, atomic_path
 from ..mesh.query import TriangleLocator
+from ..physics.face import tether_springs
 from ..physics.modal import ModalBasis, rotation_operator
 from ..physics.shell import ShellEnergy, lumped_mass
 from .muscles import KIM_MUSCLES, MUSCLES, MuscleDef
@@ -194,8 +195,7 @@ def build_rig(skin: Mesh, landmarks: np.ndarray, muscles=None, alpha: float = 10
     skin_e = ShellEnergy.default(skin)
     mass = lumped_mass(skin)
     mean_edge = skin.mean_edge_length()
-    # K + the tether springs (per node: tether x an edge's stiffness 2 k_L / l^2, by area)
-    k_node = tether * 2 * skin_e.k_length / mean_edge * mass / mass.mean()
+    k_node = tether_springs(tether, skin_e.k_length, mean_edge, mass)             # K + the tethers
     K = (skin_e.hessian(skin_e.rest) + sp.diags(np.repeat(k_node, 3))).tocsr()
     W = rotation_operator(skin.vertices, skin.triangles, smooth=WARP_SMOOTH)
     loc = TriangleLocator(skin.vertices, skin.triangles)
@@ -242,8 +242,7 @@ def build_region_system(rig: Rig, center: np.ndarray, radius: float, reach: floa
     w = (1 - d[nodes] / radius) ** 2
     energy = ShellEnergy.default(skin)
     mass = lumped_mass(skin)
-    tether = rig.params.get("tether", 0.0)
-    k_node = tether * 2 * energy.k_length / rig.params["mean_edge"] * mass / mass.mean()
+    k_node = tether_springs(rig.params.get("tether", 0.0), energy.k_length, rig.params["mean_edge"], mass)
     K = (energy.hessian(energy.rest) + sp.diags(np.repeat(k_node, 3))).tocsr()
     W = rotation_operator(skin.vertices, skin.triangles, smooth=WARP_SMOOTH)
     basis = ModalBasis.compute(energy, mass, d > reach * radius, r=rig.params.get("modes", 8),
