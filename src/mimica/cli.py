@@ -204,30 +204,31 @@ def cmd_simulate(a):
     el = time.perf_counter() - t0
     out = Path(a.out)
     skin = rig.skin
-    wrinkle_note = ""
+    note = ""
     if a.wrinkles:
-        frames, skin, wrinkle_note = _wrinkle_frames(a, rig, tl, frames, out)
+        frames, skin, note = _wrinkle_frames(a, rig, tl, frames, out)
     from .mesh import atomic_path, write_glb
     for i, v in enumerate(frames):
         write_mesh(out / f"frame_{i:04d}.obj", skin.with_vertices(v))
     with atomic_path(out / "animation.glb") as tmp:
         write_glb(tmp, skin, {f"frame_{i:04d}": v for i, v in enumerate(frames)}, fps=a.fps)
     title = a.action or (Path(a.timeline).name if a.timeline else a.expression)
+    solver_note = ", full solver" if a.solver == "full" else ""
     if a.wrinkles:
         title += f", wrinkles, age {a.age:g}" if "age" not in tl.channels else ", wrinkles, age curve"
     pick = np.linspace(0, len(frames) - 1, min(6, len(frames))).round().astype(int)
     frame = shared_frame([frames[i] for i in pick])
     tiles = [render_mesh(skin, frames[i], size=(320, 320), frame=frame) for i in pick]
     save_png(out / "strip.png", contact_sheet(tiles, [f"t = {i / a.fps:.2f}s" for i in pick],
-                                              title=f"{title} ({a.engine}"
-                                              + (", full solver)" if a.solver == "full" else ")")))
+                                              title=f"{title} ({a.engine}{solver_note})"))
     steps = (len(frames) - 1) * sim.substeps
     if a.solver == "full":
         st = sim.solver.stats
-        wrinkle_note += (f"; Newton: {st['iterations'] / max(st['steps'], 1):.1f} iterations a step"
-                         + (f", {st['unconverged']} steps stopped at the iteration cap" if st["unconverged"] else ""))
+        note += f"; Newton: {st['iterations'] / max(st['steps'], 1):.1f} iterations a step"
+        if st["unconverged"]:
+            note += f", {st['unconverged']} steps stopped at the iteration cap"
     _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {steps} steps in {el:.2f}s"
-         + wrinkle_note)
+         + note)
     return 0
 
 
