@@ -42,7 +42,7 @@ from mimica.image.ictphotos import LIGHT_LEFT, LIGHT_RIGHT, ICTPhotos  # noqa: E
 from mimica.image.landmarks2d import Tracker, detect  # noqa: E402
 from mimica.image.landmarks3d import detect_mesh  # noqa: E402
 from mimica.image.video import VideoWriter, frame_source  # noqa: E402
-from mimica.image.warp import STABLE, Similarity2D, align_to, polygon_mask  # noqa: E402
+from mimica.image.warp import Similarity2D, align_to, head_motion, polygon_mask  # noqa: E402
 from mimica.render import contact_sheet, save_png  # noqa: E402
 from mimica.render.sheet import to_uint8  # noqa: E402
 
@@ -159,8 +159,7 @@ def motion_agreement(yale, subs, e):
     d = []
     for a in subs:
         sp, xp = yale(f"{a}.normal")[1], yale(f"{a}.{e}")[1]
-        head = Similarity2D.fit(xp[STABLE], sp[STABLE])
-        d.append(Similarity2D.fit(sp, ref).linear(head(xp) - sp).ravel())
+        d.append(Similarity2D.fit(sp, ref).linear(head_motion(xp, sp)(xp) - sp).ravel())
     return float(np.median([u @ v / (np.linalg.norm(u) * np.linalg.norm(v) + 1e-12)
                             for u, v in itertools.combinations(d, 2)]))
 

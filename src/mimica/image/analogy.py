@@ -26,8 +26,8 @@ import numpy as np
 
 from ..errors import MimicaError
 from .io import luminance, rgb_to_yuv, yuv_to_rgb
-from .warp import (FOREHEAD_BROW, Bilinear, FOREHEAD_FOLLOW, STABLE, PiecewiseAffine, Similarity2D, border_points,
-                   forehead_points, polygon_mask, sample, triangulate)
+from .warp import (FOREHEAD_BROW, Bilinear, FOREHEAD_FOLLOW, PiecewiseAffine, Similarity2D, border_points,
+                   forehead_points, head_motion, polygon_mask, sample, triangulate)
 
 
 def psnr(a, b, mask=None) -> float:
@@ -136,7 +136,7 @@ class ImageAnalogy:
         """Control points (crop coordinates for the target, image coordinates for the sources)."""
         s_pts, x_pts = np.asarray(s_pts, float), np.asarray(x_pts, float)
         a = Similarity2D.fit(s_pts, self.points)                         # S -> T (step 2)
-        b = Similarity2D.fit(x_pts[STABLE], s_pts[STABLE])               # S' -> S (head motion)
+        b = head_motion(x_pts, s_pts)                                    # S' -> S
         d68 = b(x_pts) - s_pts                                           # feature motion in S
         d_fh = FOREHEAD_FOLLOW[:, None] * d68[FOREHEAD_BROW]
         d = np.concatenate([d68, d_fh, np.zeros((len(self.border), 2))])

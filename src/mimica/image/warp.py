@@ -40,10 +40,15 @@ class Similarity2D:
         return cls(s, r, cb - s * r @ ca)
 
 
+def head_motion(pts, ref_pts) -> Similarity2D:
+    """The similarity on the stable points (eye corners, nose) taking pts into ref_pts' frame:
+    how the analogy removes the head motion between a neutral and an expressive photo."""
+    return Similarity2D.fit(np.asarray(pts, float)[STABLE], np.asarray(ref_pts, float)[STABLE])
+
+
 def align_to(img, pts, ref_pts) -> np.ndarray:
-    """img resampled into the frame of ref_pts by the similarity on the stable points: how the
-    analogy removes the head motion between a neutral and an expressive photo (for truths)."""
-    b = Similarity2D.fit(np.asarray(pts)[STABLE], np.asarray(ref_pts)[STABLE]).inverse()
+    """img resampled into the frame of ref_pts by head_motion (for truths)."""
+    b = head_motion(pts, ref_pts).inverse()
     h, w = img.shape[:2]
     yy, xx = np.mgrid[0:h, 0:w]
     q = b(np.stack([xx.ravel(), yy.ravel()], 1))
