@@ -15,9 +15,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
+from mimica.anim import PRESETS, Timeline  # noqa: E402
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel  # noqa: E402
 from mimica.physics import ShellEnergy, lumped_mass  # noqa: E402
 from mimica.physics.face import FaceSimulator, displacement_cosine  # noqa: E402
+from mimica.physics.fullface import FullFaceSimulator  # noqa: E402
 from mimica.mesh import plane_grid  # noqa: E402
 from mimica.physics.modal import against_full  # noqa: E402
 from mimica.render import contact_sheet, render_mesh, save_png, shared_frame  # noqa: E402
@@ -93,7 +95,6 @@ def main():
               f"length); deviation from the full solver: modal warping {res['warped']:.3f}, linear modes {res['linear']:.3f}")
 
     # --solver full on the face: the whole skin one nonlinear shell, every muscle at once
-    from mimica.physics.fullface import FullFaceSimulator
     for base, shapes in ANATOMY[:2]:
         r1 = build_rig(skin, lm, muscles=[base + "_L"], gravity=False)
         a1 = np.ones(1)
@@ -108,7 +109,6 @@ def main():
               f"({st['iterations'] / st['steps']:.1f} Newton iterations, {st['unconverged']} unconverged); "
               f"cosine with ICT {displacement_cosine(uf, d):.3f} (modal {displacement_cosine(um, d):.3f})")
     names = [m.name for m in rig.muscles]
-    from mimica.anim import Timeline
     tl = Timeline.preset("happiness", names, duration=0.5)
     ff = FullFaceSimulator(rig)
     uf = ff.run(lambda t: tl.values(t, names), 0.5)[-1]
@@ -161,7 +161,6 @@ def main():
             held.append((mu.name, displacement_cosine(u, d)))
         print(f"held-out identity (seed {seed}): " + ", ".join(f"{n} {c:.3f}" for n, c in held))
     # the expression presets on the whole muscle library (a picture for docs/)
-    from mimica.anim import PRESETS, Timeline
     whole = build_rig(skin, lm, muscles="all", gravity=False)
     names = [m.name for m in whole.muscles]
     fr = shared_frame([skin.vertices])
