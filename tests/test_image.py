@@ -49,6 +49,28 @@ def test_self_transfer_reproduces_the_expression(photos):
     assert psnr(r.image, truth, m) > psnr(w.image, truth, m) + 5
 
 
+def test_strength_scales_the_expression(photos):
+    """strength 0.5 of S' onto S reproduces S rendered at half the expression (the blendshape
+    weight halved: truth) far closer than the neutral or the full expression does, in every
+    method; strength 0 gives S back; outside 0..2 is an error."""
+    s, sp = photos.photo("identity004")
+    x, xp = photos.photo("identity004", "surprise")
+    h, hp = photos.photo("identity004", "surprise", amount=0.5)
+    an = ImageAnalogy(s, sp)
+    truth = align_to(h, hp, sp)
+    for method, floor in (("vtc", 35.0), ("eri", 35.0), ("warp", 32.0)):
+        r = an.transfer(s, sp, x, xp, method=method, strength=0.5)
+        m = r.mask > 0.5
+        assert np.abs(r.points - hp).max() < 1.5                     # points where the half expression has them
+        assert psnr(r.image, truth, m) > floor, method
+        assert psnr(r.image, truth, m) > max(psnr(s, truth, m), psnr(an.transfer(s, sp, x, xp, method=method).image,
+                                                                      truth, m)) + 5, method
+        assert np.abs(an.transfer(s, sp, x, xp, method=method, strength=0).image - s).max() < 2e-3
+    for bad in (-0.1, 2.5, float("nan")):
+        with pytest.raises(MimicaError, match="strength"):
+            an.transfer(s, sp, x, xp, strength=bad)
+
+
 def test_beats_eri_under_another_light(photos):
     """Another identity lit from the other side: ours closer to the rendered truth than ERI."""
     s, sp = photos.photo("identity007", None, LIGHT_LEFT)
@@ -187,6 +209,15 @@ def test_cli_transfer_image_and_errors(tmp_path):
              "--out", out2)
     assert r.returncode == 2 and "junk.gif" in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not out2.exists()
+    r = _cli("transfer-image", YALE / "subject01.normal.gif", YALE / "subject01.happy.gif",
+             "--target", YALE / "subject03.normal.gif", "--strength", "3", "--out", out2)
+    assert r.returncode == 2 and "strength 3" in r.stderr and not out2.exists()
+    r = _cli("transfer-image", YALE / "subject01.normal.gif", YALE / "subject01.happy.gif",
+             "--target", YALE / "subject03.normal.gif", "--strength", "0.5", "--out", out2)
+    half = read_image(out2 / "subject01.happy.png")
+    # half the expression: about half the change from the target (warp and tents both halved)
+    ratio = np.abs(half - tgt).mean() / np.abs(res - tgt).mean()
+    assert r.returncode == 0 and 0.3 < ratio < 0.7, ratio
 
 
 def test_cli_landmarks_and_driving_frames(tmp_path):

@@ -387,6 +387,8 @@ def cmd_transfer_image(a):
         raise MimicaError("give either source expression photos or --driving VIDEO, not both")
     if not a.driving and not a.source_expr:
         raise MimicaError("give source expression photos, or --driving VIDEO")
+    from .image.analogy import check_strength
+    check_strength(a.strength)
     t0 = time.perf_counter()
     src = read_image(a.source_neutral)
     tgt = read_image(a.target)
@@ -405,7 +407,7 @@ def cmd_transfer_image(a):
         t1 = time.perf_counter()
         with VideoWriter(out, fps) as vw:
             for f in _progress(frames, n, "frames"):
-                vw.write(an.transfer(src_y, sp, f, track(f), method=a.method).image)
+                vw.write(an.transfer(src_y, sp, f, track(f), method=a.method, strength=a.strength).image)
         dt = time.perf_counter() - t1
         _say(f"{vw.n} frames -> {out} ({vw.n / max(dt, 1e-9):.1f} frames/s, landmarks tracked)")
         return 0
@@ -416,7 +418,7 @@ def cmd_transfer_image(a):
     exprs = [(p, read_image(p)) for p in paths]
     pts = [_image_points(img, p, str(p)) for p, img in exprs]
     t1 = time.perf_counter()
-    results = [an.transfer(src_y, sp, img, xp, method=a.method) for (_, img), xp in zip(exprs, pts)]
+    results = [an.transfer(src_y, sp, img, xp, method=a.method, strength=a.strength) for (_, img), xp in zip(exprs, pts)]
     t2 = time.perf_counter()
     for (p, _), r in zip(exprs, results):
         write_image(out / f"{p.stem}.png", r.image)
@@ -755,6 +757,8 @@ def build_parser():
     ti.add_argument("--method", choices=["vtc", "eri", "warp"], default="vtc",
                     help="vtc: vertex-tent luminance transfer (Song); eri: expression ratio images (Liu 2001); "
                          "warp: feature-point warp only")
+    ti.add_argument("--strength", type=float, default=1.0, metavar="A",
+                    help="how much of the expression: 0 none, 1 the source's (default), up to 2 exaggerated")
     ti.add_argument("--no-mouth", action="store_true", help="keep the target's own mouth when the source opens "
                     "its mouth (default: the source's teeth and mouth interior, Song's teeth template)")
     ti.add_argument("--out", required=True, help="output folder (photos), or an .mp4 with --driving")

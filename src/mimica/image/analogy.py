@@ -132,8 +132,10 @@ class ImageAnalogy:
         self._solver = SPDSolver(_face_laplacian(self.inside))               # factored once
 
     # -- geometry ----------------------------------------------------------------------------
-    def _controls(self, s_pts, x_pts):
-        """Control points (crop coordinates for the target, image coordinates for the sources)."""
+    def _controls(self, s_pts, x_pts, strength=1.0):
+        """Control points (crop coordinates for the target, image coordinates for the sources);
+        the target moves by `strength` times the sources' feature motion, the sources are read
+        at their own points."""
         s_pts, x_pts = np.asarray(s_pts, float), np.asarray(x_pts, float)
         a = Similarity2D.fit(s_pts, self.points)                         # S -> T (step 2)
         b = head_motion(x_pts, s_pts)                                    # S' -> S
@@ -143,7 +145,7 @@ class ImageAnalogy:
         off = np.array(self.box[:2], float)
         p_s = np.concatenate([s_pts, forehead_points(s_pts), a.inverse()(self.border + off)])
         p_x = b.inverse()(p_s + d)
-        p_tw = self.ctrl_t + a.linear(d)                                 # step 3: T warped
+        p_tw = self.ctrl_t + a.linear(strength * d)                      # step 3: T warped
         return p_s, p_x, p_tw
 
     def _neutral_mask(self) -> np.ndarray:
@@ -154,9 +156,9 @@ class ImageAnalogy:
         inside = (self.face_tri[pa.tri_id] & pa.covered).reshape(self.h, self.w)
         return np.clip(distance_transform_edt(inside) / self.feather, 0, 1).astype(np.float32)
 
-    def prepare(self, source, s_pts, expressive, x_pts):
+    def prepare(self, source, s_pts, expressive, x_pts, strength=1.0):
         """Steps 2-3: both sources resampled onto the target's grid (crop), and the warp of step 5."""
-        p_s, p_x, p_tw = self._controls(s_pts, x_pts)
+        p_s, p_x, p_tw = self._controls(s_pts, x_pts, strength)
         hw = (self.h, self.w)
         s_r = sample(luminance(source), *self.grid.map(p_s)).reshape(hw)
         x_r = sample(luminance(expressive), *self.grid.map(p_x)).reshape(hw)
@@ -178,12 +180,13 @@ class ImageAnalogy:
         known[:-1, :] += out_[1:, :]
         return t, _diffs(t), known[self.inside]
 
-    def vtc_luminance(self, s_l, x_l) -> np.ndarray:
+    def vtc_luminance(self, s_l, x_l, strength=1.0) -> np.ndarray:
         """The target's new luminance from the sources' (both on the target's grid, Y in
         [0, 1]): eq. 2 per pixel, then eq. 4 for the luminance alone (the face's pixels unknown,
-        the rest held: one back-substitution of the per-target factor)."""
+        the rest held: one back-substitution of the per-target factor).  With strength a < 1
+        each tent's transformation is (1 - a) I + a Q."""
         k = np.float32(self.height)
-        mask = self.mask_t
+        mask = self.mask_t if strength == 1 else self.mask_t * np.float32(strength)
         t, dt, known = self._target_terms
         s, x = s_l * k, x_l * k
         # neighbour differences right/left/down/up (edge-replicated: zero across the border)
@@ -232,10 +235,10 @@ class ImageAnalogy:
         sol[self.inside] = self._solver.solve(div[self.inside] + known)
         return sol / k
 
-    def eri_ratio(self, s_l, x_l, mask, small=None, large=None) -> np.ndarray:
+    def eri_ratio(self, s_l, x_l, mask, small=None, large=None, strength=1.0) -> np.ndarray:
         """Liu, Shan & Zhang 2001: R = A'/A on the aligned sources, filtered by an adaptive
         Gaussian (a small kernel where the ratio carries expression detail, a large one
-        elsewhere, to hide misregistration); 1 outside the face."""
+        elsewhere, to hide misregistration); 1 outside the face; R ** strength."""
         from scipy.ndimage import gaussian_filter
         size = np.ptp(self.points, 0).max()
         small = small or max(0.5, 0.004 * size)
@@ -245,21 +248,27 @@ class ImageAnalogy:
         detail = gaussian_filter(np.abs(r_s - r_l), large)
         wgt = np.clip(detail / 0.03, 0, 1)
         rr = wgt * r_s + (1 - wgt) * r_l
+        if strength != 1:
+            rr = rr ** np.float32(strength)
         return (mask * rr + (1 - mask)).astype(np.float32)
 
-    def transfer(self, source, s_pts, expressive, x_pts, method="vtc") -> Result:
+    def transfer(self, source, s_pts, expressive, x_pts, method="vtc", strength=1.0) -> Result:
         """The target with the expression of (source -> expressive).  Images in [0, 1]: RGB, or
         for the sources their luminance (only Y is read from them; a video's fixed source neutral
-        can be converted once)."""
+        can be converted once).  `strength` scales the expression: 0 gives the target back,
+        1 the source's expression, up to 2 exaggerates it (the feature motion times strength;
+        per pixel the transformation interpolated from the identity, (1 - a) I + a Q, or for
+        ERI the ratio to the power a)."""
         if method not in ("vtc", "eri", "warp"):
             raise MimicaError(f"unknown method {method!r}; use vtc, eri or warp")
-        s_r, x_r, look, pts = self.prepare(source, s_pts, expressive, x_pts)
+        strength = check_strength(strength)
+        s_r, x_r, look, pts = self.prepare(source, s_pts, expressive, x_pts, strength)
         yuv = self.crop_yuv
         if method == "vtc":
             yuv = yuv.copy()
-            yuv[..., 0] = self.vtc_luminance(s_r, x_r)
+            yuv[..., 0] = self.vtc_luminance(s_r, x_r, strength)
         elif method == "eri":
-            yuv = yuv * self.eri_ratio(s_r, x_r, self.mask_t)[..., None]   # Y, U, V all scale with RGB
+            yuv = yuv * self.eri_ratio(s_r, x_r, self.mask_t, strength=strength)[..., None]   # Y, U, V all scale with RGB
         x0, y0, x1, y1 = self.box
         out = self.target.copy()
         out[y0:y1, x0:x1] = np.clip(yuv_to_rgb(look(yuv).reshape(self.h, self.w, 3)), 0, 1)
@@ -276,6 +285,14 @@ class ImageAnalogy:
     @cached_property
     def _target_lightness(self) -> float:
         return _lightness(self.target, self.points)
+
+
+def check_strength(strength) -> float:
+    """An expression strength from 0 to 2, else a clear error (NaN included)."""
+    a = float(strength)
+    if not 0 <= a <= 2:
+        raise MimicaError(f"strength {a:g}: expected a number from 0 (no expression) to 2")
+    return a
 
 
 MOUTH = np.arange(60, 68)                  # the inner lip outline
