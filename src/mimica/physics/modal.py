@@ -274,7 +274,8 @@ class ModalWarpingSolver:
         u = np.zeros((b.n, 3))
         if warp:
             # forces go into the nodes' frames by R^T (Kim eq. 10); the displacement is the
-            # integrated rotation applied to the local one
+            # integrated rotation applied to the local one.  self.rot keeps R(q) for the next
+            # step's forces: a function of q alone, so calling this again changes nothing
             self.rot, warp_m = rotations((b.psi @ self.q).reshape(-1, 3))
             u[b.free] = np.einsum("kij,kj->ki", warp_m, local)
         else:
