@@ -183,7 +183,7 @@ class ImageAnalogy:
     def vtc_luminance(self, s_l, x_l, strength=1.0) -> np.ndarray:
         """The target's new luminance from the sources' (both on the target's grid, Y in
         [0, 1]): eq. 2 per pixel, then eq. 4 for the luminance alone (the face's pixels unknown,
-        the rest held: one back-substitution of the per-target factor).  With strength a < 1
+        the rest held: one back-substitution of the per-target factor).  With strength a != 1
         each tent's transformation is (1 - a) I + a Q."""
         k = np.float32(self.height)
         mask = self.mask_t if strength == 1 else self.mask_t * np.float32(strength)
