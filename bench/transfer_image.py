@@ -169,6 +169,7 @@ def yale_pairs(yale, quick):
     tot = {k: [] for k in ("vtc", "eri", "warp", "neutral")}
     weak = {a: [] for a in (0.25, 0.5)}          # ours with less of A's expression (--strength)
     rows = []
+    analogies = {}                               # one per target photo: its factorization, reused
     for e in YALE_EXPR if not quick else YALE_EXPR[:2]:
         res = {k: [] for k in tot}
         # a subject whose "expression" file is a byte copy of its neutral (subject04.sad) has no
@@ -176,14 +177,16 @@ def yale_pairs(yale, quick):
         same = {p for p in subs if (yale.dir / f"{p}.{e}.gif").read_bytes() == (yale.dir / f"{p}.normal.gif").read_bytes()}
         if same:
             print(f"  Yale {e}: {', '.join(sorted(same))} {e} = neutral (byte copy), its pairs left out")
+        truths = {}
         for a, b in itertools.permutations(sorted(set(subs) - same), 2):
             s, sp = yale(f"{a}.normal")
             x, xp = yale(f"{a}.{e}")
             t, tp = yale(f"{b}.normal")
-            tx, txp = yale(f"{b}.{e}")
-            truth = align_to(tx, txp, tp)
-            mask = hull_mask(tp, t.shape)
-            an = ImageAnalogy(t, tp)
+            if b not in truths:
+                tx, txp = yale(f"{b}.{e}")
+                truths[b] = align_to(tx, txp, tp), hull_mask(tp, t.shape)
+            truth, mask = truths[b]
+            an = analogies.get(b) or analogies.setdefault(b, ImageAnalogy(t, tp))
             r = {m: an.transfer(s, sp, x, xp, method=m).image for m in ("vtc", "eri", "warp")}
             for m in r:
                 res[m].append(psnr(r[m], truth, mask))
