@@ -16,6 +16,7 @@ deformation of a face costs the same in centimetres or metres.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -218,21 +219,20 @@ class ShellEnergy:
             g += np.bincount(dof.ravel(), weights=(k * gl).ravel(), minlength=3 * self.n)
         return g.reshape(-1, 3)
 
+    @cached_property
     def _pattern(self):
         """The Hessian's CSR structure, built once: (indptr, indices, slot of each element entry)."""
-        if getattr(self, "_csr", None) is None:
-            keys = []
-            for k, idx, _, _ in self._terms():
-                if k == 0 or len(idx) == 0:
-                    continue
-                dof = (3 * idx[:, :, None] + np.arange(3)).reshape(len(idx), -1)
-                m = dof.shape[1]
-                keys.append((np.repeat(dof, m, axis=1) * (3 * self.n) + np.tile(dof, (1, m))).ravel())
-            uniq, slot = np.unique(np.concatenate(keys), return_inverse=True)
-            rows, cols = np.divmod(uniq, 3 * self.n)
-            indptr = np.searchsorted(rows, np.arange(3 * self.n + 1))
-            self._csr = indptr, cols, slot.ravel(), len(uniq)
-        return self._csr
+        keys = []
+        for k, idx, _, _ in self._terms():
+            if k == 0 or len(idx) == 0:
+                continue
+            dof = (3 * idx[:, :, None] + np.arange(3)).reshape(len(idx), -1)
+            m = dof.shape[1]
+            keys.append((np.repeat(dof, m, axis=1) * (3 * self.n) + np.tile(dof, (1, m))).ravel())
+        uniq, slot = np.unique(np.concatenate(keys), return_inverse=True)
+        rows, cols = np.divmod(uniq, 3 * self.n)
+        indptr = np.searchsorted(rows, np.arange(3 * self.n + 1))
+        return indptr, cols, slot.ravel(), len(uniq)
 
     def hessian(self, x: np.ndarray, project: bool = False) -> sp.csr_matrix:
         """d2E/dx2 as a sparse (3n x 3n) matrix (dof order x0, y0, z0, x1, ...).
@@ -256,7 +256,7 @@ class ShellEnergy:
             else:
                 _, _, hl = hd.local_derivatives(fn, self._stack(x, idx), par)
             vals.append((k * hl).ravel())
-        indptr, cols, slot, nnz = self._pattern()
+        indptr, cols, slot, nnz = self._pattern
         data = np.bincount(slot, weights=np.concatenate(vals), minlength=nnz)
         n3 = 3 * self.n
         return sp.csr_matrix((data, cols, indptr), shape=(n3, n3))
