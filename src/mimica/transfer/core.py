@@ -122,6 +122,9 @@ class TransferSolver:
         self.k0 = k0[iv] - G @ k0[it]
         self.free = self.free[iv]
         self.n_target, self.n_unknowns = nt, n_unk
+        # the fixed vertices' map, built here and not on first use: `apply` runs on threads
+        self._vm_fixed = Vm_c.tocsr()
+        self._fixed_base = T[fixed_v] - self._vm_fixed @ S
 
     @staticmethod
     def _element_areas(el: Elements, mesh: Mesh) -> np.ndarray:
@@ -188,15 +191,3 @@ class TransferSolver:
             out = np.empty((nf, self.n_target, 3))
         out[:] = np.moveaxis(x, 1, 0)
         return out[0] if single else out
-
-    @property
-    def _vm_fixed(self):
-        if "_vmf" not in self.__dict__:
-            self._vmf = self.vertex_map[self.fixed].tocsr()
-            self._fb = self.target.vertices[self.fixed] - self._vmf @ self.source.vertices
-        return self._vmf
-
-    @property
-    def _fixed_base(self):
-        _ = self._vm_fixed
-        return self._fb
