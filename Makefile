@@ -1,31 +1,54 @@
 # make demo: set up .venv and run the main job on the bundled data (writes out/demo/)
-# make test: set up .venv and run the tests
+# make test: set up .venv and run the tests against the installed wheel
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+WHEEL_STAMP := $(VENV)/.wheel
+SOURCES := $(shell find src -type f -not -name '*.pyc' -not -path '*.egg-info*') pyproject.toml README.md
 
-.PHONY: demo test bench setup clean
+.PHONY: demo test test-lowest bench setup wheel clean
 
-setup: $(STAMP)
+setup: $(WHEEL_STAMP)
 
-$(STAMP): pyproject.toml
+# the dependencies at CI's exact versions (constraints/ci.txt); cholespy gives CHOLMOD's speed
+# from a self-contained wheel; scikit-sparse, faster still, builds only where SuiteSparse's
+# headers exist (Debian: libsuitesparse-dev, which .ci/run installs)
+$(STAMP): pyproject.toml constraints/ci.txt
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e ".[test]"
-	@# CHOLMOD is faster; it builds only where SuiteSparse headers exist (scipy otherwise)
-	-$(BIN)/pip install -q "scikit-sparse==0.4.16" 2>/dev/null || echo "note: scikit-sparse not installed; using scipy's sparse solver"
+	$(BIN)/pip install -q -c constraints/ci.txt setuptools wheel ".[test,cholmod]"
+	$(BIN)/pip uninstall -q -y mimica
+	-$(BIN)/pip install -q -c constraints/ci.txt scikit-sparse 2>/dev/null || echo "note: scikit-sparse not built (no SuiteSparse headers); cholespy's CHOLMOD is used"
 	touch $(STAMP)
 
-demo: $(STAMP)
+# mimica itself from its wheel, as a user installs it (never -e: package data must be declared)
+$(WHEEL_STAMP): $(STAMP) $(SOURCES)
+	rm -rf dist build
+	$(BIN)/pip wheel -q --no-deps --no-build-isolation -w dist .
+	$(BIN)/pip install -q --no-deps --force-reinstall dist/mimica-*.whl
+	rm -rf build src/*.egg-info
+	touch $(WHEEL_STAMP)
+
+wheel: $(WHEEL_STAMP)
+
+demo: $(WHEEL_STAMP)
 	$(BIN)/mimica demo --out out/demo
 
-test: $(STAMP)
-	$(BIN)/python -m pytest tests
+test: $(WHEEL_STAMP)
+	MIMICA_TEST_INSTALLED=1 $(BIN)/python -m pytest tests
 
-bench: $(STAMP)
-	$(BIN)/pip install -q -e ".[bench]"
+# the lowest versions pyproject.toml allows, in a venv of their own
+test-lowest:
+	$(PY) -m venv out/venv-lowest
+	out/venv-lowest/bin/pip install -q --upgrade pip
+	out/venv-lowest/bin/pip install -q -c constraints/lowest.txt ".[test,cholmod]"
+	out/venv-lowest/bin/python -m pytest tests
+
+bench: $(WHEEL_STAMP)
+	$(BIN)/pip install -q -c constraints/ci.txt ".[bench]"
+	$(BIN)/pip install -q --no-deps --force-reinstall dist/mimica-*.whl
 	$(BIN)/python bench/transfer.py
 
 clean:
-	rm -rf out $(VENV)
+	rm -rf out dist build $(VENV)

@@ -33,11 +33,13 @@ sys.path.insert(0, str(ROOT / "src"))
 
 from mimica.data import ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel  # noqa: E402
 from mimica.export import arkit_blendshapes  # noqa: E402
-from mimica.export.templates import TemplateStore  # noqa: E402
+from mimica.store import TemplateStore  # noqa: E402
 from mimica.image.video import VideoWriter  # noqa: E402
 from mimica.mesh.remesh import resample_face  # noqa: E402
 from mimica.render import contact_sheet, face_framing, render_mesh, save_png, turntable_angles  # noqa: E402
 from mimica.render.shots import shared_frame_all_views  # noqa: E402
+import mimica  # noqa: E402
+mimica.keep_memory()                   # as the command line does (mimica/_memory.py)
 
 FIG = ROOT / "docs" / "figures"
 

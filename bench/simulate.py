@@ -24,6 +24,8 @@ from mimica.mesh import plane_grid  # noqa: E402
 from mimica.physics.modal import against_full  # noqa: E402
 from mimica.render import contact_sheet, render_mesh, save_png, shared_frame  # noqa: E402
 from mimica.rig import build_rig  # noqa: E402
+import mimica  # noqa: E402
+mimica.keep_memory()                   # as the command line does (mimica/_memory.py)
 
 ANATOMY = [("zygomaticus_major", {"mouthSmile": 1.0}), ("depressor_anguli_oris", {"mouthFrown": 1.0}),
            ("corrugator_supercilii", {"browDown": 1.0}), ("depressor_labii_inferioris", {"mouthLowerDown": 1.0}),

@@ -23,7 +23,9 @@ from mimica.data import (EXPRESSIONS, ICT_FACE_AREA_FACES, ICT_FACE_AREA_VERTICE
 from mimica.landmarks import Landmarks, ict_landmarks  # noqa: E402
 from mimica.mesh.remesh import resample_face  # noqa: E402
 from mimica.transfer import ExpressionTransfer, relative_error, static_vertices  # noqa: E402
-from mimica.solver import backend  # noqa: E402
+from mimica.solver import available, backend  # noqa: E402
+import mimica  # noqa: E402
+mimica.keep_memory()                   # as the command line does (mimica/_memory.py)
 
 FACE = slice(0, ICT_FACE_AREA_VERTICES)
 
@@ -126,11 +128,9 @@ def main():
               + ", ".join(f"{e} {v:.3f}" for e, v in zip(EXPRESSIONS, rem[method])))
     print(f"correspondence for the remeshed target: {tc:.3f}s")
 
-    # CHOLMOD against SciPy's SuperLU on the same system
+    # every installed sparse solver on the same system (scikit-sparse's CHOLMOD, cholespy's, SuperLU)
     T = S.with_vertices(held_out_identity(model, 0))
-    for kind in ("cholmod", "scipy"):
-        if kind == "cholmod" and backend() != "cholmod":
-            continue
+    for kind in available():
         tp, xk = best_of(lambda: ExpressionTransfer(S, T, ls, ict_landmarks(T), "vtc", static, solver_kind=kind), a.repeat)
         ta, _ = best_of(lambda: xk.apply(frames), a.repeat)
         print(f"solver {kind}: precompute {tp:.3f}s, {a.frames / ta:.0f} frames/s")

@@ -45,6 +45,8 @@ from mimica.image.video import VideoWriter, frame_source  # noqa: E402
 from mimica.image.warp import Similarity2D, align_to, head_motion, polygon_mask  # noqa: E402
 from mimica.render import contact_sheet, save_png  # noqa: E402
 from mimica.render.sheet import to_uint8  # noqa: E402
+import mimica  # noqa: E402
+mimica.keep_memory()                   # as the command line does (mimica/_memory.py)
 
 FIG = ROOT / "docs" / "figures"
 LOCAL_FIG = ROOT / "out" / "figures"          # ignored by git

@@ -20,6 +20,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 from mimica.data import ICT_HEAD_VERTICES, ICTModel  # noqa: E402
 from mimica.wrinkles import ArcLengthTable, arc_length, dilation, fit_cylinder  # noqa: E402
 from mimica.wrinkles.bulge import control_points  # noqa: E402
+import mimica  # noqa: E402
+mimica.keep_memory()                   # as the command line does (mimica/_memory.py)
 
 
 def main():

@@ -2,10 +2,17 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from mimica.data import ICT_HEAD_VERTICES, ICTModel, data_dir
+# one data setting for the tests, also when they run against an installed wheel (CI): the
+# shared data beside this checkout unless MIMICA_DATA says otherwise
+os.environ.setdefault("MIMICA_DATA", str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+
+from mimica.data import ICT_HEAD_VERTICES, ICTModel, data_dir  # noqa: E402
 
 
 def pytest_report_header(config):

@@ -35,8 +35,9 @@ def test_transfer_folder_same_topology_keeps_quads(files, tmp_path, capsys):
     out = tmp_path / "o"
     assert main(["transfer", str(files / "S.obj"), str(files / "seq"), "--target", str(files / "T.obj"),
                  "--out", str(out)]) == 0
-    names = sorted(p.name for p in out.iterdir())
+    names = sorted(p.name for p in out.iterdir() if p.name != ".mimica-run.json")
     assert names == sorted(p.name for p in (files / "seq").iterdir())
+    assert (out / ".mimica-run.json").is_file()                 # a complete run, marked
     T = read_mesh(files / "T.obj")
     r = read_mesh(out / names[0])
     assert r.same_topology(T) and (r.face_sizes == 4).sum() > 10000 and r.uv is not None

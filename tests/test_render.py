@@ -105,7 +105,7 @@ def _write_rest(tmp_path, head_model):
 
 def test_arkit_names_and_sources():
     from mimica.export import ARKIT_52, ict_sources
-    from mimica.export.templates import MANIFEST
+    from mimica.store import MANIFEST
     assert len(ARKIT_52) == 52 and len(set(ARKIT_52)) == 52
     for a in ARKIT_52:
         for n in ict_sources(a):
@@ -116,7 +116,7 @@ def test_arkit_names_and_sources():
 
 def test_templates_offline_is_one_clear_error(tmp_path):
     from mimica.errors import MimicaError
-    from mimica.export.templates import TemplateStore
+    from mimica.store import TemplateStore
     store = TemplateStore(data=tmp_path / "nowhere", cache=tmp_path / "cache",
                           url="http://127.0.0.1:9/{commit}/{name}.obj", timeout=2)
     with pytest.raises(MimicaError, match="download from .* failed"):
@@ -129,7 +129,7 @@ def test_blendshapes_on_another_topology(tmp_path, head_model):
     the left smile moves the left mouth corner more than the right, tongueOut stays at rest."""
     from mimica.data import ICT_LANDMARKS_68
     from mimica.export import arkit_blendshapes
-    from mimica.export.templates import TemplateStore
+    from mimica.store import TemplateStore
     from mimica.mesh.remesh import resample_face
     v = head_model.identity("identity013")
     rs = resample_face(head_model.mesh.with_vertices(v), v[ICT_LANDMARKS_68], 6000, seed=3)

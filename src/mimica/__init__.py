@@ -5,5 +5,4 @@ from .errors import MimicaError
 from .mesh import Mesh, read_mesh, write_mesh
 
 __version__ = "0.1.0"
-keep_memory()
-__all__ = ["Mesh", "MimicaError", "read_mesh", "write_mesh", "__version__"]
+__all__ = ["Mesh", "MimicaError", "keep_memory", "read_mesh", "write_mesh", "__version__"]

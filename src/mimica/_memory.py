@@ -3,7 +3,9 @@ otherwise mmap'd fresh and page-faulted on every call, which on virtual machines
 than the arithmetic (measured: a 311x419 bilinear resample 7.9 ms -> 1.2 ms).
 
 Arrays under 64 MiB come from the heap, and up to 256 MiB of freed heap is kept for reuse.
-Set MIMICA_MALLOC=default to leave the allocator alone.
+A process-wide setting, so importing mimica never does it: the command line and the
+benchmarks call `keep_memory()`; a Python user may.  MIMICA_MALLOC=default leaves the
+allocator alone.
 """
 
 from __future__ import annotations

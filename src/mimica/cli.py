@@ -80,8 +80,10 @@ def cmd_transfer(a):
         out[i:i + step] = xfer.apply(frames[i:i + step])
     t3 = time.perf_counter()
     outdir = Path(a.out)
-    for name, v in zip(names, out):
-        write_mesh(outdir / name, target.with_vertices(v))
+    from .outputs import staged_dir
+    with staged_dir(outdir, {"command": "transfer"}) as d:
+        for name, v in zip(names, out):
+            write_mesh(d / name, target.with_vertices(v))
     cor = xfer.correspondence
     _say(f"aligned target to source: residual {100 * xfer.alignment_residual:.2f}% of the face size"
          + ("" if cor is None else f"; correspondence: {100 * cor.matched.mean():.1f}% of target vertices matched"))
@@ -149,9 +151,7 @@ def cmd_rig(a):
 
 def cmd_simulate(a):
     from .anim import Timeline
-    from .mesh import write_mesh
     from .physics.face import FaceSimulator
-    from .render import contact_sheet, render_mesh, save_png, shared_frame
     from .rig import Rig
     rig = Rig.load(a.rig)
     names = [m.name for m in rig.muscles]
@@ -203,15 +203,26 @@ def cmd_simulate(a):
     bar.close()
     el = time.perf_counter() - t0
     out = Path(a.out)
+    from .outputs import staged_dir
+    with staged_dir(out, {"command": "simulate"}) as d:
+        note = _write_simulation(a, rig, tl, sim, frames, d, out)
+    steps = (len(frames) - 1) * sim.substeps
+    _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {steps} steps in {el:.2f}s"
+         + note)
+    return 0
+
+
+def _write_simulation(a, rig, tl, sim, frames, d, out):
+    """frame_*.obj, animation.glb, strip.png (and the wrinkle maps) into the stage `d`."""
+    from .mesh import write_glb, write_mesh
+    from .render import contact_sheet, render_mesh, save_png, shared_frame
     skin = rig.skin
     note = ""
     if a.wrinkles:
-        frames, skin, note = _wrinkle_frames(a, rig, tl, frames, out)
-    from .mesh import atomic_path, write_glb
+        frames, skin, note = _wrinkle_frames(a, rig, tl, frames, d, out)
     for i, v in enumerate(frames):
-        write_mesh(out / f"frame_{i:04d}.obj", skin.with_vertices(v))
-    with atomic_path(out / "animation.glb") as tmp:
-        write_glb(tmp, skin, {f"frame_{i:04d}": v for i, v in enumerate(frames)}, fps=a.fps)
+        write_mesh(d / f"frame_{i:04d}.obj", skin.with_vertices(v))
+    write_glb(d / "animation.glb", skin, {f"frame_{i:04d}": v for i, v in enumerate(frames)}, fps=a.fps)
     title = a.action or (Path(a.timeline).name if a.timeline else a.expression)
     solver_note = ", full solver" if a.solver == "full" else ""
     if a.wrinkles:
@@ -219,20 +230,17 @@ def cmd_simulate(a):
     pick = np.linspace(0, len(frames) - 1, min(6, len(frames))).round().astype(int)
     frame = shared_frame([frames[i] for i in pick])
     tiles = [render_mesh(skin, frames[i], size=(320, 320), frame=frame) for i in pick]
-    save_png(out / "strip.png", contact_sheet(tiles, [f"t = {i / a.fps:.2f}s" for i in pick],
-                                              title=f"{title} ({a.engine}{solver_note})"))
-    steps = (len(frames) - 1) * sim.substeps
+    save_png(d / "strip.png", contact_sheet(tiles, [f"t = {i / a.fps:.2f}s" for i in pick],
+                                            title=f"{title} ({a.engine}{solver_note})"))
     if a.solver == "full":
         st = sim.solver.stats
         note += f"; Newton: {st['iterations'] / max(st['steps'], 1):.1f} iterations a step"
         if st["unconverged"]:
             note += f", {st['unconverged']} steps stopped at the iteration cap"
-    _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {steps} steps in {el:.2f}s"
-         + note)
-    return 0
+    return note
 
 
-def _wrinkle_frames(a, rig, tl, frames, out):
+def _wrinkle_frames(a, rig, tl, frames, d, out):
     """The wrinkle layer on simulated frames (V&Y §5.3): refined skin, age per frame."""
     from .wrinkles import WrinkledSkin
     if a.maps and rig.skin.uv is None:
@@ -253,7 +261,7 @@ def _wrinkle_frames(a, rig, tl, frames, out):
     if a.maps:
         from .wrinkles.maps import bake, save_maps
         h, n = bake(ws.layer, rig.skin, carried[peak], float(ages[peak]), a.maps)
-        save_maps(out / f"wrinkles_frame_{peak:04d}", h, n)
+        save_maps(d / f"wrinkles_frame_{peak:04d}", h, n)
     most = np.argsort(comp[peak])[:3]
     names = ws.layer.mask.names()
     note = (f"; wrinkles: {len(names)} on {ws.mesh.n_vertices} nodes (built in {build_s:.1f}s), "
@@ -420,13 +428,15 @@ def cmd_transfer_image(a):
     t1 = time.perf_counter()
     results = [an.transfer(src_y, sp, img, xp, method=a.method, strength=a.strength) for (_, img), xp in zip(exprs, pts)]
     t2 = time.perf_counter()
-    for (p, _), r in zip(exprs, results):
-        write_image(out / f"{p.stem}.png", r.image)
     cells = [[_tile(src, tgt), _tile(img, tgt), _tile(tgt, tgt), _tile(r.image, tgt)]
              for (_, img), r in zip(exprs, results)]
     sheet = contact_sheet([c for row in cells for c in row], columns=4,
                           labels=[lab for (p, _) in exprs for lab in ("source", p.stem, "target", f"target: {p.stem}")])
-    save_png(out / "sheet.png", sheet)
+    from .outputs import staged_dir
+    with staged_dir(out, {"command": "transfer-image"}) as d:
+        for (p, _), r in zip(exprs, results):
+            write_image(d / f"{p.stem}.png", r.image)
+        save_png(d / "sheet.png", sheet)
     _say(f"{len(results)} expression(s) -> {out}/ ({a.method}; points and setup {t1 - t0:.2f}s, "
          f"transfer {1000 * (t2 - t1) / len(results):.0f} ms each); sheet: {out / 'sheet.png'}")
     return 0
@@ -592,8 +602,10 @@ def cmd_export(a):
         raise MimicaError(f"{out}: export to .glb/.gltf, or to a folder (with --format obj|ply)")
     if a.format not in ("obj", "ply"):
         raise MimicaError(f"--format {a.format}: obj or ply")
-    for p, f in zip(paths, frames):
-        write_mesh(out / f"{p.stem}.{a.format}", mesh.with_vertices(f))
+    from .outputs import staged_dir
+    with staged_dir(out, {"command": "export"}) as d:
+        for p, f in zip(paths, frames):
+            write_mesh(d / f"{p.stem}.{a.format}", mesh.with_vertices(f))
     _say(f"{out}/: {len(frames)} {a.format.upper()} files")
     return 0
 
@@ -622,6 +634,8 @@ def cmd_view(a):
     from .rig import Rig, build_rig
     from .viewer import ViewerServer, ViewerSession, ensure_three
 
+    if not 0 <= a.port <= 65535:
+        raise MimicaError(f"--port {a.port}: a port is 0-65535 (0: a free one)")
     vendor = ensure_three(progress=_say)
     if a.rig:
         rig = Rig.load(a.rig)
@@ -649,13 +663,19 @@ def cmd_view(a):
     # 2-core machine while Chromium draws, ~0.5 ms with one)
     from threadpoolctl import threadpool_limits
     with threadpool_limits(limits=1, user_api="blas"):
-        asyncio.run(server.run(ready))
+        try:
+            asyncio.run(server.run(ready))
+        except OSError as e:
+            raise MimicaError(f"--port {a.port}: cannot listen on 127.0.0.1 ({e.strerror or e}); "
+                              "choose another port, or 0 for a free one") from None
     return 0
 
 
 def cmd_demo(a):
     from .demo import run_demo
-    return run_demo(Path(a.out), quick=a.quick)
+    from .outputs import staged_dir
+    with staged_dir(a.out, {"command": "demo"}) as d:
+        return run_demo(d, quick=a.quick, shown=Path(a.out))
 
 
 def build_parser():
@@ -813,16 +833,84 @@ def build_parser():
     return p
 
 
+# options that name what a command writes; every other path-like argument is an input
+OUTPUT_OPTIONS = ("out", "show")
+
+
+def _writes_folder(a) -> bool:
+    """Whether --out is a folder (replaced whole when the run completes) or one file."""
+    suffix = Path(a.out).suffix.lower()
+    return (a.cmd in ("transfer", "simulate", "demo")
+            or (a.cmd == "transfer-image" and suffix != ".mp4")
+            or (a.cmd == "export" and suffix not in (".glb", ".gltf")))
+
+
+def _inputs(a) -> list[Path]:
+    """Every argument that names an existing file or folder and is not an output."""
+    found = []
+    for k, v in vars(a).items():
+        if k in OUTPUT_OPTIONS or k == "func":
+            continue
+        for x in v if isinstance(v, list) else [v]:
+            if isinstance(x, str) and x and "\0" not in x:
+                try:
+                    if Path(x).exists():
+                        found.append(Path(x))
+                except (OSError, ValueError):
+                    pass
+    return found
+
+
+def check_paths(a) -> None:
+    """Before any work: no output may destroy an input; a folder output must be replaceable."""
+    from .outputs import check_output_dir, guard_outputs
+    outs = []
+    if getattr(a, "out", None):
+        outs.append((a.out, _writes_folder(a)))
+    if getattr(a, "show", None):
+        outs.append((a.show, False))
+    guard_outputs(_inputs(a), outs)
+    for o, folder in outs:
+        if folder:
+            check_output_dir(o)
+
+
+def _terminate(signum, frame):
+    raise KeyboardInterrupt          # SIGTERM unwinds like Ctrl-C: stages and temporary files go
+
+
 def main(argv=None) -> int:
+    import signal
+    from ._memory import keep_memory
+    from .outputs import os_error
     args = build_parser().parse_args(argv)
+    keep_memory()
     try:
+        previous = signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:                                     # not the main thread (tests, embedding)
+        previous = None
+    try:
+        check_paths(args)
         return int(args.func(args) or 0)
     except MimicaError as e:
-        print(f"mimica: error: {e}", file=sys.stderr)
+        print(f"mimica: error: {_one_line(e)}", file=sys.stderr)
+        return 2
+    except OSError as e:                                   # an OS error no command turned into ours
+        print(f"mimica: error: {_one_line(os_error(e.filename or '?', e, 'read or write'))}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print("mimica: error: out of memory; the input is too large for this machine", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("mimica: interrupted", file=sys.stderr)
+        print("mimica: interrupted; nothing of this run was kept", file=sys.stderr)
         return 130
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _one_line(e) -> str:
+    return " ".join(str(e).split())
 
 
 if __name__ == "__main__":

@@ -1,7 +1,9 @@
 """The data directory and the facts about the bundled ICT-FaceKit template.
 
-The data directory is `$MIMICA_DATA` if set, else `../shared/data` beside the project
-root (this repository's layout).  Nothing from it is copied into the project.
+The data directory is `$MIMICA_DATA` if set, else, in a checkout of this repository,
+`../shared/data` beside it; an installed wheel has none and reads ICT-FaceKit through the
+template store (`mimica.store`: the user cache, filled once by a checked download).  Nothing
+from it is copied into the project.
 """
 
 from __future__ import annotations
@@ -33,32 +35,27 @@ ICT_LANDMARKS_68 = np.array([
 ICT_FACE_AREA_SHA256 = "9be0b1b432fef37dd62416d07dd400bab4c925047a6c1f14b5b7a582f8cb3504"
 
 
-def data_dir() -> Path:
-    """The configured data directory (`MIMICA_DATA`, default `<project>/../shared/data`)."""
+def data_dir() -> Path | None:
+    """The configured data directory: `MIMICA_DATA`, else `<checkout>/../shared/data` when
+    running from this repository, else None."""
     env = os.environ.get("MIMICA_DATA")
-    return Path(env).expanduser().resolve() if env else (PROJECT_ROOT.parent / "shared" / "data").resolve()
-
-
-def ict_dir() -> Path:
-    d = data_dir() / "ict-facekit" / "FaceXModel"
-    if not (d / "generic_neutral_mesh.obj").is_file():
-        raise MimicaError(f"{d}: ICT-FaceKit not found; set MIMICA_DATA to the folder that holds "
-                          "ict-facekit/FaceXModel")
-    return d
+    if env:
+        return Path(env).expanduser().resolve()
+    if (PROJECT_ROOT / "pyproject.toml").is_file() and (PROJECT_ROOT / "src" / "mimica").is_dir():
+        return (PROJECT_ROOT.parent / "shared" / "data").resolve()
+    return None
 
 
 def ict_path(name: str) -> Path:
-    """Path of an ICT-FaceKit OBJ by stem: 'generic_neutral_mesh', 'identity003', 'jawOpen'..."""
-    p = ict_dir() / f"{name}.obj"
-    if not p.is_file():
-        raise MimicaError(f"{p}: no such ICT-FaceKit shape")
-    return p
+    """Path of an ICT-FaceKit OBJ by stem ('generic_neutral_mesh', 'identity003', 'jawOpen'...),
+    through the one template store."""
+    from .store import default_store
+    return default_store().path(name)
 
 
 def ict_expression_names() -> list[str]:
-    skip = {"generic_neutral_mesh"}
-    return sorted(p.stem for p in ict_dir().glob("*.obj")
-                  if p.stem not in skip and not p.stem.startswith("identity"))
+    from .store import shape_names
+    return [n for n in shape_names() if n != "generic_neutral_mesh" and not n.startswith("identity")]
 
 
 def face_area_hash(face_indices: np.ndarray, face_starts: np.ndarray) -> str | None:

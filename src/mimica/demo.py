@@ -21,7 +21,8 @@ TARGETS = [("identity A", {"identity000": -0.9, "identity003": 1.2, "identity006
            ("identity C (remeshed scan)", {"identity004": 1.0, "identity005": -1.2, "identity008": 1.0})]
 
 
-def run_demo(out: Path, quick=False) -> int:
+def run_demo(out: Path, quick=False, shown: Path | None = None) -> int:
+    """Write the demo into `out` (`shown`: the folder named in the messages, if `out` is a stage)."""
     t0 = time.perf_counter()
     log = lambda m: print(m, file=sys.stderr)  # noqa: E731
     model = ICTModel(ICT_HEAD_VERTICES)
@@ -65,6 +66,7 @@ def run_demo(out: Path, quick=False) -> int:
     sheet = contact_sheet(tiles, labels, columns=len(exprs) + 1, row_labels=[r[0] for r in rows],
                           title="mimica: ICT-FaceKit expressions transferred (VTC, Song et al.)")
     save_png(out / "contact_sheet.png", sheet)
+    out = shown or out
     log(f"demo done in {time.perf_counter() - t0:.1f}s: meshes in {out}/, picture {out / 'contact_sheet.png'}")
     log(f"try: mimica transfer {out}/source/neutral.obj {out}/source --target {out}/identity_C/neutral.obj "
         f"--target-landmarks {out}/identity_C/neutral.landmarks.json --out {out}/again")

@@ -1,6 +1,8 @@
-"""ICT-FaceKit template files for users outside this repository: read from the data directory
-when it is there, else downloaded once from the public repository at a pinned commit into the
-user cache, each file checked against its sha256 (ict_manifest.json)."""
+"""The one data store for templates (DESIGN.md, Conventions): every ICT-FaceKit file mimica
+reads comes through `TemplateStore.path` -- from the data directory when it holds the file,
+else from the user cache, else downloaded once from the public repository at a pinned commit,
+each download checked against its sha256 (ict_manifest.json).  The installed wheel needs no
+checkout."""
 
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import MimicaError
+from .errors import MimicaError
 
 MANIFEST = json.loads(Path(__file__).with_name("ict_manifest.json").read_text())
 
@@ -28,18 +30,20 @@ class TemplateStore:
     """Where the ICT-FaceKit template files come from (data directory, cache, or download)."""
 
     def __init__(self, data=None, cache=None, url=None, timeout=30.0):
-        from ..data import data_dir
-        self.data = Path(data) if data is not None else data_dir() / "ict-facekit" / "FaceXModel"
+        from .data import data_dir
+        base = data_dir()
+        self.data = Path(data) if data is not None else (base / "ict-facekit" / "FaceXModel" if base else None)
         self.cache = Path(cache) if cache is not None else cache_dir() / "ict-facekit" / MANIFEST["commit"][:12]
-        self.url = url or MANIFEST["url"]
+        # MIMICA_ICT_URL: a mirror of the pinned files (same {commit} and {name} pattern)
+        self.url = url or os.environ.get("MIMICA_ICT_URL") or MANIFEST["url"]
         self.timeout = timeout
 
     def path(self, name: str, progress=None) -> Path:
         if name not in MANIFEST["files"]:
-            raise MimicaError(f"ICT-FaceKit: {name!r} is not one of the template files")
-        p = self.data / f"{name}.obj"
-        if p.is_file():
-            return p
+            raise MimicaError(f"ICT-FaceKit: {name!r} is not one of its shapes (known: "
+                              f"{', '.join(sorted(MANIFEST['files'])[:6])}, ...)")
+        if self.data is not None and (self.data / f"{name}.obj").is_file():
+            return self.data / f"{name}.obj"
         p = self.cache / f"{name}.obj"
         if p.is_file():
             return p
@@ -56,21 +60,21 @@ class TemplateStore:
                 data = r.read()
         except (urllib.error.URLError, OSError, ValueError) as e:
             reason = getattr(e, "reason", None) or e
-            raise MimicaError(f"ICT-FaceKit template {name}.obj: not in the data directory ({self.data}) "
+            raise MimicaError(f"ICT-FaceKit template {name}.obj: not in the data directory ({self.data or 'MIMICA_DATA not set'}) "
                               f"and the download from {url} failed ({reason}); connect once, or set "
                               f"MIMICA_DATA to a folder holding ict-facekit/FaceXModel") from None
         digest = hashlib.sha256(data).hexdigest()
         if digest != MANIFEST["files"][name]:
             raise MimicaError(f"ICT-FaceKit template {name}.obj from {url}: sha256 {digest[:16]}... does not "
                               f"match the expected {MANIFEST['files'][name][:16]}...; not used")
-        from ..mesh import atomic_path
+        from .mesh import atomic_path
         with atomic_path(dest) as tmp:
             tmp.write_bytes(data)
         return dest
 
     def shapes(self, names, n_vertices, progress=None) -> dict:
         """Vertex positions (first n_vertices) of the named shapes, via a compact cache file."""
-        from ..mesh import atomic_path, read_vertices
+        from .mesh import atomic_path, read_vertices
         key = f"shapes-{n_vertices}-{hashlib.sha1(','.join(sorted(names)).encode()).hexdigest()[:10]}.npz"
         cache = self.cache / key
         if cache.is_file():
@@ -91,3 +95,21 @@ class TemplateStore:
         except OSError:
             pass                                  # a read-only home: just slower next time
         return out
+
+
+_default = None
+
+
+def default_store() -> TemplateStore:
+    """The store for the current MIMICA_DATA / MIMICA_CACHE (rebuilt when they change)."""
+    global _default
+    key = tuple(os.environ.get(k) for k in ("MIMICA_DATA", "MIMICA_CACHE", "XDG_CACHE_HOME", "MIMICA_ICT_URL"))
+    if _default is None or _default[0] != key:
+        _default = (key, TemplateStore())
+    return _default[1]
+
+
+def shape_names() -> list[str]:
+    """Every ICT-FaceKit file the store knows, by stem."""
+    return sorted(MANIFEST["files"])
+

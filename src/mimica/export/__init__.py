@@ -1,6 +1,6 @@
 """Take it home: ARKit blendshapes for any head, glTF sequences (issue 5)."""
 
 from .blendshapes import ARKIT_52, arkit_blendshapes, ict_sources
-from .templates import TemplateStore
+from ..store import TemplateStore
 
 __all__ = ["ARKIT_52", "arkit_blendshapes", "ict_sources", "TemplateStore"]

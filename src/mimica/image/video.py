@@ -13,11 +13,8 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".gif", ".bmp", ".tif", ".tiff", ".we
 
 
 def _ffmpeg():
-    try:
-        import imageio_ffmpeg
-        return imageio_ffmpeg
-    except ImportError:
-        raise MimicaError("video needs imageio-ffmpeg: pip install imageio-ffmpeg (or give a folder of frames)") from None
+    from .._extras import require
+    return require("imageio_ffmpeg", "photo", "video (or a folder of frames instead)")
 
 
 def frame_source(path):
@@ -52,9 +49,13 @@ class VideoWriter:
     def __init__(self, path, fps=25.0):
         import os
         import tempfile
+        from ..outputs import make_parent, os_error
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.stem}.", suffix=".mp4", dir=self.path.parent)
+        make_parent(self.path)
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=f".{self.path.stem}.", suffix=".mp4", dir=self.path.parent)
+        except OSError as e:
+            raise os_error(self.path, e) from None
         os.close(fd)
         self.tmp, self.fps, self.gen, self.n = Path(tmp), fps, None, 0
 
@@ -71,12 +72,17 @@ class VideoWriter:
 
     def close(self, ok=True):
         import os
-        if self.gen is not None:
-            self.gen.close()
-        if ok and self.n:
-            os.replace(self.tmp, self.path)
-        elif self.tmp.exists():
-            self.tmp.unlink()
+        from ..outputs import os_error
+        try:
+            if self.gen is not None:
+                self.gen.close()
+            if ok and self.n:
+                os.replace(self.tmp, self.path)
+        except OSError as e:
+            raise os_error(self.path, e) from None
+        finally:
+            if self.tmp.exists():
+                self.tmp.unlink()
 
     def __enter__(self):
         return self

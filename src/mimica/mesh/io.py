@@ -6,36 +6,15 @@ Writes are atomic: the file appears complete or not at all.
 
 from __future__ import annotations
 
-import os
-import tempfile
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import MimicaError
+from ..outputs import atomic_path  # noqa: F401  (re-exported: mesh.atomic_path)
 from .core import Mesh
 
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf")
-
-
-# ----------------------------------------------------------------- atomic write
-@contextmanager
-def atomic_path(path):
-    """Yield a temporary path beside `path`; move it into place only on success."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)        # mkstemp makes 0600 files; use the usual mode
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def read_json(path, what="file"):

@@ -39,6 +39,8 @@ def _frame(kind: int, arr) -> bytes:
 
 class ViewerServer:
     def __init__(self, session, vendor: Path, title="mimica", host="127.0.0.1", port=0, log=None):
+        from .._extras import require
+        require("websockets", "viewer", "the viewer")
         self.session, self.vendor, self.title = session, Path(vendor), title
         self.host, self.port = host, port
         self.log = log or (lambda m: None)

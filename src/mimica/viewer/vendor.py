@@ -23,12 +23,14 @@ FILES = {
 
 
 def vendor_dir() -> Path:
-    from ..export.templates import cache_dir
+    from ..store import cache_dir
     return cache_dir() / f"three-{THREE_VERSION}"
 
 
 def ensure_three(url: str = THREE_URL, timeout: float = 60.0, progress=None) -> Path:
     """The folder holding three.js's files, downloading and checking them on first use."""
+    from .._extras import require
+    require("websockets", "viewer", "the viewer")          # said before anything is fetched or built
     d = vendor_dir()
     if all((d / n).is_file() for n in FILES):
         return d
