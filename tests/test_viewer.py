@@ -35,6 +35,11 @@ def server(tmp_path_factory):
         yield url, d, face
 
 
+def _ws_url(url, token=None):
+    base, tok = url.split("?token=")
+    return base.replace("http", "ws") + "ws?token=" + (tok if token is None else token)
+
+
 def _get(url):
     try:
         with urllib.request.urlopen(url, timeout=10) as r:
@@ -45,13 +50,16 @@ def _get(url):
 
 def test_serves_only_its_own_files(server):
     url, d, _ = server
-    assert url.startswith("http://127.0.0.1:")
+    base = url.split("?")[0]
+    assert url.startswith("http://127.0.0.1:") and "?token=" in url
     status, body = _get(url)
     assert status == 200 and b"<canvas" in body
-    assert _get(url + "app.js")[0] == 200 and _get(url + "vendor/three.module.js")[0] == 200
+    assert _get(base)[0] == 403                                   # the page needs the token
+    assert _get(base + "?token=wrong")[0] == 403
+    assert _get(base + "app.js")[0] == 200 and _get(base + "vendor/three.module.js")[0] == 200
     for bad in ("../../../../etc/passwd", "%2e%2e/%2e%2e/etc/passwd", "face.rig", str(d / "face.rig"),
                 "vendor/../../pyproject.toml", "static/app.js"):
-        assert _get(url + bad)[0] == 404, bad
+        assert _get(base + bad)[0] == 404, bad
 
 
 def test_bad_messages_are_answered_and_the_server_lives(server):
@@ -59,7 +67,7 @@ def test_bad_messages_are_answered_and_the_server_lives(server):
     from websockets.asyncio.client import connect
 
     async def run():
-        async with connect(url.replace("http", "ws") + "ws", max_size=1 << 26) as ws:
+        async with connect(_ws_url(url), max_size=1 << 26) as ws:
             init = json.loads(await ws.recv())
             assert init["type"] == "init" and "zygomaticus_major_L" in init["muscles"] and init["age"]
             errors = []
@@ -149,3 +157,148 @@ def test_page_in_headless_chromium(server, tmp_path):
         pg.wait_for_function("window.mimica.scale().scale === 1", timeout=10000)   # still: drawn sharp
         pg.screenshot(path=str(ARTIFACTS / "viewer_second_face.png"))
         assert not pg.errors, pg.errors
+
+
+# ------------------------------------------------------------------ only its user reaches it
+def _raw(url, request: bytes, read=True) -> bytes:
+    import socket
+    host, port = url.split("//")[1].split("/")[0].split(":")
+    s = socket.create_connection((host, int(port)), timeout=10)
+    s.sendall(request)
+    data = s.recv(4096) if read else b""
+    s.close()
+    return data
+
+
+def test_foreign_origin_wrong_host_or_no_token_get_403_and_no_byte_of_the_face(server):
+    url = server[0]
+    from websockets.asyncio.client import connect
+    from websockets.exceptions import InvalidStatus
+
+    async def refused(uri, **kw):
+        try:
+            async with connect(uri, **kw) as ws:
+                await ws.recv()
+        except InvalidStatus as e:
+            return e.response.status_code, e.response.body
+        return None, b""
+    for uri, kw in [(_ws_url(url), {"origin": "https://evil.example"}),
+                    (_ws_url(url), {"origin": "http://127.0.0.1:1"}),
+                    (_ws_url(url, token=""), {}), (_ws_url(url, token="guess"), {}),
+                    (_ws_url(url).split("?")[0], {})]:
+        code, body = asyncio.run(refused(uri, **kw))
+        assert code == 403 and len(body) < 100, (uri, kw, code)
+    port = url.split(":")[2].split("/")[0]
+    tok = url.split("token=")[1]
+    for path in (f"/?token={tok}", "/app.js", f"/ws?token={tok}"):
+        reply = _raw(url, (f"GET {path} HTTP/1.1\r\nHost: attacker.example:{port}\r\nConnection: Upgrade\r\n"
+                           "Upgrade: websocket\r\nSec-WebSocket-Version: 13\r\n"
+                           "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n").encode())
+        assert reply.startswith(b"HTTP/1.1 403"), (path, reply[:80])
+    # the page's own origin is let in
+    async def own():
+        async with connect(_ws_url(url), origin=f"http://127.0.0.1:{port}") as ws:
+            return json.loads(await ws.recv())["type"]
+    assert asyncio.run(own()) == "init"
+
+
+def test_hostile_messages_get_short_replies_of_ours(server):
+    url = server[0]
+    from websockets.asyncio.client import connect
+
+    async def run():
+        async with connect(_ws_url(url), max_size=1 << 26) as ws:
+            await ws.recv()
+            replies = []
+            for msg in ['{"type": "set", "name": "x", "value": ' + "9" * 5000 + "}",
+                        "[" * 100_000 + "]" * 100_000,
+                        json.dumps({"type": "load", "name": "big.obj", "obj": "v 0 0 0\n" * 400_000})]:
+                await ws.send(msg)
+                while True:
+                    r = await asyncio.wait_for(ws.recv(), 30)
+                    if isinstance(r, str):
+                        replies.append(json.loads(r))
+                        break
+            return replies
+    replies = asyncio.run(run())
+    assert all(r["type"] == "error" and len(r["message"]) < 200 for r in replies), replies
+    assert not any("Exceeds" in r["message"] or "recursion" in r["message"].lower() for r in replies)
+    assert "400000 vertices" in replies[2]["message"]
+
+
+def test_a_stuck_client_slows_no_other(server):
+    """50 pages, one of which never reads: the 49 others keep getting >= 20 frames/s."""
+    url = server[0]
+    from websockets.asyncio.client import connect
+    import socket
+    host, port = url.split("//")[1].split("/")[0].split(":")
+    tok = url.split("token=")[1]
+    stuck = socket.socket()
+    stuck.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    stuck.connect((host, int(port)))
+    stuck.sendall((f"GET /ws?token={tok} HTTP/1.1\r\nHost: {host}:{port}\r\nConnection: Upgrade\r\n"
+                   "Upgrade: websocket\r\nSec-WebSocket-Version: 13\r\n"
+                   "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n").encode())
+
+    async def reader(counts, i, stop):
+        async with connect(_ws_url(url), max_size=1 << 26, compression=None) as ws:
+            while not stop.is_set():
+                try:
+                    r = await asyncio.wait_for(ws.recv(), 0.5)
+                except asyncio.TimeoutError:
+                    continue
+                if isinstance(r, bytes) and r[:4] == b"\0\0\0\0":
+                    counts[i] += 1
+                    await ws.send('{"type": "ack"}')
+
+    async def driver(stop):
+        async with connect(_ws_url(url), max_size=1 << 26) as ws:
+            k = 0
+            while not stop.is_set():
+                k += 1
+                await ws.send(json.dumps({"type": "set", "name": "zygomaticus_major_L", "value": k % 2}))
+                await asyncio.sleep(0.05)
+
+    async def run():
+        stop = asyncio.Event()
+        counts = [0] * 49
+        tasks = [asyncio.create_task(reader(counts, i, stop)) for i in range(49)]
+        tasks.append(asyncio.create_task(driver(stop)))
+        await asyncio.sleep(2.0)                                  # connected, the stuck one's buffers full
+        c0 = list(counts)
+        t0 = time.monotonic()
+        await asyncio.sleep(3.0)
+        rates = [(c - b) / (time.monotonic() - t0) for c, b in zip(counts, c0)]
+        stop.set()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        return rates
+    try:
+        rates = asyncio.run(run())
+    finally:
+        stuck.close()
+    assert min(rates) >= 20, sorted(rates)[:5]
+
+
+def test_a_flood_and_half_open_connections_leave_it_serving(server):
+    import socket
+    url = server[0]
+    host, port = url.split("//")[1].split("/")[0].split(":")
+    half = []
+    for _ in range(200):
+        s = socket.create_connection((host, int(port)), timeout=5)
+        s.sendall(b"GET / HTTP/1.1\r\n")                          # and never the rest
+        half.append(s)
+    from websockets.asyncio.client import connect
+
+    async def flood():
+        async with connect(_ws_url(url), max_size=1 << 26) as ws:
+            await ws.recv()
+            for i in range(20_000):
+                await ws.send('{"type": "ack"}' if i % 2 else "not json")
+    try:
+        asyncio.run(flood())
+        status, body = _get(url)
+        assert status == 200 and b"<canvas" in body
+    finally:
+        for s in half:
+            s.close()

@@ -28,7 +28,7 @@ def viewer_process(face, rig, extra=(), timeout=180):
     url, log, t0 = None, [], time.time()
     for line in proc.stderr:
         log.append(line)
-        m = re.search(r"(http://127\.0\.0\.1:\d+/)", line)
+        m = re.search(r"(http://127\.0\.0\.1:\d+/\?token=[\w-]+)", line)
         if m:
             url = m.group(1)
             break
@@ -54,7 +54,7 @@ def browser_page(url, size=(960, 640), query="software"):
             pg = b.new_page(viewport={"width": size[0], "height": size[1]})
             pg.errors = []
             pg.on("pageerror", lambda e: pg.errors.append(str(e)))
-            pg.goto(url + "?" + query)
+            pg.goto(url + ("&" if "?" in url else "?") + query)
             pg.wait_for_function("window.mimica && window.mimica.ready && window.mimica.framesApplied > 0",
                                  timeout=30000)
             yield pg

@@ -10,24 +10,34 @@ Messages from the page (JSON text):
 Replies: JSON {"type": "init" | "error" | "loaded", ...}; binary frames: a uint32 kind then
 data (0: positions float32 of the face, 1: of the second face, 2: triangles uint32 of the
 face, 3: of the second face).  A bad message gets an error reply; the server keeps going.
+
+Only its user reaches it: every request must name the server by Host (127.0.0.1, localhost
+or [::1] with its port: no DNS rebinding); the page and the WebSocket need the per-run
+token of the URL the command prints (as Jupyter does); a WebSocket from a page of another
+Origin is refused (403) before a byte of the face is sent.  Each page has its own bounded
+outbox that keeps only the newest frame, so a page that stops reading slows no other.
 """
 
 from __future__ import annotations
 
 import asyncio
+import hmac
 import json
 import mimetypes
+import secrets
 import struct
 import tempfile
 import time
 from pathlib import Path
+from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
 from ..errors import MimicaError
 
 STATIC = Path(__file__).with_name("static")
-MAX_MESSAGE = 64 << 20
+MAX_MESSAGE = 32 << 20           # bytes a page may send in one message (a second face's OBJ text)
+MAX_SECOND_VERTICES = 300_000    # a second face larger than this is refused before it is parsed
 
 
 IN_FLIGHT = 2
@@ -48,24 +58,47 @@ class ViewerServer:
                        "/vendor/three.module.js": self.vendor / "three.module.js",
                        "/vendor/three.core.js": self.vendor / "three.core.js",
                        "/vendor/OrbitControls.js": self.vendor / "OrbitControls.js"}
+        self.token = secrets.token_urlsafe(24)
         self.clients = set()
+        self.outbox = {}              # per page: the newest frames not yet sent (kind -> bytes)
+        self.wake = {}                # per page: set when its outbox has something
         self.in_flight = {}           # per page: frames sent that it has not shown yet
         self.sent_at = {}
         self.last_input = 0.0
         self.frames_sent = 0
 
     # -- HTTP -----------------------------------------------------------------------------------
+    def _hosts(self):
+        return {f"127.0.0.1:{self.port}", f"localhost:{self.port}", f"[::1]:{self.port}"}
+
+    def _token_ok(self, query: str) -> bool:
+        given = parse_qs(query).get("token", [""])[0]
+        return hmac.compare_digest(given.encode(), self.token.encode())
+
     def _http(self, connection, request):
         from websockets.datastructures import Headers
         from websockets.http11 import Response
-        path = request.path.split("?", 1)[0]
+
+        def refuse(code, reason, text):
+            body = text.encode() + b"\n"
+            return Response(code, reason, Headers([("Content-Type", "text/plain"),
+                                                   ("Content-Length", str(len(body)))]), body)
+        parts = urlsplit(request.path)
+        path = parts.path
+        if request.headers.get("Host", "") not in self._hosts():
+            return refuse(403, "Forbidden", "wrong Host")             # DNS rebinding
         if path == "/ws":
+            origin = request.headers.get("Origin")
+            if origin is not None and origin not in {f"http://{h}" for h in self._hosts()}:
+                return refuse(403, "Forbidden", "foreign Origin")
+            if not self._token_ok(parts.query):
+                return refuse(403, "Forbidden", "token needed")
             return None                                             # the WebSocket handshake
+        if path == "/" and not self._token_ok(parts.query):
+            return refuse(403, "Forbidden", "open the address mimica printed (it carries a token)")
         f = self.routes.get(path)
         if f is None or not f.is_file():
-            body = b"not found\n"
-            return Response(404, "Not Found", Headers([("Content-Type", "text/plain"),
-                                                       ("Content-Length", str(len(body)))]), body)
+            return refuse(404, "Not Found", "not found")
         body = f.read_bytes()
         ctype = mimetypes.guess_type(f.name)[0] or "application/octet-stream"
         if f.suffix == ".js":
@@ -77,31 +110,60 @@ class ViewerServer:
     async def _client(self, ws):
         from websockets.exceptions import ConnectionClosed
         s = self.session
+        self.outbox[ws], self.wake[ws] = {}, asyncio.Event()
+        self._post(ws, "init", json.dumps({"type": "init", "title": self.title, **s.controls(),
+                                           "timeline_format": _timeline_format()}))
+        self._post(ws, 2, _frame(2, s.rig.skin.triangles.astype(np.uint32)))
+        self._post(ws, 0, _frame(0, (s._last if s._last is not None else s.rest).astype(np.float32)))
+        writer = asyncio.create_task(self._writer(ws))
         self.clients.add(ws)
         try:
-            await ws.send(json.dumps({"type": "init", "title": self.title, **s.controls(),
-                                      "timeline_format": _timeline_format()}))
-            await ws.send(_frame(2, s.rig.skin.triangles.astype(np.uint32)))
-            await ws.send(_frame(0, (s._last if s._last is not None else s.rest).astype(np.float32)))
             async for msg in ws:
                 try:
                     reply = await self._handle(msg, ws)
                 except MimicaError as e:
-                    reply = {"type": "error", "message": str(e)}
+                    reply = {"type": "error", "message": " ".join(str(e).split())[:300]}
                 except Exception as e:                              # never let one message kill the server
-                    reply = {"type": "error", "message": f"{type(e).__name__}: {e}"}
+                    self.log(f"viewer: a message failed: {type(e).__name__}: {e}")
+                    reply = {"type": "error", "message": "that message could not be handled"}
                 if reply:
-                    await ws.send(json.dumps(reply))
+                    self._post(ws, f"reply{time.monotonic_ns()}", json.dumps(reply))
                     if reply.get("type") == "loaded":
                         mesh = s.second[0]
-                        await ws.send(_frame(3, mesh.triangles.astype(np.uint32)))
-                        await ws.send(_frame(1, s.second_positions()))
+                        self._post(ws, 3, _frame(3, mesh.triangles.astype(np.uint32)))
+                        self._post(ws, 1, _frame(1, s.second_positions()))
         except ConnectionClosed:
             pass                                                    # the page went away
         finally:
             self.clients.discard(ws)
-            self.in_flight.pop(ws, None)
-            self.sent_at.pop(ws, None)
+            writer.cancel()
+            for d in (self.in_flight, self.sent_at, self.outbox, self.wake):
+                d.pop(ws, None)
+
+    def _post(self, ws, kind, data):
+        """Queue data for one page; a newer frame of the same kind replaces an unsent one."""
+        box = self.outbox.get(ws)
+        if box is None:
+            return
+        box.pop(kind, None)
+        box[kind] = data
+        while len(box) > 64:                          # a page that sends and never reads: drop old replies
+            box.pop(next(k for k in box if isinstance(k, str) and k.startswith("reply")), None)
+        self.wake[ws].set()
+
+    async def _writer(self, ws):
+        """Send one page's outbox in order; only this page waits when it stops reading."""
+        from websockets.exceptions import ConnectionClosed
+        box, wake = self.outbox[ws], self.wake[ws]
+        try:
+            while True:
+                await wake.wait()
+                wake.clear()
+                while box:
+                    kind = next(iter(box))
+                    await ws.send(box.pop(kind))
+        except (ConnectionClosed, asyncio.CancelledError):
+            pass
 
     async def _handle(self, msg, ws=None):
         s = self.session
@@ -109,8 +171,8 @@ class ViewerServer:
             raise MimicaError("binary messages are not understood")
         try:
             m = json.loads(msg)
-        except json.JSONDecodeError:
-            raise MimicaError("not JSON") from None
+        except (ValueError, RecursionError):                       # bad JSON, 5000-digit numbers, deep nesting
+            raise MimicaError("not a JSON message this viewer understands") from None
         if not isinstance(m, dict) or not isinstance(m.get("type"), str):
             raise MimicaError("a message is a JSON object with a 'type'")
         t = m["type"]
@@ -139,6 +201,10 @@ class ViewerServer:
         name, text = m.get("name"), m.get("obj")
         if not isinstance(name, str) or not isinstance(text, str):
             raise MimicaError("load: 'name' and 'obj' (the OBJ file's text) are needed")
+        n = text.count("\nv ") + text.startswith("v ")
+        if n > MAX_SECOND_VERTICES:
+            raise MimicaError(f"{Path(name).name}: {n} vertices; the viewer takes a second face of up to "
+                              f"{MAX_SECOND_VERTICES} vertices")
         with tempfile.TemporaryDirectory() as d:
             p = Path(d) / "second.obj"
             p.write_text(text)
@@ -183,12 +249,9 @@ class ViewerServer:
         for ws in pages:
             self.in_flight[ws] = self.in_flight.get(ws, 0) + 1   # before sending: the ack may come first
             self.sent_at[ws] = time.monotonic()
-            try:
-                if second is not None:
-                    await ws.send(_frame(1, second))
-                await ws.send(data)
-            except Exception:
-                self.clients.discard(ws)
+            if second is not None:
+                self._post(ws, 1, _frame(1, second))
+            self._post(ws, 0, data)
         self.frames_sent += 1
 
     async def run(self, ready=None):
@@ -196,7 +259,7 @@ class ViewerServer:
         async with serve(self._client, self.host, self.port, process_request=self._http,
                          max_size=MAX_MESSAGE, compression=None) as server:
             self.port = server.sockets[0].getsockname()[1]
-            self.url = f"http://{self.host}:{self.port}/"
+            self.url = f"http://{self.host}:{self.port}/?token={self.token}"
             if ready:
                 ready(self)
             await self._simulate()

@@ -176,7 +176,8 @@ renderer.setAnimationLoop((now) => {
 // ---------------------------------------------------------------- socket
 const status = document.getElementById('status');
 function say(msg, err) { status.textContent = msg; status.className = err ? 'err' : ''; if (err) state.lastError = msg; }
-const ws = new WebSocket(`ws://${location.host}/ws`);
+const token = new URLSearchParams(location.search).get('token') || '';   // the server's per-run secret
+const ws = new WebSocket(`ws://${location.host}/ws?token=${encodeURIComponent(token)}`);
 ws.binaryType = 'arraybuffer';
 let faceFramed = false;
 ws.onopen = () => say('connected');
