@@ -110,13 +110,17 @@ def cmd_error(a):
         try:
             lo, hi = (int(x) for x in a.region.split(":"))
         except ValueError:
-            raise MimicaError(f"--region {a.region!r}: expected LO:HI vertex indices, e.g. 0:9409") from None
+            lo = hi = -1
+        if not 0 <= lo < hi <= res.n_vertices:
+            raise MimicaError(f"--region {a.region!r}: expected LO:HI vertex indices with 0 <= LO < HI <= "
+                              f"{res.n_vertices}, e.g. 0:9409")
         region = slice(lo, hi)
     try:
         bins = tuple(float(x) / 100 for x in a.bins.split(","))
-        assert len(bins) == 3 and list(bins) == sorted(bins)
-    except (ValueError, AssertionError):
-        raise MimicaError(f"--bins {a.bins!r}: expected three increasing percentages, e.g. 0.1,0.5,2") from None
+    except ValueError:
+        bins = ()
+    if len(bins) != 3 or not np.isfinite(bins).all() or min(bins) <= 0 or list(bins) != sorted(bins):
+        raise MimicaError(f"--bins {a.bins!r}: expected three increasing positive percentages, e.g. 0.1,0.5,2")
     e = song_vertex_error(res.vertices, res_n.vertices, ref.vertices, ref_n.vertices)
     rel = relative_error(res.vertices, ref.vertices + (res_n.vertices - ref_n.vertices), res_n.vertices, region)
     ee = e if region is None else e[region]
@@ -153,8 +157,15 @@ def cmd_simulate(a):
     from .anim import Timeline
     from .physics.face import FaceSimulator
     from .rig import Rig
+    tl_file = Timeline.load(a.timeline) if a.timeline else None        # files checked before the work
     rig = Rig.load(a.rig)
     names = [m.name for m in rig.muscles]
+    mask = None
+    if a.wrinkles:                                      # the mask checked on this face before the work
+        if a.maps and rig.skin.uv is None:
+            raise MimicaError(f"--maps: the rig's skin has no texture coordinates ({a.rig}); rebuild the rig "
+                              "from a mesh with uv")
+        mask = _mask_on(a.wrinkles, rig.skin, a.rig)
     if a.action:
         from .anim import Channel
         from .physics.sprung import action_activations
@@ -163,7 +174,7 @@ def cmd_simulate(a):
         tl = Timeline({n: Channel(np.array([[0.0, 0.0], [min(0.3, duration / 3), v]]), "cubic")
                        for n, v in zip(names, act) if v}, duration)
     elif a.timeline:
-        tl = Timeline.load(a.timeline)
+        tl = tl_file
         unknown = sorted(set(tl.channels) - set(names) - {"age", "gravity", "pull"})
         if unknown:
             raise MimicaError(f"{a.timeline}: channel {unknown[0]!r} is not a muscle of {a.rig} "
@@ -205,21 +216,21 @@ def cmd_simulate(a):
     out = Path(a.out)
     from .outputs import staged_dir
     with staged_dir(out, {"command": "simulate"}) as d:
-        note = _write_simulation(a, rig, tl, sim, frames, d, out)
+        note = _write_simulation(a, rig, tl, sim, frames, d, out, mask)
     steps = (len(frames) - 1) * sim.substeps
     _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {steps} steps in {el:.2f}s"
          + note)
     return 0
 
 
-def _write_simulation(a, rig, tl, sim, frames, d, out):
+def _write_simulation(a, rig, tl, sim, frames, d, out, mask=None):
     """frame_*.obj, animation.glb, strip.png (and the wrinkle maps) into the stage `d`."""
     from .mesh import write_glb, write_mesh
     from .render import contact_sheet, render_mesh, save_png, shared_frame
     skin = rig.skin
     note = ""
     if a.wrinkles:
-        frames, skin, note = _wrinkle_frames(a, rig, tl, frames, d, out)
+        frames, skin, note = _wrinkle_frames(a, rig, tl, frames, d, out, mask)
     for i, v in enumerate(frames):
         write_mesh(d / f"frame_{i:04d}.obj", skin.with_vertices(v))
     write_glb(d / "animation.glb", skin, {f"frame_{i:04d}": v for i, v in enumerate(frames)}, fps=a.fps)
@@ -240,13 +251,9 @@ def _write_simulation(a, rig, tl, sim, frames, d, out):
     return note
 
 
-def _wrinkle_frames(a, rig, tl, frames, d, out):
+def _wrinkle_frames(a, rig, tl, frames, d, out, mask):
     """The wrinkle layer on simulated frames (V&Y §5.3): refined skin, age per frame."""
     from .wrinkles import WrinkledSkin
-    if a.maps and rig.skin.uv is None:
-        raise MimicaError(f"--maps: the rig's skin has no texture coordinates ({a.rig}); rebuild the rig "
-                          "from a mesh with uv")
-    mask = _mask_on(a.wrinkles, rig.skin, a.rig)
     t0 = time.perf_counter()
     ws = WrinkledSkin.build(rig.skin, mask, refine=not a.no_refine)
     build_s = time.perf_counter() - t0
@@ -324,11 +331,15 @@ def cmd_age(a):
     from .wrinkles import WrinkledSkin
     try:
         ages = [float(x) for x in a.ages.split(",")]
-        assert ages and all(0 <= x <= 150 for x in ages)
-    except (ValueError, AssertionError):
-        raise MimicaError(f"--ages {a.ages!r}: expected ages in years, e.g. 25,45,65,85") from None
+    except ValueError:
+        ages = []
+    if not ages or not all(0 <= x <= 150 for x in ages):                 # NaN fails too
+        raise MimicaError(f"--ages {a.ages!r}: expected ages in years from 0 to 150, e.g. 25,45,65,85")
     if not str(a.out).lower().endswith(".png"):
         raise MimicaError(f"--out {a.out}: the age sheet is a PNG picture; name it *.png")
+    from .anim import PRESETS
+    if a.expression not in PRESETS:
+        raise MimicaError(f"--expression {a.expression!r}: one of {', '.join(PRESETS)}")
     face = read_mesh(a.face)
     lm = landmarks_for(face, a.landmarks, "--landmarks", str(a.face)).positions(face)
     t0 = time.perf_counter()
@@ -373,9 +384,14 @@ def _parse_pull(spec):
         center = np.array([float(v) for v in c.split(",")])
         force = np.array([float(v) for v in f.split(",")])
         radius = float(r)
-        assert center.shape == (3,) and force.shape == (3,) and radius > 0
-    except (ValueError, AssertionError):
-        raise MimicaError(f"--pull {spec!r}: expected x,y,z:radius:fx,fy,fz (skin units)") from None
+    except ValueError:
+        center = force = np.zeros(0)
+        radius = float("nan")
+    if not (center.shape == (3,) and force.shape == (3,) and np.isfinite(center).all()
+            and np.isfinite(force).all() and np.isfinite(radius) and radius > 0
+            and np.abs(force).max() <= 1e6):
+        raise MimicaError(f"--pull {spec!r}: expected x,y,z:radius:fx,fy,fz (skin units; finite numbers, "
+                          "radius > 0)")
     return center, radius, force
 
 
@@ -678,8 +694,15 @@ def cmd_demo(a):
         return run_demo(d, quick=a.quick, shown=Path(a.out))
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse whose refusals are one line, like every other error of the command line."""
+
+    def error(self, message):
+        self.exit(2, f"mimica: error: {' '.join(message.split())} (see `{self.prog} --help`)\n")
+
+
 def build_parser():
-    p = argparse.ArgumentParser(prog="mimica", description="Anatomy-aware facial animation toolkit.")
+    p = _Parser(prog="mimica", description="Anatomy-aware facial animation toolkit.")
     sub = p.add_subparsers(dest="cmd", required=True)
 
     t = sub.add_parser("transfer", help="move expressions of a source face onto a target face (Song et al.)",
@@ -861,6 +884,32 @@ def _inputs(a) -> list[Path]:
     return found
 
 
+# numeric options: (command, option) -> (low, high, integer?); NaN and infinities never pass
+LIMITS = {
+    ("simulate", "fps"): (1.0, 1000.0, False), ("simulate", "duration"): (1e-3, 3600.0, False),
+    ("simulate", "age"): (0.0, 150.0, False), ("simulate", "gravity"): (-1e4, 1e4, False),
+    ("simulate", "maps"): (16, 8192, True),
+    ("rig", "alpha"): (1e-3, 1e3, False), ("rig", "modes"): (1, 200, True),
+    ("render", "size"): (16, 4096, True), ("render", "frames"): (1, 100_000, True),
+    ("render", "fps"): (0.1, 240.0, False),
+    ("export", "fps"): (0.1, 1000.0, False),
+    ("age", "size"): (16, 4096, True),
+    ("transfer-image", "strength"): (0.0, 2.0, False),
+}
+
+
+def check_numbers(a) -> None:
+    """Every numeric option finite and in its range, before any work."""
+    for (cmd, opt), (lo, hi, integer) in LIMITS.items():
+        v = getattr(a, opt, None) if a.cmd == cmd else None
+        if v is None:
+            continue
+        if not np.isfinite(v) or not lo <= v <= hi:
+            flag = "--" + opt.replace("_", "-")
+            raise MimicaError(f"{flag} {v:g}: expected {'a whole number' if integer else 'a number'} "
+                              f"from {lo:g} to {hi:g}")
+
+
 def check_paths(a) -> None:
     """Before any work: no output may destroy an input; a folder output must be replaceable."""
     from .outputs import check_output_dir, guard_outputs
@@ -890,6 +939,7 @@ def main(argv=None) -> int:
     except ValueError:                                     # not the main thread (tests, embedding)
         previous = None
     try:
+        check_numbers(args)
         check_paths(args)
         return int(args.func(args) or 0)
     except MimicaError as e:

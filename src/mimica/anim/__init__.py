@@ -20,6 +20,10 @@ from ..mesh import atomic_path, read_json
 
 FORMAT = "mimica-timeline/1"
 INTERPS = ("linear", "cubic", "step")
+MAX_DURATION = 3600.0                         # seconds: an hour of animation at most
+# the range of a channel's values: age in years, force scales, muscle activations
+RANGES = {"age": (0.0, 150.0), "gravity": (-100.0, 100.0), "pull": (-100.0, 100.0)}
+ACTIVATION_RANGE = (-2.0, 2.0)
 
 # the six basic expressions and neutral as muscle activations (FACS action units mapped to
 # the muscles that produce them, after Ekman & Friesen and Hjortsjö)
@@ -96,14 +100,20 @@ class Timeline:
         if not isinstance(doc, dict) or doc.get("format") != FORMAT:
             raise MimicaError(f"{path}: expected a timeline with 'format': '{FORMAT}'")
         chans = {}
-        for name, c in (doc.get("channels") or {}).items():
+        channels = doc.get("channels") or {}
+        if not isinstance(channels, dict):
+            raise MimicaError(f"{path}: 'channels' must be an object {{name: {{'keys': [[time, value], ...]}}}}")
+        for name, c in channels.items():
             try:
                 keys = np.asarray(c["keys"], float)
                 interp = c.get("interp", "linear")
-            except (TypeError, KeyError, ValueError):
+            except (TypeError, KeyError, ValueError, AttributeError, IndexError):
                 raise MimicaError(f"{path}: channel {name!r} needs 'keys': [[time, value], ...]") from None
             if keys.ndim != 2 or keys.shape[1] != 2 or len(keys) == 0 or not np.isfinite(keys).all():
                 raise MimicaError(f"{path}: channel {name!r}: keys must be [[time, value], ...] with finite numbers")
+            lo, hi = RANGES.get(name, ACTIVATION_RANGE)
+            if keys[:, 1].min() < lo or keys[:, 1].max() > hi:
+                raise MimicaError(f"{path}: channel {name!r}: values must lie in [{lo:g}, {hi:g}]")
             if (np.diff(keys[:, 0]) <= 0).any():
                 raise MimicaError(f"{path}: channel {name!r}: key times must increase")
             if interp not in INTERPS:
@@ -111,6 +121,6 @@ class Timeline:
             chans[name] = Channel(keys, interp)
         last = max((c.keys[-1, 0] for c in chans.values()), default=0.0)
         dur = doc.get("duration", last if last > 0 else 1.0)
-        if not isinstance(dur, (int, float)) or dur <= 0:
-            raise MimicaError(f"{path}: duration must be a positive number of seconds")
+        if isinstance(dur, bool) or not isinstance(dur, (int, float)) or not 0 < dur <= MAX_DURATION:
+            raise MimicaError(f"{path}: duration must be a number of seconds in (0, {MAX_DURATION:g}]")
         return cls(chans, float(dur))

@@ -18,6 +18,9 @@ _RGB2YUV = np.array([[0.299, 0.587, 0.114],
 _YUV2RGB = np.linalg.inv(_RGB2YUV)
 
 
+MAX_PIXELS = 40_000_000           # 40 megapixels: more than any camera frame mimica is meant for
+
+
 def read_image(path) -> np.ndarray:
     """An image file as float RGB in [0, 1], (h, w, 3); one-line error naming the file."""
     from PIL import Image, UnidentifiedImageError
@@ -26,9 +29,12 @@ def read_image(path) -> np.ndarray:
         raise MimicaError(f"{path}: no such image file")
     try:
         with Image.open(path) as im:
+            if im.width * im.height > MAX_PIXELS:
+                raise MimicaError(f"{path}: image is {im.width}x{im.height}; photos of up to "
+                                  f"{MAX_PIXELS // 10**6} megapixels are taken, resize it first")
             im.seek(0)
             arr = np.asarray(im.convert("RGB"), dtype=np.float32) / 255.0
-    except (UnidentifiedImageError, OSError, ValueError) as e:
+    except (UnidentifiedImageError, OSError, ValueError, Image.DecompressionBombError, EOFError) as e:
         raise MimicaError(f"{path}: not an image Pillow can read ({e.__class__.__name__})") from None
     if arr.shape[0] < 16 or arr.shape[1] < 16:
         raise MimicaError(f"{path}: image is {arr.shape[1]}x{arr.shape[0]}; a face needs at least 16x16 pixels")

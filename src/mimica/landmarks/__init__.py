@@ -138,9 +138,24 @@ def read_point_file(path, scheme: str, dim: int, allow_null: bool, example: str 
 def read_landmarks(path, mesh: Mesh | None = None):
     """Read a landmark JSON file; returns (68,3) positions (NaN = missing), or Landmarks if mesh."""
     out = read_point_file(path, SCHEME, 3, allow_null=True)
-    if np.isfinite(out).all(axis=1).sum() < 4:
-        raise MimicaError(f"{path}: at least 4 points are needed, {int(np.isfinite(out).all(1).sum())} given")
-    return Landmarks.snap(mesh, out) if mesh is not None else out
+    ok = np.isfinite(out).all(axis=1)
+    if ok.sum() < 4:
+        raise MimicaError(f"{path}: at least 4 points are needed, {int(ok.sum())} given")
+    if mesh is None:
+        return out
+    size = mesh.bounding_box_diagonal()
+    if np.ptp(out[ok], axis=0).max() < 0.05 * size:
+        raise MimicaError(f"{path}: the points nearly coincide (they span under 5% of the mesh's size); "
+                          "each landmark is its own place on the face")
+    t, b, _, dist = TriangleLocator(mesh.vertices, mesh.triangles).closest(out[ok])
+    if dist.max() > 0.1 * size:
+        i = int(np.nonzero(ok)[0][np.argmax(dist)])
+        raise MimicaError(f"{path}: point {i} lies {dist.max():.3g} off the mesh's surface (the mesh is "
+                          f"{size:.3g} across); landmarks are in the mesh's own coordinates")
+    tri = np.full(N_POINTS, -1, dtype=np.int64)
+    bary = np.zeros((N_POINTS, 3))
+    tri[ok], bary[ok] = t, b
+    return Landmarks(tri, bary)
 
 
 def write_landmarks(path, positions) -> Path:

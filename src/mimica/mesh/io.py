@@ -54,6 +54,12 @@ def validate(mesh: Mesh, source="mesh", allow_degenerate=False) -> Mesh:
         face = int(np.argmax(mesh.face_sizes < 3)) + 1
         raise MimicaError(f"{source}: face {face} has fewer than 3 corners")
     if not allow_degenerate:
+        used = np.zeros(len(v), bool)
+        used[fi] = True
+        if not used.all():
+            raise MimicaError(f"{source}: {int((~used).sum())} vertices belong to no face (first: vertex "
+                              f"{int(np.argmin(used)) + 1}); remove the loose vertices first (Blender: "
+                              "Mesh > Clean Up > Delete Loose)")
         t = mesh.triangles
         rep = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])
         area2 = np.linalg.norm(mesh.face_normals(), axis=1)

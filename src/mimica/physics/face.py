@@ -180,6 +180,17 @@ def follow_activation(q, v, a, h, w):
     return q + h * v, v
 
 
+def check_frame(x: np.ndarray, rest: np.ndarray, t: float) -> None:
+    """Stop before anything is written when a frame is not finite or has exploded (a vertex
+    moved more than ten times the face's size): an unstable step, or non-finite input."""
+    size = float(np.linalg.norm(np.ptp(rest, axis=0)))
+    d = np.abs(x - rest)
+    if not np.isfinite(d).all() or d.max() > 10 * size:
+        raise MimicaError(f"the simulation became unstable at t = {t:.3f} s (the skin "
+                          f"{'is not finite' if not np.isfinite(d).all() else 'moved beyond ten face sizes'}); "
+                          "nothing was written: use a higher frame rate, or smaller forces")
+
+
 def run_frames(sim, activation_at, duration: float, progress=None, before_step=None) -> np.ndarray:
     """Frames (F, n, 3) of skin positions from a simulator with fps, substeps, h, step() and
     displacement(); activation_at(t) -> (n_muscles,); before_step(t) is called before each step."""
@@ -194,6 +205,7 @@ def run_frames(sim, activation_at, duration: float, progress=None, before_step=N
                 before_step(t)
             sim.step(activation_at(t))
         frames[f] = rest + sim.displacement()
+        check_frame(frames[f], rest, f / sim.fps)
         if progress:
             progress(f, n_frames)
     return frames

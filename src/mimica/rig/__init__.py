@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 
 from ..correspond import face_cylinder
 from ..errors import MimicaError
-from ..mesh import Mesh, atomic_path
+from ..mesh import Mesh, atomic_path, validate
 from ..mesh.query import TriangleLocator
 from ..physics.face import tether_springs
 from ..physics.modal import ModalBasis, rotation_operator
@@ -86,18 +86,32 @@ class Rig:
             raise MimicaError(f"{path}: no such rig file") from None
         except Exception as e:  # zip, npy and JSON errors alike
             raise MimicaError(f"{path}: not a mimica rig file ({type(e).__name__})") from None
-        if meta.get("format") != FORMAT:
-            raise MimicaError(f"{path}: rig format {meta.get('format')!r}, expected {FORMAT!r}; rebuild it with `mimica rig`")
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+            got = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
+            raise MimicaError(f"{path}: rig format {got!r}, expected {FORMAT!r}; rebuild it with `mimica rig`")
+        if not isinstance(meta.get("muscles"), list) or not all(isinstance(d, dict) for d in meta["muscles"]):
+            raise MimicaError(f"{path}: the rig's muscle list is damaged; rebuild it with `mimica rig`")
         try:
             uv = (z["skin_uv"], z["skin_fuv"]) if "skin_uv" in z.files else (None, None)
-            skin = Mesh(z["skin_v"], z["skin_fi"], z["skin_fs"], *uv)
+            skin = Mesh(np.asarray(z["skin_v"], np.float64), z["skin_fi"], z["skin_fs"], *uv)
+            validate(skin, f"{path} (the rig's skin)")
             W = rotation_operator(skin.vertices, skin.triangles, smooth=WARP_SMOOTH)
-            muscles = [Muscle(d["name"], z[f"m{i}_nodes"], z[f"m{i}_stretch"], float(d["omega"]),
+            muscles = [Muscle(str(d["name"]), z[f"m{i}_nodes"], z[f"m{i}_stretch"], float(d["omega"]),
                               z[f"m{i}_attach"], z[f"m{i}_roi"], _get_basis(z, f"m{i}_b", W))
                        for i, d in enumerate(meta["muscles"])]
-            return cls(skin, z["landmarks"], muscles, meta["params"], _get_basis(z, "g_b", W))
+            rig = cls(skin, z["landmarks"], muscles, meta["params"], _get_basis(z, "g_b", W))
         except KeyError as e:
             raise MimicaError(f"{path}: rig file is missing {e.args[0]!r}; rebuild it with `mimica rig`") from None
+        except MimicaError:
+            raise
+        except Exception as e:       # a damaged member (bad CRC, truncated), wrong shapes or types
+            raise MimicaError(f"{path}: the rig file is damaged ({type(e).__name__}); rebuild it with "
+                              "`mimica rig`") from None
+        for m in rig.muscles:
+            arrays = [m.nodes, m.stretch] + ([m.basis.phi, m.basis.lam] if m.basis is not None else [])
+            if not all(np.isfinite(np.asarray(a, float)).all() for a in arrays):
+                raise MimicaError(f"{path}: muscle {m.name} holds non-finite numbers; rebuild the rig with `mimica rig`")
+        return rig
 
 
 def _put_basis(arrays, key, b):
@@ -189,6 +203,8 @@ def build_rig(skin: Mesh, landmarks: np.ndarray, muscles=None, alpha: float = 10
     if isinstance(muscles, str) and muscles not in ("kim", "all"):
         muscles = [m.strip() for m in muscles.split(",") if m.strip()]
     names = list(KIM_MUSCLES if muscles in (None, "kim") else MUSCLES if muscles == "all" else muscles)
+    if not names:
+        raise MimicaError("rig: no muscles named; give 'kim', 'all' or muscle names separated by commas")
     for n in names:
         if n not in MUSCLES:
             raise MimicaError(f"rig: unknown muscle {n!r}; known: {', '.join(MUSCLES)}")
