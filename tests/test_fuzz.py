@@ -5,9 +5,7 @@ traceback, nothing written, and every input left as it was; a success is a false
 from __future__ import annotations
 
 import json
-import os
 import struct
-import zipfile
 import zlib
 from pathlib import Path
 
@@ -15,9 +13,9 @@ import numpy as np
 import pytest
 
 from mimica.cli import main
-from mimica.data import ICT_HEAD_FACES, ICT_LANDMARKS_68, ict_path
+from mimica.data import ICT_LANDMARKS_68
 from mimica.landmarks import write_landmarks
-from mimica.mesh import read_mesh, write_mesh
+from mimica.mesh import write_mesh
 
 TRI = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n"
 BAD_MESHES = {
