@@ -5,6 +5,10 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 WHEEL_STAMP := $(VENV)/.wheel
+# the one data setting: the shared data beside this checkout unless MIMICA_DATA says otherwise
+# (the installed wheel does not know where the checkout is)
+MIMICA_DATA ?= $(abspath $(CURDIR)/..)/shared/data
+export MIMICA_DATA
 SOURCES := $(shell find src -type f -not -name '*.pyc' -not -path '*.egg-info*') pyproject.toml README.md
 
 .PHONY: demo test test-lowest bench setup wheel clean
