@@ -381,3 +381,41 @@ def test_full_solver_face_smiles_closer_to_ict_than_the_modal_face(rig, face):
     assert full.solver.stats["unconverged"] == 0 and np.isfinite(uf).all()
     assert displacement_cosine(uf, smile) > 0.83
     assert displacement_cosine(uf, smile) > displacement_cosine(um, smile) + 0.05
+
+
+def test_sprung_engine_at_low_frame_rates_stays_bounded(rig):
+    """At 1, 5 and 10 fps the sprung engine substeps (<= 1/120 s): its frames stay close to
+    the 60 fps clip at the same times, where two substeps a frame flew off (1e11-1e19)."""
+    from mimica.physics.sprung import MAX_DT, SprungFace, action_activations
+    a = action_activations("AU12_lip_corner_puller", [m.name for m in rig.muscles])
+    ref = SprungFace(rig, fps=60).run(lambda t: a, 1.0)
+    scale = np.abs(ref[-1] - rig.skin.vertices).max()
+    for fps in (1, 5, 10):
+        sf = SprungFace(rig, fps=fps)
+        assert sf.dt <= MAX_DT + 1e-12
+        frames = sf.run(lambda t: a, 1.0)
+        assert np.isfinite(frames).all()
+        assert np.abs(frames[-1] - ref[-1]).max() < 0.1 * scale, fps
+
+
+@pytest.mark.parametrize("engine", ["modal", "sprung", "full"])
+def test_every_engine_refuses_non_finite_or_exploded_frames(rig, engine):
+    """A non-finite activation, or one so large that the skin flies off, stops the run with
+    one MimicaError before any frame is returned (and so before anything is written)."""
+    from mimica.physics.fullface import FullFaceSimulator
+    from mimica.physics.sprung import SprungFace
+    make = {"modal": FaceSimulator, "sprung": SprungFace, "full": FullFaceSimulator}[engine]
+    sim = make(rig)
+    with pytest.raises(MimicaError, match="not finite"):
+        sim.run(lambda t: np.full(len(rig.muscles), np.nan), 2 / sim.fps)
+    from mimica.physics.face import explosion_limit
+    sim = make(rig)
+    try:                          # the linear engines fly off; the full solver's line search holds
+        frames = sim.run(lambda t: np.full(len(rig.muscles), 1e30), 2 / sim.fps)
+    except MimicaError as e:
+        assert "became unstable" in str(e)
+        assert engine != "full"
+    else:
+        assert engine == "full"
+        assert np.isfinite(frames).all()
+        assert np.abs(frames - rig.skin.vertices).max() <= explosion_limit(rig.skin.vertices)

@@ -180,32 +180,45 @@ def follow_activation(q, v, a, h, w):
     return q + h * v, v
 
 
-def check_frame(x: np.ndarray, rest: np.ndarray, t: float) -> None:
-    """Stop before anything is written when a frame is not finite or has exploded (a vertex
-    moved more than ten times the face's size): an unstable step, or non-finite input."""
-    size = float(np.linalg.norm(np.ptp(rest, axis=0)))
-    d = np.abs(x - rest)
-    if not np.isfinite(d).all() or d.max() > 10 * size:
-        raise MimicaError(f"the simulation became unstable at t = {t:.3f} s (the skin "
-                          f"{'is not finite' if not np.isfinite(d).all() else 'moved beyond ten face sizes'}); "
-                          "nothing was written: use a higher frame rate, or smaller forces")
+def explosion_limit(rest: np.ndarray) -> float:
+    """The largest displacement a frame may have: ten times the face's size."""
+    return 10.0 * float(np.linalg.norm(np.ptp(rest, axis=0)))
+
+
+def check_frame(u: np.ndarray, limit: float, t: float) -> None:
+    """Stop before anything is written when a frame's displacement `u` is not finite or has
+    exploded past `limit` (an unstable step, or non-finite input).  Two reductions, no
+    temporary: NaN propagates through min and max, so one comparison catches both."""
+    lo, hi = float(u.min()), float(u.max())
+    if not (-limit <= lo and hi <= limit):
+        what = "is not finite" if not (np.isfinite(lo) and np.isfinite(hi)) else "moved beyond ten face sizes"
+        raise MimicaError(f"the simulation became unstable at t = {t:.3f} s (the skin {what}); nothing "
+                          "was written: use a higher frame rate, or smaller forces")
 
 
 def run_frames(sim, activation_at, duration: float, progress=None, before_step=None) -> np.ndarray:
-    """Frames (F, n, 3) of skin positions from a simulator with fps, substeps, h, step() and
-    displacement(); activation_at(t) -> (n_muscles,); before_step(t) is called before each step."""
+    """Frames (F, n, 3) of skin positions from a simulator with rig, fps, substeps, step() and
+    displacement(); activation_at(t) -> (n_muscles,); before_step(t) is called before each step.
+    A non-finite activation or an exploded frame stops the run (MimicaError) before any frame
+    is handed back."""
+    h = 1.0 / (sim.fps * sim.substeps)
     n_frames = int(round(duration * sim.fps)) + 1
     rest = sim.rig.skin.vertices
+    limit = explosion_limit(rest)
     frames = np.empty((n_frames,) + rest.shape)
     frames[0] = rest + sim.displacement()
     for f in range(1, n_frames):
         for k in range(sim.substeps):
-            t = ((f - 1) * sim.substeps + k + 1) * sim.h
+            t = ((f - 1) * sim.substeps + k + 1) * h
             if before_step is not None:
                 before_step(t)
-            sim.step(activation_at(t))
-        frames[f] = rest + sim.displacement()
-        check_frame(frames[f], rest, f / sim.fps)
+            a = activation_at(t)
+            if not np.isfinite(a).all():
+                raise MimicaError(f"the muscle activations at t = {t:.3f} s are not finite; nothing was written")
+            sim.step(a)
+        u = sim.displacement()
+        check_frame(u, limit, f / sim.fps)
+        frames[f] = rest + u
         if progress:
             progress(f, n_frames)
     return frames

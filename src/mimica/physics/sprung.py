@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..solver import SPDSolver
-from .face import check_frame
+from .face import run_frames
 from .shell import lumped_mass
 
 # The 28 facial actions (FACS units, Ekman & Friesen), each a group of the library's muscles
@@ -149,14 +149,4 @@ class SprungFace:
         return self.x - self.x0
 
     def run(self, activation_at, duration, progress=None):
-        n_frames = int(round(duration * self.fps)) + 1
-        frames = np.empty((n_frames, self.n, 3))
-        frames[0] = self.x
-        for f in range(1, n_frames):
-            for k in range(self.substeps):
-                self.step(activation_at(((f - 1) * self.substeps + k + 1) * self.dt))
-            frames[f] = self.x
-            check_frame(self.x, self.x0, f / self.fps)
-            if progress:
-                progress(f, n_frames)
-        return frames
+        return run_frames(self, activation_at, duration, progress)
