@@ -124,6 +124,20 @@ def test_templates_offline_is_one_clear_error(tmp_path):
     assert not any((tmp_path / "cache").glob("*.obj"))
 
 
+def test_templates_with_an_unwritable_cache_still_read(tmp_path, head_model, monkeypatch):
+    """A cache that cannot be written (a read-only home: every file creation refused) only
+    makes the next read slower: the shapes still come from the data directory."""
+    import errno
+    from mimica.store import TemplateStore
+
+    def refuse(*a, **k):
+        raise PermissionError(errno.EACCES, "Permission denied")
+    monkeypatch.setattr("mimica.outputs.tempfile.mkstemp", refuse)
+    store = TemplateStore(cache=tmp_path / "cache")
+    shapes = store.shapes(["jawOpen"], head_model.n)
+    assert np.array_equal(shapes["jawOpen"], head_model.shape("jawOpen"))
+
+
 def test_blendshapes_on_another_topology(tmp_path, head_model):
     """52 ARKit shapes on a resampled head (its own triangulation): jawOpen opens the jaw,
     the left smile moves the left mouth corner more than the right, tongueOut stays at rest."""

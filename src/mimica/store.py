@@ -88,12 +88,11 @@ class TemplateStore:
         for n in names:
             out[n] = read_vertices(self.path(n, progress))[:n_vertices]
         try:
-            cache.parent.mkdir(parents=True, exist_ok=True)
             with atomic_path(cache) as tmp:
                 with open(tmp, "wb") as fh:
                     np.savez(fh, **{n: v.astype(np.float32) for n, v in out.items()})
-        except OSError:
-            pass                                  # a read-only home: just slower next time
+        except MimicaError:                       # atomic_path's one-line write error: a read-only
+            pass                                  # home is just slower next time
         return out
 
 
