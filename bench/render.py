@@ -108,7 +108,7 @@ def viewer():
     import json
     from mimica.data import ICT_FACE_AREA_VERTICES
     from mimica.rig import build_rig
-    from mimica.viewer.probe import browser_page, chromium_path, drag_fps, viewer_process
+    from mimica.viewer.probe import browser_page, chromium_path, drag_fps, viewer_process, ws_url
     from websockets.asyncio.client import connect
     if chromium_path() is None:
         print("viewer: no Chromium on this machine (apt install chromium)")
@@ -119,7 +119,7 @@ def viewer():
         rig.save(Path(tmp) / "face.rig")
         with viewer_process("face.obj", Path(tmp) / "face.rig") as (url, _):
             async def socket_fps():
-                async with connect(url.replace("http", "ws") + "ws", max_size=1 << 26) as ws:
+                async with connect(ws_url(url), max_size=1 << 26) as ws:
                     n, t0, k = 0, time.time(), 0
                     while time.time() - t0 < 2.5:
                         await ws.send(json.dumps({"type": "set", "name": "zygomaticus_major_L",

@@ -68,7 +68,7 @@ def _write(p: Path, content):
     if isinstance(content, bytes):
         p.write_bytes(content)
     elif isinstance(content, (dict, list)):
-        p.write_text(json.dumps(content).replace("NaN", "NaN"))
+        p.write_text(json.dumps(content))          # NaN and Infinity as Python's json writes them
     else:
         p.write_text(content)
     return p

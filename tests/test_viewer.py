@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel
+from mimica.viewer.probe import ws_url
 
 ARTIFACTS = Path(__file__).resolve().parents[1] / "out" / "ci-artifacts"
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -36,9 +37,14 @@ def server(tmp_path_factory):
         yield url, d, face
 
 
-def _ws_url(url, token=None):
-    base, tok = url.split("?token=")
-    return base.replace("http", "ws") + "ws?token=" + (tok if token is None else token)
+async def _reply(ws, msg):
+    """Send a message and return the server's JSON reply, acking the frames that come first."""
+    await ws.send(msg)
+    while True:
+        r = await asyncio.wait_for(ws.recv(), 30)
+        if isinstance(r, str):
+            return json.loads(r)
+        await ws.send(json.dumps({"type": "ack"}))
 
 
 def _get(url):
@@ -68,7 +74,7 @@ def test_bad_messages_are_answered_and_the_server_lives(server):
     from websockets.asyncio.client import connect
 
     async def run():
-        async with connect(_ws_url(url), max_size=1 << 26) as ws:
+        async with connect(ws_url(url), max_size=1 << 26) as ws:
             init = json.loads(await ws.recv())
             assert init["type"] == "init" and "zygomaticus_major_L" in init["muscles"] and init["age"]
             errors = []
@@ -79,13 +85,7 @@ def test_bad_messages_are_answered_and_the_server_lives(server):
                         json.dumps({"type": "pose", "values": [1]}),
                         json.dumps({"type": "load", "name": "broken.obj", "obj": "v 1 2\nf 1 2 3\n"}),
                         b"\x00\x01binary"]:
-                await ws.send(msg)
-                while True:
-                    r = await asyncio.wait_for(ws.recv(), 30)
-                    if isinstance(r, str):
-                        errors.append(json.loads(r))
-                        break
-                    await ws.send(json.dumps({"type": "ack"}))
+                errors.append(await _reply(ws, msg))
             assert all(e["type"] == "error" for e in errors) and len(errors) == 9
             assert "broken.obj" in errors[7]["message"]
             # still alive: a good message makes the face move
@@ -186,10 +186,10 @@ def test_foreign_origin_wrong_host_or_no_token_get_403_and_no_byte_of_the_face(s
         except InvalidStatus as e:
             return e.response.status_code, e.response.body
         return None, b""
-    for uri, kw in [(_ws_url(url), {"origin": "https://evil.example"}),
-                    (_ws_url(url), {"origin": "http://127.0.0.1:1"}),
-                    (_ws_url(url, token=""), {}), (_ws_url(url, token="guess"), {}),
-                    (_ws_url(url).split("?")[0], {})]:
+    for uri, kw in [(ws_url(url), {"origin": "https://evil.example"}),
+                    (ws_url(url), {"origin": "http://127.0.0.1:1"}),
+                    (ws_url(url, token=""), {}), (ws_url(url, token="guess"), {}),
+                    (ws_url(url).split("?")[0], {})]:
         code, body = asyncio.run(refused(uri, **kw))
         assert code == 403 and len(body) < 100, (uri, kw, code)
     port = url.split(":")[2].split("/")[0]
@@ -201,7 +201,7 @@ def test_foreign_origin_wrong_host_or_no_token_get_403_and_no_byte_of_the_face(s
         assert reply.startswith(b"HTTP/1.1 403"), (path, reply[:80])
     # the page's own origin is let in
     async def own():
-        async with connect(_ws_url(url), origin=f"http://127.0.0.1:{port}") as ws:
+        async with connect(ws_url(url), origin=f"http://127.0.0.1:{port}") as ws:
             return json.loads(await ws.recv())["type"]
     assert asyncio.run(own()) == "init"
 
@@ -211,18 +211,13 @@ def test_hostile_messages_get_short_replies_of_ours(server):
     from websockets.asyncio.client import connect
 
     async def run():
-        async with connect(_ws_url(url), max_size=1 << 26) as ws:
+        async with connect(ws_url(url), max_size=1 << 26) as ws:
             await ws.recv()
             replies = []
             for msg in ['{"type": "set", "name": "x", "value": ' + "9" * 5000 + "}",
                         "[" * 100_000 + "]" * 100_000,
                         json.dumps({"type": "load", "name": "big.obj", "obj": "v 0 0 0\n" * 400_000})]:
-                await ws.send(msg)
-                while True:
-                    r = await asyncio.wait_for(ws.recv(), 30)
-                    if isinstance(r, str):
-                        replies.append(json.loads(r))
-                        break
+                replies.append(await _reply(ws, msg))
             return replies
     replies = asyncio.run(run())
     assert all(r["type"] == "error" and len(r["message"]) < 200 for r in replies), replies
@@ -245,7 +240,7 @@ def test_a_stuck_client_slows_no_other(server):
                    "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n").encode())
 
     async def reader(counts, i, stop):
-        async with connect(_ws_url(url), max_size=1 << 26, compression=None) as ws:
+        async with connect(ws_url(url), max_size=1 << 26, compression=None) as ws:
             while not stop.is_set():
                 try:
                     r = await asyncio.wait_for(ws.recv(), 0.5)
@@ -256,7 +251,7 @@ def test_a_stuck_client_slows_no_other(server):
                     await ws.send('{"type": "ack"}')
 
     async def driver(stop):
-        async with connect(_ws_url(url), max_size=1 << 26) as ws:
+        async with connect(ws_url(url), max_size=1 << 26) as ws:
             k = 0
             while not stop.is_set():
                 k += 1
@@ -295,7 +290,7 @@ def test_a_flood_and_half_open_connections_leave_it_serving(server):
     from websockets.asyncio.client import connect
 
     async def flood():
-        async with connect(_ws_url(url), max_size=1 << 26) as ws:
+        async with connect(ws_url(url), max_size=1 << 26) as ws:
             await ws.recv()
             for i in range(20_000):
                 await ws.send('{"type": "ack"}' if i % 2 else "not json")

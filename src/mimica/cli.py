@@ -411,8 +411,6 @@ def cmd_transfer_image(a):
         raise MimicaError("give either source expression photos or --driving VIDEO, not both")
     if not a.driving and not a.source_expr:
         raise MimicaError("give source expression photos, or --driving VIDEO")
-    from .image.analogy import check_strength
-    check_strength(a.strength)
     t0 = time.perf_counter()
     src = read_image(a.source_neutral)
     tgt = read_image(a.target)

@@ -66,15 +66,19 @@ def atomic_path(path):
     try:
         try:
             yield Path(tmp)
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(tmp, 0o666 & ~umask)        # mkstemp makes 0600 files; use the usual mode
+            os.chmod(tmp, 0o666 & ~_umask())     # mkstemp makes 0600 files; use the usual mode
             os.replace(tmp, path)
         except OSError as e:
             raise os_error(path, e) from None
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def _umask() -> int:
+    m = os.umask(0)
+    os.umask(m)
+    return m
 
 
 def _alive(pid: int) -> bool:
@@ -161,12 +165,6 @@ def staged_dir(path, about: dict | None = None):
             raise os_error(path, e) from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-
-
-def _umask() -> int:
-    m = os.umask(0)
-    os.umask(m)
-    return m
 
 
 def _same(a: Path, b: Path) -> bool:

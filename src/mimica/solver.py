@@ -9,8 +9,8 @@ Three backends, fastest first, each taking a block of right-hand sides at once:
 - "scipy": SciPy's SuperLU in symmetric mode, always there.
 
 Measured on the transfer system of the ICT head (n = 11,248, 145k non-zeros, 96 right-hand
-sides; best of 7, 2-core VM): factor 0.06 / 0.13-0.17 / 0.28-0.33 s, solve 48-56 / 78-156 /
-308-360 ms.  `backend()` says which one is in use; MIMICA_SOLVER=cholmod|cholespy|scipy
+sides; best of 7 over two runs, 2-core VM; docs/benchmarks.md): factor 0.06 / 0.13-0.17 /
+0.28-0.38 s, solve 48-62 / 52-156 / 275-360 ms.  `backend()` says which one is in use; MIMICA_SOLVER=cholmod|cholespy|scipy
 chooses among the installed ones.
 """
 

@@ -96,14 +96,20 @@ class Landmarks:
     @classmethod
     def snap(cls, mesh: Mesh, points) -> "Landmarks":
         """Snap (68, 3) points (NaN rows = missing) to the closest surface points."""
+        return cls.snap_with_distance(mesh, points)[0]
+
+    @classmethod
+    def snap_with_distance(cls, mesh: Mesh, points) -> tuple["Landmarks", np.ndarray]:
+        """`snap`, and each point's distance to the surface (NaN where missing)."""
         p = np.asarray(points, dtype=np.float64)
         tri = np.full(len(p), -1, dtype=np.int64)
         bary = np.zeros((len(p), 3))
+        dist = np.full(len(p), np.nan)
         ok = np.isfinite(p).all(axis=1)
         if ok.any():
-            t, b, _, _ = TriangleLocator(mesh.vertices, mesh.triangles).closest(p[ok])
-            tri[ok], bary[ok] = t, b
-        return cls(tri, bary)
+            t, b, _, d = TriangleLocator(mesh.vertices, mesh.triangles).closest(p[ok])
+            tri[ok], bary[ok], dist[ok] = t, b, d
+        return cls(tri, bary), dist
 
 
 def ict_landmarks(mesh: Mesh) -> Landmarks:
@@ -147,15 +153,12 @@ def read_landmarks(path, mesh: Mesh | None = None):
     if np.ptp(out[ok], axis=0).max() < 0.05 * size:
         raise MimicaError(f"{path}: the points nearly coincide (they span under 5% of the mesh's size); "
                           "each landmark is its own place on the face")
-    t, b, _, dist = TriangleLocator(mesh.vertices, mesh.triangles).closest(out[ok])
-    if dist.max() > 0.1 * size:
-        i = int(np.nonzero(ok)[0][np.argmax(dist)])
-        raise MimicaError(f"{path}: point {i} lies {dist.max():.3g} off the mesh's surface (the mesh is "
+    lm, dist = Landmarks.snap_with_distance(mesh, out)
+    if np.nanmax(dist) > 0.1 * size:
+        i = int(np.nanargmax(dist))
+        raise MimicaError(f"{path}: point {i} lies {dist[i]:.3g} off the mesh's surface (the mesh is "
                           f"{size:.3g} across); landmarks are in the mesh's own coordinates")
-    tri = np.full(N_POINTS, -1, dtype=np.int64)
-    bary = np.zeros((N_POINTS, 3))
-    tri[ok], bary[ok] = t, b
-    return Landmarks(tri, bary)
+    return lm
 
 
 def write_landmarks(path, positions) -> Path:

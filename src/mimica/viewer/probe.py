@@ -45,6 +45,13 @@ def viewer_process(face, rig, extra=(), timeout=180):
         proc.wait(10)
 
 
+def ws_url(url: str, token: str | None = None) -> str:
+    """The WebSocket address of a viewer whose page is `url` (http://host:port/?token=T);
+    `token` replaces the page's (for refusal tests)."""
+    base, tok = url.split("?token=")
+    return base.replace("http", "ws", 1) + "ws?token=" + (tok if token is None else token)
+
+
 @contextmanager
 def browser_page(url, size=(960, 640), query="software"):
     from playwright.sync_api import sync_playwright

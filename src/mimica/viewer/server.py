@@ -235,7 +235,7 @@ class ViewerServer:
                 if ready and (active or s.moved):
                     x = s.positions()                     # sets s.moved
                     if s.moved:                           # a face that did not move is not sent again
-                        await self._send_frame(ready, x)
+                        self._send_frame(ready, x)
                 for ws in list(self.in_flight):            # a page that never acks still gets frames
                     if time.monotonic() - self.sent_at.get(ws, 0) > 0.5:
                         self.in_flight[ws] = 0
@@ -243,7 +243,8 @@ class ViewerServer:
             if time.monotonic() - nxt > 1.0:                       # fell behind: do not try to catch up
                 nxt = time.monotonic()
 
-    async def _send_frame(self, pages, x):
+    def _send_frame(self, pages, x):
+        """Post a frame to each ready page's outbox (its writer sends it)."""
         data = _frame(0, x)
         second = self.session.second_positions() if self.session.second is not None else None
         for ws in pages:
