@@ -30,12 +30,13 @@ from PIL import Image
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT / "tools"))  # viewer_probe: the browser harness
 
 from mimica.data import ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel  # noqa: E402
 from mimica.export import arkit_blendshapes  # noqa: E402
 from mimica.store import TemplateStore  # noqa: E402
 from mimica.image.video import VideoWriter  # noqa: E402
-from mimica.mesh.remesh import resample_face  # noqa: E402
+from mimica.correspond.remesh import resample_face  # noqa: E402
 from mimica.render import contact_sheet, face_framing, render_mesh, save_png, turntable_angles  # noqa: E402
 from mimica.render.shots import shared_frame_all_views  # noqa: E402
 import mimica  # noqa: E402
@@ -108,7 +109,7 @@ def viewer():
     import json
     from mimica.data import ICT_FACE_AREA_VERTICES
     from mimica.rig import build_rig
-    from mimica.viewer.probe import browser_page, chromium_path, drag_fps, viewer_process, ws_url
+    from viewer_probe import browser_page, chromium_path, drag_fps, viewer_process, ws_url
     from websockets.asyncio.client import connect
     if chromium_path() is None:
         print("viewer: no Chromium on this machine (apt install chromium)")

@@ -23,6 +23,7 @@ from mimica.physics.fullface import FullFaceSimulator  # noqa: E402
 from mimica.mesh import plane_grid  # noqa: E402
 from mimica.physics.modal import against_full  # noqa: E402
 from mimica.render import contact_sheet, render_mesh, save_png, shared_frame  # noqa: E402
+from mimica.physics import precompute  # noqa: E402
 from mimica.rig import build_rig  # noqa: E402
 import mimica  # noqa: E402
 mimica.keep_memory()                   # as the command line does (mimica/_memory.py)
@@ -38,7 +39,7 @@ def main():
     skin = face.mesh
     lm = face.neutral[ICT_LANDMARKS_68]
     t = time.perf_counter()
-    rig = build_rig(skin, lm)                                            # Kim's 8 muscles + gravity
+    rig = precompute(build_rig(skin, lm))                                # Kim's 8 muscles + gravity
     pre = time.perf_counter() - t
     print(f"rig precompute (8 muscles + gravity, modes included): {pre:.2f}s")
 
@@ -98,7 +99,7 @@ def main():
 
     # --solver full on the face: the whole skin one nonlinear shell, every muscle at once
     for base, shapes in ANATOMY[:2]:
-        r1 = build_rig(skin, lm, muscles=[base + "_L"], gravity=False)
+        r1 = precompute(build_rig(skin, lm, muscles=[base + "_L"], gravity=False))
         a1 = np.ones(1)
         t = time.perf_counter()
         ff = FullFaceSimulator(r1)

@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 from mimica.data import (EXPRESSIONS, ICT_FACE_AREA_FACES, ICT_FACE_AREA_VERTICES,  # noqa: E402
                          ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel)
 from mimica.landmarks import Landmarks, ict_landmarks  # noqa: E402
-from mimica.mesh.remesh import resample_face  # noqa: E402
+from mimica.correspond.remesh import resample_face  # noqa: E402
 from mimica.transfer import ExpressionTransfer, relative_error, static_vertices  # noqa: E402
 from mimica.solver import available, backend  # noqa: E402
 import mimica  # noqa: E402

@@ -39,12 +39,12 @@ from mimica.data import ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel, data_dir 
 from mimica.image import ImageAnalogy, psnr, read_image  # noqa: E402
 from mimica.image.io import luminance  # noqa: E402
 from mimica.image.ictphotos import LIGHT_LEFT, LIGHT_RIGHT, ICTPhotos  # noqa: E402
-from mimica.image.landmarks2d import Tracker, detect  # noqa: E402
-from mimica.image.landmarks3d import detect_mesh  # noqa: E402
+from mimica.landmarks.detect2d import Tracker, detect  # noqa: E402
+from mimica.landmarks.detect3d import detect_mesh  # noqa: E402
 from mimica.image.video import VideoWriter, frame_source  # noqa: E402
 from mimica.image.warp import Similarity2D, align_to, head_motion, polygon_mask  # noqa: E402
 from mimica.render import contact_sheet, save_png  # noqa: E402
-from mimica.render.sheet import to_uint8  # noqa: E402
+from mimica.image.io import to_uint8  # noqa: E402
 import mimica  # noqa: E402
 mimica.keep_memory()                   # as the command line does (mimica/_memory.py)
 

@@ -84,7 +84,7 @@ def mask_transfer():
     from mimica.align import fit_similarity
     from mimica.data import ICT_LANDMARKS_68
     from mimica.mesh.query import TriangleLocator
-    from mimica.mesh.remesh import resample_face
+    from mimica.correspond.remesh import resample_face
     from mimica.wrinkles import carry_mask, reference_mask, transfer_mask
     m = ICTModel(ICT_HEAD_VERTICES)
     ref, mask = m.mesh, reference_mask()

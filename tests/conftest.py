@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,8 @@ import pytest
 # one data setting for the tests, also when they run against an installed wheel (CI): the
 # shared data beside this checkout unless MIMICA_DATA says otherwise
 os.environ.setdefault("MIMICA_DATA", str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+# the repository's tools (the viewer's browser harness, tools/viewer_probe.py) for the tests
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 
 from mimica.data import ICT_HEAD_VERTICES, ICTModel, data_dir  # noqa: E402
 

@@ -11,7 +11,7 @@ from mimica import read_mesh, write_mesh
 from mimica.cli import main
 from mimica.data import ICT_LANDMARKS_68, ict_path
 from mimica.landmarks import write_landmarks
-from mimica.mesh.remesh import resample_face
+from mimica.correspond.remesh import resample_face
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ from conftest import held_out_identity
 
 from mimica.data import EXPRESSIONS, ICT_FACE_AREA_FACES, ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68
 from mimica.landmarks import Landmarks, ict_landmarks
-from mimica.mesh.remesh import resample_face
+from mimica.correspond.remesh import resample_face
 from mimica.transfer import ExpressionTransfer, relative_error, static_vertices
 
 FACE = slice(0, ICT_FACE_AREA_VERTICES)

@@ -12,7 +12,7 @@ import pytest
 from mimica.data import ICT_LANDMARKS_68, data_dir
 from mimica.errors import MimicaError
 from mimica.image import ImageAnalogy, psnr, read_image
-from mimica.image import landmarks2d
+from mimica.landmarks import detect2d
 from mimica.image.ictphotos import LIGHT_LEFT, LIGHT_RIGHT, ICTPhotos
 from mimica.image.warp import STABLE, PiecewiseAffine, Similarity2D, align_to, sample, triangulate
 
@@ -145,38 +145,38 @@ def test_transfer_moves_target_points_by_the_source_motion(photos):
 
 def test_landmarks_found_on_a_photo_and_round_trip(tmp_path):
     img = read_image(YALE / "subject03.normal.gif")
-    pts = landmarks2d.detect(img, "subject03")
+    pts = detect2d.detect(img, "subject03")
     assert pts.shape == (68, 2)
     # eyes above the nose above the mouth, inside the image
     assert pts[36:48, 1].mean() < pts[30, 1] < pts[48:68, 1].mean()
     assert (pts >= 0).all() and (pts[:, 0] < 320).all() and (pts[:, 1] < 243).all()
-    f = landmarks2d.write_points(tmp_path / "a.landmarks.json", pts, image="a.gif", size=(320, 243))
-    np.testing.assert_allclose(landmarks2d.read_points(f, (320, 243)), pts, atol=0.01)
+    f = detect2d.write_points(tmp_path / "a.landmarks.json", pts, image="a.gif", size=(320, 243))
+    np.testing.assert_allclose(detect2d.read_points(f, (320, 243)), pts, atol=0.01)
 
 
 def test_bad_landmark_files_and_images(tmp_path):
     bad = tmp_path / "b.json"
     bad.write_text(json.dumps({"scheme": "ibug68-image", "points": [[1, 2]] * 67}))
     with pytest.raises(MimicaError, match="68"):
-        landmarks2d.read_points(bad)
+        detect2d.read_points(bad)
     bad.write_text(json.dumps({"scheme": "ibug68-image", "points": [[1, 2]] * 67 + [["x", 2]]}))
     with pytest.raises(MimicaError, match="point 67"):
-        landmarks2d.read_points(bad)
+        detect2d.read_points(bad)
     bad.write_text("{not json")
     with pytest.raises(MimicaError, match="not valid JSON"):
-        landmarks2d.read_points(bad)
+        detect2d.read_points(bad)
     junk = tmp_path / "photo.jpg"
     junk.write_bytes(b"not an image at all")
     with pytest.raises(MimicaError, match="photo.jpg"):
         read_image(junk)
     with pytest.raises(MimicaError, match="no face"):
-        landmarks2d.detect(np.full((200, 200, 3), 0.5, np.float32), "grey")
+        detect2d.detect(np.full((200, 200, 3), 0.5, np.float32), "grey")
 
 
 def test_3d_landmarks_found_on_a_held_out_identity(head_model):
     """Render, detect, cast back: within 2% of the face width (median over the 68) of
     ICT-FaceKit's own landmark vertices, on an identity the calibration did not see."""
-    from mimica.image.landmarks3d import detect_mesh
+    from mimica.landmarks.detect3d import detect_mesh
     v = head_model.identity("identity015")
     p, view = detect_mesh(head_model.mesh, v)
     tru = v[ICT_LANDMARKS_68]

@@ -144,7 +144,7 @@ def test_blendshapes_on_another_topology(tmp_path, head_model):
     from mimica.data import ICT_LANDMARKS_68
     from mimica.export import arkit_blendshapes
     from mimica.store import TemplateStore
-    from mimica.mesh.remesh import resample_face
+    from mimica.correspond.remesh import resample_face
     v = head_model.identity("identity013")
     rs = resample_face(head_model.mesh.with_vertices(v), v[ICT_LANDMARKS_68], 6000, seed=3)
     shapes = arkit_blendshapes(rs.mesh, store=TemplateStore(cache=tmp_path))

@@ -210,7 +210,8 @@ def test_cli_rig_and_simulate(tmp_path, face, capsys):
 
 
 def test_sprung_engine_rests_moves_and_returns(rig, face):
-    from mimica.physics.sprung import FACIAL_ACTIONS, SprungFace, action_activations
+    from mimica.physics.sprung import SprungFace
+    from mimica.rig.muscles import FACIAL_ACTIONS, action_activations
     assert len(FACIAL_ACTIONS) == 28
     sf = SprungFace(rig)
     for _ in range(20):
@@ -386,7 +387,8 @@ def test_full_solver_face_smiles_closer_to_ict_than_the_modal_face(rig, face):
 def test_sprung_engine_at_low_frame_rates_stays_bounded(rig):
     """At 1, 5 and 10 fps the sprung engine substeps (<= 1/120 s): its frames stay close to
     the 60 fps clip at the same times, where two substeps a frame flew off (1e11-1e19)."""
-    from mimica.physics.sprung import MAX_DT, SprungFace, action_activations
+    from mimica.physics.sprung import MAX_DT, SprungFace
+    from mimica.rig.muscles import action_activations
     a = action_activations("AU12_lip_corner_puller", [m.name for m in rig.muscles])
     ref = SprungFace(rig, fps=60).run(lambda t: a, 1.0)
     scale = np.abs(ref[-1] - rig.skin.vertices).max()

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel
-from mimica.viewer.probe import ws_url
+from viewer_probe import ws_url
 
 ARTIFACTS = Path(__file__).resolve().parents[1] / "out" / "ci-artifacts"
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -27,7 +27,7 @@ CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
     from mimica.rig import build_rig
-    from mimica.viewer.probe import viewer_process
+    from viewer_probe import viewer_process
     face = ICTModel(ICT_FACE_AREA_VERTICES)
     rig = build_rig(face.mesh, face.neutral[ICT_LANDMARKS_68],
                     muscles=["zygomaticus_major_L", "zygomaticus_major_R", "frontalis_L", "frontalis_R"])
@@ -117,8 +117,8 @@ def test_page_in_headless_chromium(server, tmp_path):
     url, _, face = server
     pytest.importorskip("playwright")
     from mimica.mesh import write_mesh
-    from mimica.viewer.probe import browser_page, drag_fps
-    from mimica.mesh.remesh import resample_face
+    from viewer_probe import browser_page, drag_fps
+    from mimica.correspond.remesh import resample_face
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     v = face.neutral
     other = resample_face(face.mesh, v[ICT_LANDMARKS_68], 3000, seed=5).mesh

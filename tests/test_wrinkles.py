@@ -157,7 +157,7 @@ def test_mask_file_round_trip_and_bad_files(tmp_path):
 def test_mask_transfer_onto_another_topology_stays_on_the_surface_and_in_its_region(head_model, seed):
     """V&Y §3.2 onto a held-out ICT identity resampled with its own triangulation; the truth is
     the reference mask carried along ICT-FaceKit's own correspondence of identities."""
-    from mimica.mesh.remesh import resample_face
+    from mimica.correspond.remesh import resample_face
     ref = head_model.mesh
     mask = reference_mask()
     V = head_model.identity(np.random.default_rng(seed).normal(0, 0.8, 20))

@@ -2,7 +2,7 @@
 
 Renders the even-numbered ICT identities (000, 002, ... 018) as `mimica landmarks` does, runs
 the 2D detector, and averages (true projection - detection) in the eye-line frame, in units of
-the eye-to-eye distance.  Writes src/mimica/image/landmarks3d_offsets.json.  The odd-numbered
+the eye-to-eye distance.  Writes src/mimica/landmarks/detect3d_offsets.json.  The odd-numbered
 identities stay held out: bench/transfer_image.py reports the 3D error on them.
 """
 
@@ -11,8 +11,8 @@ import json
 import numpy as np
 
 from mimica.data import ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel
-from mimica.image import landmarks2d
-from mimica.image.landmarks3d import OFFSETS_FILE, eye_frame, render_for_detection
+from mimica.landmarks import detect2d
+from mimica.landmarks.detect3d import OFFSETS_FILE, eye_frame, render_for_detection
 
 TRAIN = [f"identity{i:03d}" for i in range(0, 20, 2)]
 
@@ -23,7 +23,7 @@ def main():
     for name in TRAIN:
         v = m.identity(name)
         img, frame, xy, cam = render_for_detection(m.mesh, v)
-        p2 = landmarks2d.fit_points(img, landmarks2d.detect_faces(img, upsample=0)[0])
+        p2 = detect2d.fit_points(img, detect2d.detect_faces(img, upsample=0)[0])
         iod, ex, ey = eye_frame(p2)
         d = xy[ICT_LANDMARKS_68] - p2
         offs.append(np.stack([d @ ex, d @ ey], 1) / iod)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 from pathlib import Path
@@ -16,6 +17,32 @@ def _progress(iterable, total=None, desc=""):
     from tqdm import tqdm
     return tqdm(iterable, total=total, desc=desc, disable=not sys.stderr.isatty(), leave=False,
                 unit="frame")
+
+
+@contextlib.contextmanager
+def _muscle_bar(desc):
+    """A progress bar over the muscles' systems: yields progress(k, n, name)."""
+    bar = _progress(range(1), 1, desc)
+
+    def progress(k, n, name):
+        bar.total = n
+        bar.set_postfix_str(name)
+        bar.update(1 if k else 0)
+    try:
+        yield progress
+    finally:
+        bar.close()
+
+
+def _landmarks(mesh, path, flag, what):
+    """A face's landmarks (landmarks_for); where none are found, the flag that gives them."""
+    from .landmarks import landmarks_for
+    try:
+        return landmarks_for(mesh, path, what)
+    except MimicaError as e:
+        if path is None:
+            raise MimicaError(f"{e}; pass it with {flag} FILE") from None
+        raise
 
 
 def _say(msg):
@@ -51,7 +78,6 @@ def read_frames(paths, source):
 
 
 def cmd_transfer(a):
-    from .landmarks import landmarks_for
     from .mesh import read_mesh, write_mesh
     from .transfer import ExpressionTransfer, static_vertices
 
@@ -68,8 +94,8 @@ def cmd_transfer(a):
     same = source.same_topology(target)
     ls = lt = None
     if not same or a.source_landmarks or a.target_landmarks:
-        ls = landmarks_for(source, a.source_landmarks, "--source-landmarks", str(a.source_neutral))
-        lt = landmarks_for(target, a.target_landmarks, "--target-landmarks", str(a.target))
+        ls = _landmarks(source, a.source_landmarks, "--source-landmarks", str(a.source_neutral))
+        lt = _landmarks(target, a.target_landmarks, "--target-landmarks", str(a.target))
     t1 = time.perf_counter()
     xfer = ExpressionTransfer(source, target, ls, lt, method=a.method,
                               static=static_vertices(source.vertices, frames))
@@ -133,20 +159,15 @@ def cmd_error(a):
 
 
 def cmd_rig(a):
-    from .landmarks import landmarks_for
     from .mesh import read_mesh
+    from .physics import precompute
     from .rig import build_rig
     t0 = time.perf_counter()
     skin = read_mesh(a.face)
-    lm = landmarks_for(skin, a.landmarks, "--landmarks", str(a.face)).positions(skin)
-    bar = _progress(range(1), 1, "muscles")
-
-    def progress(k, n, name):
-        bar.total = n
-        bar.set_postfix_str(name)
-        bar.update(1 if k else 0)
-    rig = build_rig(skin, lm, muscles=a.muscles, alpha=a.alpha, modes=a.modes, progress=progress)
-    bar.close()
+    lm = _landmarks(skin, a.landmarks, "--landmarks", str(a.face)).positions(skin)
+    rig = build_rig(skin, lm, muscles=a.muscles, alpha=a.alpha, modes=a.modes)
+    with _muscle_bar("muscles") as progress:
+        precompute(rig, progress=progress)
     rig.save(a.out)
     _say(f"rig: {len(rig.muscles)} muscles on {skin.n_vertices} skin nodes -> {a.out} "
          f"({time.perf_counter() - t0:.1f}s)")
@@ -154,6 +175,7 @@ def cmd_rig(a):
 
 
 def cmd_simulate(a):
+    from .wrinkles import mask_on
     from .anim import Timeline
     from .physics.face import FaceSimulator
     from .rig import Rig
@@ -165,14 +187,10 @@ def cmd_simulate(a):
         if a.maps and rig.skin.uv is None:
             raise MimicaError(f"--maps: the rig's skin has no texture coordinates ({a.rig}); rebuild the rig "
                               "from a mesh with uv")
-        mask = _mask_on(a.wrinkles, rig.skin, a.rig)
+        mask = mask_on(a.wrinkles, rig.skin, a.rig)
     if a.action:
-        from .anim import Channel
-        from .physics.sprung import action_activations
-        act = action_activations(a.action, names)
         duration = a.duration or 2.0
-        tl = Timeline({n: Channel(np.array([[0.0, 0.0], [min(0.3, duration / 3), v]]), "cubic")
-                       for n, v in zip(names, act) if v}, duration)
+        tl = Timeline.action(a.action, names, duration)
     elif a.timeline:
         tl = tl_file
         unknown = sorted(set(tl.channels) - set(names) - {"age", "gravity", "pull"})
@@ -252,64 +270,30 @@ def _write_simulation(a, rig, tl, sim, frames, d, out, mask=None):
 
 
 def _wrinkle_frames(a, rig, tl, frames, d, out, mask):
-    """The wrinkle layer on simulated frames (V&Y §5.3): refined skin, age per frame."""
-    from .wrinkles import WrinkledSkin
-    t0 = time.perf_counter()
-    ws = WrinkledSkin.build(rig.skin, mask, refine=not a.no_refine)
-    build_s = time.perf_counter() - t0
-    times = np.arange(len(frames)) / a.fps
-    ages = tl.channels["age"](times) if "age" in tl.channels else np.full(len(frames), a.age)
-    t0 = time.perf_counter()
-    carried = [ws.carry(v) for v in frames]
-    fine = np.stack([ws.layer.apply(X, float(g)) for X, g in zip(carried, ages)])
-    per = (time.perf_counter() - t0) / len(frames)
-    comp = np.stack([ws.layer.compression(X) for X in carried])
-    peak = int(np.argmin(np.minimum(comp, 1.0).mean(1)))         # the frame with the most compression
+    """The wrinkle layer on the frames, the maps of the most compressed one, and a note."""
+    from .wrinkles import wrinkle_frames
+    ages = tl.channels["age"](np.arange(len(frames)) / a.fps) if "age" in tl.channels else a.age
+    w = wrinkle_frames(rig.skin, mask, frames, ages, refine=not a.no_refine)
+    peak = w.peak
     if a.maps:
         from .wrinkles.maps import bake, save_maps
-        h, n = bake(ws.layer, rig.skin, carried[peak], float(ages[peak]), a.maps)
+        h, n = bake(w.skin.layer, rig.skin, w.carried[peak], float(w.ages[peak]), a.maps)
         save_maps(d / f"wrinkles_frame_{peak:04d}", h, n)
-    most = np.argsort(comp[peak])[:3]
-    names = ws.layer.mask.names()
-    note = (f"; wrinkles: {len(names)} on {ws.mesh.n_vertices} nodes (built in {build_s:.1f}s), "
-            f"{1000 * per:.2f} ms/frame; most compressed at t={peak / a.fps:.2f}s: "
-            + ", ".join(f"{names[i]} {comp[peak, i]:.2f}" for i in most)
+    most = np.argsort(w.compression[peak])[:3]
+    names = w.skin.layer.mask.names()
+    note = (f"; wrinkles: {len(names)} on {w.skin.mesh.n_vertices} nodes (built in {w.build_s:.1f}s), "
+            f"{1000 * w.frame_s:.2f} ms/frame; most compressed at t={peak / a.fps:.2f}s: "
+            + ", ".join(f"{names[i]} {w.compression[peak, i]:.2f}" for i in most)
             + (f"; maps of that frame -> {out}/wrinkles_frame_{peak:04d}_*" if a.maps else ""))
-    return fine, ws.mesh, note
-
-
-def _mask_on(mask_path, skin, face_path):
-    """A mask file read and snapped onto the skin; an error if it was made for another face."""
-    from .wrinkles import WrinkleMask, snap_mask
-    mask, d = snap_mask(WrinkleMask.load(mask_path), skin)
-    size = float(np.linalg.norm(np.ptp(skin.vertices, axis=0)))
-    if np.median(d) > 0.02 * size:
-        raise MimicaError(f"{mask_path}: the mask does not lie on {face_path} (median distance "
-                          f"{np.median(d):.3g}); make one for this face with `mimica wrinkle-mask`")
-    return mask
-
-
-def _mask_for(face, lm, path_anchors=None, reference=None):
-    """The reference mask on a face: carried exactly on ICT-FaceKit topology, else by V&Y §3.2."""
-    from .data import ICT_FACE_AREA_VERTICES, ICT_HEAD_VERTICES, ICTModel, is_ict_topology
-    from .wrinkles import WrinkleMask, carry_mask, reference_mask, transfer_mask
-    mask = reference_mask() if reference is None else WrinkleMask.load(reference)
-    anchors = _mask_on(path_anchors, face, face.name).anchors if path_anchors else None
-    if anchors is None and reference is None and is_ict_topology(face):
-        # the face area alone, or with head and neck: the reference of the same vertex count
-        ref = ICTModel(ICT_FACE_AREA_VERTICES if face.n_vertices < ICT_HEAD_VERTICES else ICT_HEAD_VERTICES)
-        return carry_mask(mask, ref.mesh, face.vertices, face.name), "carried on the ICT-FaceKit topology"
-    new, info = transfer_mask(mask, ICTModel(ICT_HEAD_VERTICES).mesh, face, lm, target_anchors=anchors)
-    return new, (f"spring mesh relaxed in {info.iterations} steps (residual {info.residual:.1e}), "
-                 f"{info.seconds:.2f}s")
+    return w.frames, w.skin.mesh, note
 
 
 def cmd_wrinkle_mask(a):
-    from .landmarks import landmarks_for
+    from .wrinkles import mask_for
     from .mesh import read_mesh
     face = read_mesh(a.face)
-    lm = landmarks_for(face, a.landmarks, "--landmarks", str(a.face)).positions(face)
-    mask, how = _mask_for(face, lm, a.anchors, a.reference)
+    lm = _landmarks(face, a.landmarks, "--landmarks", str(a.face)).positions(face)
+    mask, how = mask_for(face, lm, a.anchors, a.reference)
     mask.face = Path(a.face).name
     if a.show:
         from .render import contact_sheet, save_png
@@ -322,11 +306,12 @@ def cmd_wrinkle_mask(a):
 
 
 def cmd_age(a):
+    from .wrinkles import mask_for, mask_on
     from .anim import Timeline
-    from .landmarks import landmarks_for
     from .mesh import read_mesh
     from .physics.face import FaceSimulator
     from .render import contact_sheet, face_framing, render_mesh, save_png
+    from .physics import precompute
     from .rig import Rig, build_rig
     from .wrinkles import WrinkledSkin
     try:
@@ -341,7 +326,7 @@ def cmd_age(a):
     if a.expression not in PRESETS:
         raise MimicaError(f"--expression {a.expression!r}: one of {', '.join(PRESETS)}")
     face = read_mesh(a.face)
-    lm = landmarks_for(face, a.landmarks, "--landmarks", str(a.face)).positions(face)
+    lm = _landmarks(face, a.landmarks, "--landmarks", str(a.face)).positions(face)
     t0 = time.perf_counter()
     if a.rig:
         rig = Rig.load(a.rig)
@@ -349,21 +334,16 @@ def cmd_age(a):
             raise MimicaError(f"{a.rig}: the rig's skin has {rig.skin.n_vertices} nodes, {a.face} has "
                               f"{face.n_vertices}; build the rig from this face")
     else:
-        bar = _progress(range(1), 1, "rig (all muscles)")
-
-        def progress(k, n, name):
-            bar.total = n
-            bar.set_postfix_str(name)
-            bar.update(1 if k else 0)
-        rig = build_rig(face, lm, muscles="all", progress=progress)
-        bar.close()
+        rig = build_rig(face, lm, muscles="all")
+        with _muscle_bar("rig (all muscles)") as progress:
+            precompute(rig, progress=progress)
     names = [m.name for m in rig.muscles]
     tl = Timeline.preset(a.expression, names, duration=1.2)
     expr = FaceSimulator(rig).run(lambda t: tl.values(t, names), 1.2)[-1]
     if a.wrinkles:
-        mask = _mask_on(a.wrinkles, face, a.face)
+        mask = mask_on(a.wrinkles, face, a.face)
     else:
-        mask, _ = _mask_for(face, lm)
+        mask, _ = mask_for(face, lm)
     ws = WrinkledSkin.build(face, mask)
     frame = face_framing(lm)
     tiles, labels = [], []
@@ -397,14 +377,19 @@ def _parse_pull(spec):
 
 def _image_points(img, path, what):
     """2D feature points: `--landmarks`-style sibling file PHOTO.landmarks.json if present, else dlib."""
-    from .image import landmarks2d
+    from .landmarks import detect2d
     side = Path(path).with_suffix(".landmarks.json")
-    return landmarks2d.points_for(img, side if side.is_file() else None, str(path))
+    if side.is_file():
+        return detect2d.read_points(side, (img.shape[1], img.shape[0]))
+    try:
+        return detect2d.detect(img, str(path))
+    except MimicaError as e:
+        raise MimicaError(f"{e}, named {side.name} beside it (`mimica landmarks` writes one to edit)") from None
 
 
 def cmd_transfer_image(a):
     from .image import ImageAnalogy, read_image, write_image
-    from .image.landmarks2d import Tracker
+    from .landmarks.detect2d import Tracker
     from .render import contact_sheet, save_png
 
     if a.driving and a.source_expr:
@@ -466,12 +451,13 @@ def _tile(img, like):
 
 
 def cmd_landmarks(a):
-    from .image import landmarks2d, read_image, write_image
+    from .image import read_image, write_image
+    from .landmarks import detect2d
     from .image.io import to_uint8
     from .mesh import MESH_SUFFIXES
     path = Path(a.face)
     if path.suffix.lower() in MESH_SUFFIXES:
-        from .image.landmarks3d import detect_mesh
+        from .landmarks.detect3d import detect_mesh
         from .landmarks import write_landmarks
         from .mesh import read_mesh
         mesh = read_mesh(path)
@@ -486,10 +472,10 @@ def cmd_landmarks(a):
         _say(f"68 landmarks found from the view yaw {view[0]}, pitch {view[1]} -> {a.out}")
         return 0
     img = read_image(path)
-    pts = landmarks2d.detect(img, str(path))
+    pts = detect2d.detect(img, str(path))
     if a.show:
         write_image(Path(a.show), _draw_points(to_uint8(img), pts))
-    landmarks2d.write_points(a.out, pts, image=path.name, size=(img.shape[1], img.shape[0]))
+    detect2d.write_points(a.out, pts, image=path.name, size=(img.shape[1], img.shape[0]))
     _say(f"68 points -> {a.out} (pixel coordinates; edit and rerun `transfer-image`, which reads "
          f"PHOTO.landmarks.json beside each photo)")
     return 0
@@ -643,6 +629,7 @@ def cmd_blendshapes(a):
 
 
 def cmd_view(a):
+    from .wrinkles import mask_for
     import asyncio
     import webbrowser
     from .rig import Rig, build_rig
@@ -655,16 +642,15 @@ def cmd_view(a):
         rig = Rig.load(a.rig)
         name = Path(a.rig).stem
     else:
-        from .landmarks import landmarks_for
         from .mesh import read_mesh
         face = read_mesh(a.face)
-        lm = landmarks_for(face, a.landmarks, "--landmarks", str(a.face))
+        lm = _landmarks(face, a.landmarks, "--landmarks", str(a.face))
         _say(f"building a rig of {a.face} (Kim's muscles; `mimica rig` once and --rig to skip this)...")
         rig = build_rig(face, lm.positions(face))
         name = Path(a.face).stem
     mask = None
     if not a.no_wrinkles:
-        mask, _ = _mask_for(rig.skin, rig.landmarks)
+        mask, _ = mask_for(rig.skin, rig.landmarks)
     session = ViewerSession(rig, mask)
     server = ViewerServer(session, vendor, title=f"mimica · {name}", port=a.port)
 

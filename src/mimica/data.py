@@ -9,14 +9,13 @@ from it is copied into the project.
 from __future__ import annotations
 
 import hashlib
-import os
 from pathlib import Path
 
 import numpy as np
 
 from .errors import MimicaError
+from .store import data_dir, default_store, shape_names  # noqa: F401  (data_dir: the store owns it)
 
-PROJECT_ROOT = Path(__file__).resolve().parents[2]
 
 # ICT-FaceKit topology (README.upstream.md, "Face Model Topology").
 ICT_N_VERTICES = 26719
@@ -35,26 +34,13 @@ ICT_LANDMARKS_68 = np.array([
 ICT_FACE_AREA_SHA256 = "9be0b1b432fef37dd62416d07dd400bab4c925047a6c1f14b5b7a582f8cb3504"
 
 
-def data_dir() -> Path | None:
-    """The configured data directory: `MIMICA_DATA`, else `<checkout>/../shared/data` when
-    running from this repository, else None."""
-    env = os.environ.get("MIMICA_DATA")
-    if env:
-        return Path(env).expanduser().resolve()
-    if (PROJECT_ROOT / "pyproject.toml").is_file() and (PROJECT_ROOT / "src" / "mimica").is_dir():
-        return (PROJECT_ROOT.parent / "shared" / "data").resolve()
-    return None
-
-
 def ict_path(name: str) -> Path:
     """Path of an ICT-FaceKit OBJ by stem ('generic_neutral_mesh', 'identity003', 'jawOpen'...),
     through the one template store."""
-    from .store import default_store
     return default_store().path(name)
 
 
 def ict_expression_names() -> list[str]:
-    from .store import shape_names
     return [n for n in shape_names() if n != "generic_neutral_mesh" and not n.startswith("identity")]
 
 

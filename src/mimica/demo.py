@@ -11,7 +11,7 @@ import numpy as np
 from .data import ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel
 from .landmarks import Landmarks, ict_landmarks, write_landmarks
 from .mesh import write_mesh
-from .mesh.remesh import resample_face
+from .correspond.remesh import resample_face
 from .render import contact_sheet, render_mesh, save_png, shared_frame
 from .transfer import ExpressionTransfer, static_vertices
 

@@ -14,7 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from .errors import MimicaError
+from .mesh import atomic_path, read_vertices
 
+PROJECT_ROOT = Path(__file__).resolve().parents[2]
 MANIFEST = json.loads(Path(__file__).with_name("ict_manifest.json").read_text())
 
 
@@ -26,11 +28,21 @@ def cache_dir() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "mimica"
 
 
+def data_dir() -> Path | None:
+    """The configured data directory: `MIMICA_DATA`, else `<checkout>/../shared/data` when
+    running from this repository, else None."""
+    env = os.environ.get("MIMICA_DATA")
+    if env:
+        return Path(env).expanduser().resolve()
+    if (PROJECT_ROOT / "pyproject.toml").is_file() and (PROJECT_ROOT / "src" / "mimica").is_dir():
+        return (PROJECT_ROOT.parent / "shared" / "data").resolve()
+    return None
+
+
 class TemplateStore:
     """Where the ICT-FaceKit template files come from (data directory, cache, or download)."""
 
     def __init__(self, data=None, cache=None, url=None, timeout=30.0):
-        from .data import data_dir
         base = data_dir()
         self.data = Path(data) if data is not None else (base / "ict-facekit" / "FaceXModel" if base else None)
         self.cache = Path(cache) if cache is not None else cache_dir() / "ict-facekit" / MANIFEST["commit"][:12]
@@ -67,14 +79,12 @@ class TemplateStore:
         if digest != MANIFEST["files"][name]:
             raise MimicaError(f"ICT-FaceKit template {name}.obj from {url}: sha256 {digest[:16]}... does not "
                               f"match the expected {MANIFEST['files'][name][:16]}...; not used")
-        from .mesh import atomic_path
         with atomic_path(dest) as tmp:
             tmp.write_bytes(data)
         return dest
 
     def shapes(self, names, n_vertices, progress=None) -> dict:
         """Vertex positions (first n_vertices) of the named shapes, via a compact cache file."""
-        from .mesh import atomic_path, read_vertices
         key = f"shapes-{n_vertices}-{hashlib.sha1(','.join(sorted(names)).encode()).hexdigest()[:10]}.npz"
         cache = self.cache / key
         if cache.is_file():

@@ -85,6 +85,15 @@ class Timeline:
                 ch[name] = Channel(np.array(keys), "cubic")
         return cls(ch, duration)
 
+    @classmethod
+    def action(cls, action: str, muscles, duration=2.0, onset=0.3) -> "Timeline":
+        """Ramp into one facial action (FACS unit, rig.muscles.FACIAL_ACTIONS) and hold it."""
+        from ..rig.muscles import action_activations
+        act = action_activations(action, list(muscles))
+        ramp = min(onset, duration / 3)
+        return cls({n: Channel(np.array([[0.0, 0.0], [ramp, v]]), "cubic") for n, v in zip(muscles, act) if v},
+                   duration)
+
     def save(self, path) -> Path:
         doc = {"format": FORMAT, "duration": self.duration,
                "channels": {n: {"interp": c.interp, "keys": c.keys.tolist()} for n, c in self.channels.items()}}

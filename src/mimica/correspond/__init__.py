@@ -25,52 +25,10 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import Delaunay, cKDTree
 
+from ..align import face_cylinder
 from ..errors import MimicaError
 from ..mesh import Mesh
 from ..mesh.query import barycentric_2d
-
-# iBUG 68 indices used to build the face frame
-_JAW_CHIN, _EYE_R_OUT, _EYE_L_OUT = 8, 36, 45     # jaw.8, eye.right.0, eye.left.3
-_BROWS = slice(17, 27)
-
-
-@dataclass
-class Cylinder:
-    """A vertical cylinder in a face frame: origin on the axis, axes (right, up, forward)."""
-
-    origin: np.ndarray
-    axes: np.ndarray          # (3, 3) rows: right, up, forward
-    radius: float             # reference radius: u is arc length at this radius
-
-    def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Points (m, 3) -> (uv (m, 2), r (m,)); u = radius * angle from forward."""
-        loc = (np.asarray(x) - self.origin) @ self.axes.T
-        ang = np.arctan2(loc[:, 0], loc[:, 2])
-        r = np.hypot(loc[:, 0], loc[:, 2])
-        return np.stack([self.radius * ang, loc[:, 1]], axis=1), r
-
-
-def face_cylinder(landmarks: np.ndarray) -> Cylinder:
-    """Cylinder from 68 landmark positions: axis vertical through the middle of the head."""
-    lm = np.asarray(landmarks, float)
-    ok = np.isfinite(lm).all(1)
-    need = [_JAW_CHIN, _EYE_R_OUT, _EYE_L_OUT]
-    if not ok[need].all() or not ok[_BROWS].any():
-        raise MimicaError("landmarks: the chin (8), outer eye corners (36, 45) and a brow point "
-                          "(17-26) are needed to place the face on a cylinder")
-    right = lm[_EYE_L_OUT] - lm[_EYE_R_OUT]
-    width = float(np.linalg.norm(right))
-    right /= width
-    up = np.nanmean(lm[_BROWS], axis=0) - lm[_JAW_CHIN]
-    up -= right * (up @ right)
-    up /= np.linalg.norm(up)
-    fwd = np.cross(right, up)
-    center = lm[ok].mean(0)
-    # the axis sits behind the face, near the middle of the skull (about one eye-to-eye
-    # width behind the landmarks' centroid, for adult heads)
-    origin = center - fwd * 1.1 * width
-    return Cylinder(origin, np.stack([right, up, fwd]), 1.1 * width)
-
 
 @dataclass
 class Correspondence:

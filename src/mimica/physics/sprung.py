@@ -18,49 +18,6 @@ from ..solver import SPDSolver
 from .face import run_frames
 from .shell import lumped_mass
 
-# The 28 facial actions (FACS units, Ekman & Friesen), each a group of the library's muscles
-# (Viaud & Yahia drive 28 actions with eight groups of forces; "_L"/"_R" both unless named).
-FACIAL_ACTIONS = {
-    "AU1_inner_brow_raiser": {"frontalis": 0.6, "corrugator_supercilii": -0.2},
-    "AU2_outer_brow_raiser": {"frontalis": 1.0},
-    "AU4_brow_lowerer": {"corrugator_supercilii": 1.0},
-    "AU5_upper_lid_raiser": {"frontalis": 0.3},
-    "AU6_cheek_raiser": {"orbicularis_oculi": 1.0, "zygomaticus_minor": 0.3},
-    "AU7_lid_tightener": {"orbicularis_oculi": 0.6},
-    "AU9_nose_wrinkler": {"levator_labii_superioris_alaeque_nasi": 1.0, "nasalis": 0.6},
-    "AU10_upper_lip_raiser": {"levator_labii_superioris": 1.0},
-    "AU11_nasolabial_deepener": {"zygomaticus_minor": 1.0},
-    "AU12_lip_corner_puller": {"zygomaticus_major": 1.0},
-    "AU13_cheek_puffer": {"levator_anguli_oris": 1.0},
-    "AU14_dimpler": {"orbicularis_oris": 0.4, "zygomaticus_major": 0.3},
-    "AU15_lip_corner_depressor": {"depressor_anguli_oris": 1.0},
-    "AU16_lower_lip_depressor": {"depressor_labii_inferioris": 1.0},
-    "AU17_chin_raiser": {"mentalis": 1.0},
-    "AU18_lip_pucker": {"orbicularis_oris": 1.0},
-    "AU20_lip_stretcher": {"depressor_anguli_oris": 0.4, "zygomaticus_major": 0.4, "orbicularis_oris": -0.5},
-    "AU22_lip_funneler": {"orbicularis_oris": 0.8, "mentalis": 0.2},
-    "AU23_lip_tightener": {"orbicularis_oris": 0.6},
-    "AU24_lip_pressor": {"orbicularis_oris": 0.7, "mentalis": 0.3},
-    "AU25_lips_part": {"depressor_labii_inferioris": 0.5},
-    "AU26_jaw_drop": {"masseter": -0.6, "depressor_labii_inferioris": 0.4},
-    "AU27_mouth_stretch": {"masseter": -1.0, "depressor_labii_inferioris": 0.6},
-    "AU28_lip_suck": {"orbicularis_oris": 1.0, "mentalis": 0.5},
-    "AU38_nostril_dilator": {"nasalis": -0.8},
-    "AU39_nostril_compressor": {"nasalis": 1.0},
-    "AU43_eyes_closed": {"orbicularis_oculi": 1.0},
-    "AU45_blink": {"orbicularis_oculi": 0.8},
-}
-
-
-def action_activations(action: str, muscle_names) -> np.ndarray:
-    """Activations (n_muscles,) of one facial action for the muscles a rig has."""
-    from ..errors import MimicaError
-    if action not in FACIAL_ACTIONS:
-        raise MimicaError(f"unknown facial action {action!r}; actions: {', '.join(FACIAL_ACTIONS)}")
-    w = FACIAL_ACTIONS[action]
-    return np.array([w.get(n.rsplit("_", 1)[0], w.get(n, 0.0)) for n in muscle_names])
-
-
 MAX_DT = 1.0 / 120.0                  # seconds: the longest step of the sprung engine
 
 

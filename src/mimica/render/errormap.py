@@ -6,8 +6,9 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from ..mesh import Mesh
-from .raster import render_mesh
-from .sheet import _font, save_png
+from ..image.raster import render_mesh
+from ..image.io import write_image as save_png
+from .sheet import _font
 
 # Song Fig. 11 levels: < 0.1 % green, [0.1 %, 0.5 %) blue, [0.5 %, 2 %) red; beyond: purple
 BINS = (0.001, 0.005, 0.02)

@@ -1,32 +1,9 @@
-"""Contact sheets, colour maps and PNG output."""
+"""Contact sheets and colour maps (PNG output: image.io.write_image)."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
-
-from ..mesh import atomic_path
-
-
-def to_uint8(img) -> np.ndarray:
-    """uint8 pixels of an image in [0, 1] (float) or already uint8."""
-    img = np.asarray(img)
-    if img.dtype == np.uint8:
-        return img
-    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8)
-
-
-def save_png(path, img: np.ndarray) -> Path:
-    """Write an RGB or grey image (uint8, or float in [0, 1]) atomically, its folder made; the
-    format follows the suffix (PNG for .png and anything Pillow does not know)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fmt = Image.registered_extensions().get(path.suffix.lower(), "PNG")
-    with atomic_path(path) as tmp:
-        Image.fromarray(to_uint8(img)).save(tmp, format=fmt, **({"compress_level": 3} if fmt == "PNG" else {}))
-    return path
 
 
 def _font(size=14):

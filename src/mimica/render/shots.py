@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from PIL import Image, ImageDraw
 
-from .raster import framing, render_mesh
+from ..image.raster import framing, render_mesh
 from .sheet import _font, colormap
 
 # (yaw, pitch) in degrees; yaw turns the face to its left (the viewer sees its right cheek)

@@ -1,8 +1,10 @@
 """The face rig (Kim 2020 §IV-V): skin, muscles as thin shell strips, the spring layer,
-per-muscle regions of interest, and one modal system per force type (Kim §VI).
+per-muscle regions of interest and the nodes the skull holds.
 
 `build_rig(skin, landmarks)` places every muscle of the library from the 68 landmarks, so
-the same definitions fit any face of any topology.  A `Rig` saves to one `.rig` file.
+the same definitions fit any face of any topology.  A `Rig` saves to one `.rig` file, with
+the modal system of each force type (Kim §VI) when the physics stage has precomputed them
+(`mimica.physics.precompute`): the rig carries them, it does not make them.
 """
 
 from __future__ import annotations
@@ -12,21 +14,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from ..correspond import face_cylinder
+from ..align import face_cylinder
 from ..errors import MimicaError
 from ..mesh import Mesh, atomic_path, validate
 from ..mesh.query import TriangleLocator
-from ..physics.face import tether_springs
-from ..physics.modal import ModalBasis, rotation_operator
-from ..physics.shell import ShellEnergy, lumped_mass
 from .muscles import KIM_MUSCLES, MUSCLES, MuscleDef
 
 ROWS, COLS = 9, 4                # strip resolution along / across (Kim: 36 nodes a muscle)
 FORMAT = "mimica-rig/1"
-WARP_SMOOTH = 4                  # rings over which the modal-warping rotation is averaged
 
 
 @dataclass
@@ -39,7 +36,7 @@ class Muscle:
     omega: float                 # frequency of the stretch mode (rad/s), critically damped
     attach: np.ndarray           # (k,) skin node of each muscle node's spring
     roi: np.ndarray              # (n_skin,) bool, Kim eq. 19
-    basis: ModalBasis | None = None
+    basis: object = None         # its skin system (physics.precompute); a dict of arrays when loaded
 
 
 @dataclass
@@ -48,7 +45,14 @@ class Rig:
     landmarks: np.ndarray        # (68, 3)
     muscles: list[Muscle]
     params: dict = field(default_factory=dict)
-    gravity_basis: ModalBasis | None = None
+    gravity_basis: object = None  # the gravity system (physics.precompute), as `basis`
+
+    def held(self) -> np.ndarray:
+        """(n_skin,) bool: the nodes the skull holds under gravity -- the skin's outline (the
+        back of the head, a scan's border) and the node under each landmark (Kim §VI)."""
+        held = self.skin.boundary_vertices()
+        held[cKDTree(self.skin.vertices).query(self.landmarks)[1]] = True
+        return held
 
     def muscle(self, name: str) -> Muscle:
         for m in self.muscles:
@@ -95,11 +99,10 @@ class Rig:
             uv = (z["skin_uv"], z["skin_fuv"]) if "skin_uv" in z.files else (None, None)
             skin = Mesh(np.asarray(z["skin_v"], np.float64), z["skin_fi"], z["skin_fs"], *uv)
             validate(skin, f"{path} (the rig's skin)")
-            W = rotation_operator(skin.vertices, skin.triangles, smooth=WARP_SMOOTH)
             muscles = [Muscle(str(d["name"]), z[f"m{i}_nodes"], z[f"m{i}_stretch"], float(d["omega"]),
-                              z[f"m{i}_attach"], z[f"m{i}_roi"], _get_basis(z, f"m{i}_b", W))
+                              z[f"m{i}_attach"], z[f"m{i}_roi"], _get_basis(z, f"m{i}_b"))
                        for i, d in enumerate(meta["muscles"])]
-            rig = cls(skin, z["landmarks"], muscles, meta["params"], _get_basis(z, "g_b", W))
+            rig = cls(skin, z["landmarks"], muscles, meta["params"], _get_basis(z, "g_b"))
         except KeyError as e:
             raise MimicaError(f"{path}: rig file is missing {e.args[0]!r}; rebuild it with `mimica rig`") from None
         except MimicaError:
@@ -108,28 +111,28 @@ class Rig:
             raise MimicaError(f"{path}: the rig file is damaged ({type(e).__name__}); rebuild it with "
                               "`mimica rig`") from None
         for m in rig.muscles:
-            arrays = [m.nodes, m.stretch] + ([m.basis.phi, m.basis.lam] if m.basis is not None else [])
+            arrays = [m.nodes, m.stretch] + ([m.basis["phi"], m.basis["lam"]] if m.basis is not None else [])
             if not all(np.isfinite(np.asarray(a, float)).all() for a in arrays):
                 raise MimicaError(f"{path}: muscle {m.name} holds non-finite numbers; rebuild the rig with `mimica rig`")
         return rig
 
 
+_BASIS_KEYS = ("free", "phi", "lam", "mass", "n")
+
+
 def _put_basis(arrays, key, b):
-    """Mode shapes are stored in single precision; the rotation fields are derived on load."""
+    """A force's system as the physics stage hands it over (its to_arrays(), or the arrays
+    it was loaded as)."""
     if b is None:
         return
-    arrays.update({f"{key}_free": b.free, f"{key}_phi": b.phi.astype(np.float32), f"{key}_lam": b.lam,
-                   f"{key}_mass": b.mass, f"{key}_n": np.array(b.n)})
+    d = b if isinstance(b, dict) else b.to_arrays()
+    arrays.update({f"{key}_{k}": d[k] for k in _BASIS_KEYS})
 
 
-def _get_basis(z, key, W):
+def _get_basis(z, key):
     if f"{key}_phi" not in z:
         return None
-    free, phi, n = z[f"{key}_free"], z[f"{key}_phi"].astype(np.float64), int(z[f"{key}_n"])
-    dof = (3 * free[:, None] + np.arange(3)).ravel()
-    full = np.zeros((3 * n, phi.shape[1]))
-    full[dof] = phi
-    return ModalBasis(free, phi, z[f"{key}_lam"], (W @ full)[dof], z[f"{key}_mass"], n)
+    return {k: z[f"{key}_{k}"] for k in _BASIS_KEYS}
 
 
 # ---------------------------------------------------------------------- placement
@@ -189,13 +192,15 @@ def stretch_mode(nodes: np.ndarray) -> np.ndarray:
 def build_rig(skin: Mesh, landmarks: np.ndarray, muscles=None, alpha: float = 10.0, modes: int = 8,
               contraction: float = 0.25, gravity: bool = True, muscle_omega: float = 40.0,
               tether: float = 0.02, progress=None) -> Rig:
-    """Place the muscles, springs and ROIs on a face; precompute one modal system per force.
+    """Place the muscles, springs and ROIs on a face (the modal system of each force is the
+    physics stage's: `mimica.physics.precompute(rig)`, or made when the rig is first simulated).
 
     alpha: Kim eq. 19 ROI range; contraction: muscle shortening at full activation;
     muscle_omega: the stretch mode's frequency (rad/s; the muscle follows its activation
     critically damped, time constant 1/omega); tether: stiffness of the subcutaneous
     layer that ties every skin node to the skull, relative to a skin edge (Viaud & Yahia's
-    rest-position feedback; without it the whole ROI slides as one sheet).
+    rest-position feedback; without it the whole ROI slides as one sheet); modes and gravity:
+    the size of each force's modal system and whether gravity gets one (kept in params).
     """
     lm = np.asarray(landmarks, float)
     if not np.isfinite(lm).all():
@@ -208,12 +213,7 @@ def build_rig(skin: Mesh, landmarks: np.ndarray, muscles=None, alpha: float = 10
     for n in names:
         if n not in MUSCLES:
             raise MimicaError(f"rig: unknown muscle {n!r}; known: {', '.join(MUSCLES)}")
-    skin_e = ShellEnergy.default(skin)
-    mass = lumped_mass(skin)
     mean_edge = skin.mean_edge_length()
-    k_node = tether_springs(tether, skin_e.k_length, mean_edge, mass)             # K + the tethers
-    K = (skin_e.hessian(skin_e.rest) + sp.diags(np.repeat(k_node, 3))).tocsr()
-    W = rotation_operator(skin.vertices, skin.triangles, smooth=WARP_SMOOTH)
     loc = TriangleLocator(skin.vertices, skin.triangles)
     normals = skin.vertex_normals()
     tree = cKDTree(skin.vertices)
@@ -231,36 +231,7 @@ def build_rig(skin: Mesh, landmarks: np.ndarray, muscles=None, alpha: float = 10
         for p, r in zip(nodes, a_m * s_init):
             roi[tree.query_ball_point(p, r)] = True
         roi[attach] = True
-        basis = ModalBasis.compute(skin_e, mass, ~roi, r=modes, load_nodes=np.unique(attach), stiffness=K,
-                                   rotation=W)
-        out.append(Muscle(n, nodes, shape * contraction, muscle_omega, attach, roi, basis))
-    gb = None
-    if gravity:
-        # gravity: the skin hangs from its outline (the back of the head / scan border) and
-        # from the landmarks (feature points held by the skull), Kim §VI
-        fixed = skin.boundary_vertices()
-        fixed[tree.query(lm)[1]] = True
-        gb = ModalBasis.compute(skin_e, mass, fixed, r=modes, stiffness=K, rotation=W)
+        out.append(Muscle(n, nodes, shape * contraction, muscle_omega, attach, roi))
     params = {"alpha": alpha, "modes": modes, "contraction": contraction, "tether": tether,
-              "mean_edge": mean_edge,
-              "k_area": skin_e.k_area, "k_length": skin_e.k_length, "k_bend": skin_e.k_bend}
-    return Rig(skin, lm, out, params, gb)
-
-
-def build_region_system(rig: Rig, center: np.ndarray, radius: float, reach: float = 3.0):
-    """A modal system for a force on the skin within `radius` of `center` (a user pull):
-    its ROI is the skin within reach x radius; returns (basis, loaded nodes, weights)."""
-    skin = rig.skin
-    d = np.linalg.norm(skin.vertices - center, axis=1)
-    nodes = np.nonzero(d < radius)[0]
-    if len(nodes) == 0:
-        raise MimicaError(f"pull: no skin within {radius:g} of {np.round(center, 3).tolist()}")
-    w = (1 - d[nodes] / radius) ** 2
-    energy = ShellEnergy.default(skin)
-    mass = lumped_mass(skin)
-    k_node = tether_springs(rig.params.get("tether", 0.0), energy.k_length, rig.params["mean_edge"], mass)
-    K = (energy.hessian(energy.rest) + sp.diags(np.repeat(k_node, 3))).tocsr()
-    W = rotation_operator(skin.vertices, skin.triangles, smooth=WARP_SMOOTH)
-    basis = ModalBasis.compute(energy, mass, d > reach * radius, r=rig.params.get("modes", 8),
-                               load_nodes=nodes[:: max(1, len(nodes) // 24)], stiffness=K, rotation=W)
-    return basis, nodes, w / w.sum()
+              "gravity": bool(gravity), "mean_edge": mean_edge}
+    return Rig(skin, lm, out, params)

@@ -16,7 +16,6 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from ..align import fit_similarity
 from ..correspond import Correspondence, correspond
@@ -48,7 +47,7 @@ class ExpressionTransfer:
             ls = lt = None
         else:
             raise MimicaError("source and target have different topologies: landmarks are needed "
-                              "on both (--source-landmarks / --target-landmarks)")
+                              "on both (68 points each)")
         width = float(np.ptp(source.vertices, axis=0).max())
         self.alignment_residual = self.similarity.residual / max(width, 1e-300)
         aligned = target.with_vertices(self.similarity.apply(target.vertices))
@@ -83,6 +82,7 @@ class ExpressionTransfer:
             for i in starts:
                 self.solver.apply(f[i:i + batch], self._back, out=out[i:i + batch])
         else:
+            from threadpoolctl import threadpool_limits   # here: its import sets KMP_DUPLICATE_LIB_OK
             with threadpool_limits(limits=1), ThreadPoolExecutor(workers) as ex:
                 jobs = [ex.submit(self.solver.apply, f[i:i + batch], self._back, out[i:i + batch])
                         for i in starts]

@@ -12,7 +12,7 @@ class ViewerSession:
     def __init__(self, rig, mask=None, fps: float = 60.0):
         from ..anim import PRESETS
         from ..physics.face import FaceSimulator
-        from ..physics.sprung import FACIAL_ACTIONS
+        from ..rig.muscles import FACIAL_ACTIONS
         self.rig, self.fps = rig, fps
         # display: reduced output and frame model (0.007% off), built now, not inside the first frames
         self.sim = FaceSimulator(rig, fps=fps, reduced=1e-4).prepare()
@@ -46,7 +46,7 @@ class ViewerSession:
         v = float(value)
         if name == "age":
             if self.layer is None:
-                raise MimicaError("age: this face has no wrinkle layer (start the viewer with --wrinkles)")
+                raise MimicaError("age: this face has no wrinkle layer (the viewer was started without wrinkles)")
             self.age = float(np.clip(v, 15.0, 95.0))
         elif name in self.values:
             self.values[name] = float(np.clip(v, -1.0, 1.0))
@@ -93,7 +93,7 @@ class ViewerSession:
         from ..transfer import ExpressionTransfer
         src = self.rig.skin
         ls = self.rig_landmarks()
-        lt = landmarks_for(mesh, None, "a landmark file", "the second face")
+        lt = landmarks_for(mesh, None, "the second face")
         self.second = (mesh, ExpressionTransfer(src, mesh, ls, lt, method="vtc"))
         return mesh
 

@@ -4,6 +4,7 @@ lines, and displacement/normal maps."""
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,7 +14,7 @@ from .cylinder import CylinderFit, fit_cylinder, flatten
 from .layer import WrinkleLayer
 from .mask import Wrinkle, WrinkleMask, reference_mask
 from .refine import Refined, refine_along
-from .transfer import carry_mask, snap_mask, transfer_mask
+from .transfer import carry_mask, mask_for, mask_on, snap_mask, transfer_mask
 
 
 @dataclass
@@ -49,6 +50,39 @@ class WrinkledSkin:
         return self.layer.apply(X, age)
 
 
+@dataclass
+class WrinkledFrames:
+    """Simulated frames with the wrinkle layer on (wrinkle_frames)."""
+    skin: WrinkledSkin
+    frames: np.ndarray            # (F, n_fine, 3) the wrinkled fine skin
+    carried: list                 # per frame, the fine skin before the bulges
+    compression: np.ndarray       # (F, n_wrinkles) each wrinkle's compression (1: at rest)
+    ages: np.ndarray              # (F,)
+    build_s: float                # seconds to refine and build the layer
+    frame_s: float                # seconds a frame
+
+    @property
+    def peak(self) -> int:
+        """The frame with the most compression."""
+        return int(np.argmin(np.minimum(self.compression, 1.0).mean(1)))
+
+
+def wrinkle_frames(skin, mask: WrinkleMask, frames, ages, refine: bool = True) -> WrinkledFrames:
+    """The wrinkle layer on simulated frames (V&Y §5.3): the skin refined along the mask, each
+    frame carried onto it and bulged at its age (ages: one a frame)."""
+    t0 = time.perf_counter()
+    ws = WrinkledSkin.build(skin, mask, refine=refine)
+    build_s = time.perf_counter() - t0
+    ages = np.broadcast_to(np.asarray(ages, float), (len(frames),))
+    t0 = time.perf_counter()
+    carried = [ws.carry(v) for v in frames]
+    fine = np.stack([ws.layer.apply(X, float(g)) for X, g in zip(carried, ages)])
+    per = (time.perf_counter() - t0) / max(len(frames), 1)
+    comp = np.stack([ws.layer.compression(X) for X in carried])
+    return WrinkledFrames(ws, fine, carried, comp, np.array(ages), build_s, per)
+
+
 __all__ = ["ArcLengthTable", "arc_length", "dilation", "CylinderFit", "fit_cylinder", "flatten",
            "WrinkleLayer", "Wrinkle", "WrinkleMask", "reference_mask", "Refined", "refine_along",
-           "snap_mask", "carry_mask", "transfer_mask", "WrinkledSkin"]
+           "snap_mask", "carry_mask", "transfer_mask", "mask_on", "mask_for", "WrinkledSkin", "WrinkledFrames",
+           "wrinkle_frames"]

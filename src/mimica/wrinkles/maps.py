@@ -16,7 +16,7 @@ from PIL import Image
 
 from ..errors import MimicaError
 from ..mesh import Mesh, atomic_path
-from ..render import rasterize
+from ..image.raster import rasterize
 
 
 def texel_points(mesh: Mesh, size: int):

@@ -7,7 +7,7 @@ from PIL import Image, ImageDraw
 from scipy.spatial import cKDTree
 
 from ..mesh import Mesh
-from ..render import framing, project, render_mesh, view_matrix
+from ..image.raster import framing, project, render_mesh, view_matrix
 from .surface import cardinal_spline
 
 GROUP_COLORS = {"forehead": (220, 40, 40), "glabellar": (230, 120, 0), "procerus": (230, 120, 0),

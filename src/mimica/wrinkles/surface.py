@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..correspond import face_cylinder
+from ..align import face_cylinder
 from ..mesh import Mesh
 from ..mesh.query import SurfaceMap
 

@@ -175,3 +175,30 @@ def carry_mask(mask: WrinkleMask, reference: Mesh, vertices: np.ndarray, face=""
         t, b, _, _ = loc.closest(p)
         return np.einsum("ij,ijk->ik", b, vertices[tri[t]])
     return _moved(mask, move, face)
+
+
+def mask_on(path, skin: Mesh, what: str = "") -> WrinkleMask:
+    """A mask file read and snapped onto `skin`; an error if it was made for another face."""
+    mask, d = snap_mask(WrinkleMask.load(path), skin)
+    size = float(np.linalg.norm(np.ptp(skin.vertices, axis=0)))
+    if np.median(d) > 0.02 * size:
+        raise MimicaError(f"{path}: the mask does not lie on {what or skin.name or 'the face'} (median distance "
+                          f"{np.median(d):.3g}); make one for this face with `mimica wrinkle-mask`")
+    return mask
+
+
+def mask_for(face: Mesh, landmarks: np.ndarray, anchors=None, reference=None) -> tuple[WrinkleMask, str]:
+    """The reference mask (or the mask file `reference`) on a face, and how it got there:
+    carried exactly on ICT-FaceKit topology, else by V&Y §3.2 (transfer_mask).  anchors: a mask
+    file on this face whose anchors the transfer keeps."""
+    from ..data import ICT_FACE_AREA_VERTICES, ICT_HEAD_VERTICES, ICTModel, is_ict_topology
+    from .mask import reference_mask
+    mask = reference_mask() if reference is None else WrinkleMask.load(reference)
+    target_anchors = mask_on(anchors, face).anchors if anchors else None
+    if target_anchors is None and reference is None and is_ict_topology(face):
+        # the face area alone, or with head and neck: the reference of the same vertex count
+        ref = ICTModel(ICT_FACE_AREA_VERTICES if face.n_vertices < ICT_HEAD_VERTICES else ICT_HEAD_VERTICES)
+        return carry_mask(mask, ref.mesh, face.vertices, face.name), "carried on the ICT-FaceKit topology"
+    new, info = transfer_mask(mask, ICTModel(ICT_HEAD_VERTICES).mesh, face, landmarks, target_anchors=target_anchors)
+    return new, (f"spring mesh relaxed in {info.iterations} steps (residual {info.residual:.1e}), "
+                 f"{info.seconds:.2f}s")

@@ -1,4 +1,5 @@
-"""Resample a face surface with a new, unrelated triangulation (for tests and the demo).
+"""Resample a face surface with a new, unrelated triangulation (for tests and the demo); the
+result is a correspondence to the original (a triangle and barycentric coordinates a vertex).
 
 Samples a jittered grid in the face's cylinder map, triangulates it (Delaunay), lifts every
 sample onto the outermost layer of the original surface, and cuts holes where the original
@@ -15,6 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import Delaunay
 
+from ..align import face_cylinder
 from ..mesh.core import Mesh
 from ..mesh.query import SurfaceMap
 
@@ -34,7 +36,6 @@ class Resampled:
 
 def resample_face(mesh: Mesh, landmarks: np.ndarray, n_vertices: int = 12000, seed: int = 0,
                   nostril_holes: bool = True, rings: int = 6) -> Resampled:
-    from ..correspond import face_cylinder
     rng = np.random.default_rng(seed)
     cyl = face_cylinder(landmarks)
     uv, r = cyl.project(mesh.vertices)

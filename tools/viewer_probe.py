@@ -1,5 +1,5 @@
-"""Drive the viewer page in a headless Chromium (Playwright + the system's Chromium): used by
-the browser tests and by bench/render.py."""
+"""Drive the viewer page in a headless Chromium (Playwright + the system's Chromium): the timing
+harness of the browser tests and of bench/render.py (kept out of the package: not a user tool)."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ def viewer_process(face, rig, extra=(), timeout=180):
     import os
     from pathlib import Path
     import mimica
-    from ..data import data_dir
+    from mimica.data import data_dir
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [str(Path(mimica.__file__).resolve().parents[1])] + os.environ.get("PYTHONPATH", "").split(os.pathsep)))
     if data_dir() is not None:

@@ -48,7 +48,7 @@ def _predictor_file() -> Path:
 
 
 def _grey8(img) -> np.ndarray:
-    from .io import luminance, to_uint8
+    from ..image.io import luminance, to_uint8
     a = np.asarray(img)
     if a.dtype == np.uint8:
         a = a.astype(np.float32) / 255.0
@@ -79,7 +79,7 @@ def detect(img, what="image") -> np.ndarray:
     """68 points of the largest face; a clear error when no face is found."""
     boxes = detect_faces(img)
     if not boxes:
-        raise MimicaError(f"{what}: no face found; give the points by hand with --landmarks FILE "
+        raise MimicaError(f"{what}: no face found; give its 68 points by hand in a landmark file "
                           f"(JSON: {{\"scheme\": \"{SCHEME}\", \"points\": [[x, y], ...]}})")
     return fit_points(img, boxes[0])
 
@@ -116,7 +116,7 @@ class Tracker:
 
 def read_points(path, size=None) -> np.ndarray:
     """Read a 2D landmark file, (68, 2); checked against the image size when given."""
-    from ..landmarks import read_point_file
+    from .core import read_point_file
     out = read_point_file(path, SCHEME, 2, allow_null=False, example="[x, y], ...")
     if size is not None:
         w, h = size

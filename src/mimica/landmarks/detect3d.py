@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import MimicaError
 from ..mesh import Mesh
-from . import landmarks2d
+from . import detect2d
 
 # views tried in turn until a face is found: (yaw, pitch) in degrees; the first is the
 # usual convention (y up, face toward +z)
@@ -20,7 +20,7 @@ VIEWS = [(0, 0), (180, 0), (90, 0), (-90, 0), (0, 90), (0, -90)]
 
 
 def _frame(v, view):
-    from ..render import framing
+    from ..image.raster import framing
     c, half = framing(v, *view, margin=1.1)
     return c, half
 
@@ -28,7 +28,7 @@ def _frame(v, view):
 def render_for_detection(mesh: Mesh, vertices=None, view=(0, 0), size=640, frame=None):
     """A front picture for the detector (grey, lit from the front and a little above), the
     framing used, and the vertices' pixel (xy) and camera-space positions."""
-    from ..render import project, render_mesh
+    from ..image.raster import project, render_mesh
     v = mesh.vertices if vertices is None else np.asarray(vertices)
     frame = frame or _frame(v, view)
     img = render_mesh(mesh, v, size=(size, size), yaw=view[0], pitch=view[1], frame=frame,
@@ -41,7 +41,7 @@ def front_ids(mesh: Mesh, xy, cam, size, sign=1.0):
     """Triangle per pixel with back faces culled, so that a point in an eye or mouth opening
     sees no surface (rather than the inside of the back of the head); ids index the mesh's
     triangles, -1 = nothing."""
-    from ..render import rasterize
+    from ..image.raster import rasterize
     tris = mesh.triangles
     p = xy[tris]
     # pixel y points down: a counter-clockwise triangle (as seen) has negative signed area here
@@ -85,7 +85,7 @@ def cast_back(points2d, mesh: Mesh, xy, tri_id, vertices=None) -> np.ndarray:
     return out
 
 
-OFFSETS_FILE = Path(__file__).with_name("landmarks3d_offsets.json")
+OFFSETS_FILE = Path(__file__).with_name("detect3d_offsets.json")
 
 
 @lru_cache(maxsize=1)
@@ -120,9 +120,9 @@ def detect_mesh(mesh: Mesh, vertices=None, what="mesh", size=640, view=None, cal
     views = [view] if view is not None else VIEWS
     for vw in views:
         img, frame, xy, cam = render_for_detection(mesh, vertices, vw, size)
-        boxes = landmarks2d.detect_faces(img, upsample=0)
+        boxes = detect2d.detect_faces(img, upsample=0)
         if boxes:
-            p2 = landmarks2d.fit_points(img, boxes[0])
+            p2 = detect2d.fit_points(img, boxes[0])
             if calibrated:
                 p2 = calibrate(p2)
             for sign in (1.0, -1.0):                 # outward normals, else the mesh is inside out
@@ -134,4 +134,4 @@ def detect_mesh(mesh: Mesh, vertices=None, what="mesh", size=640, view=None, cal
             if np.isfinite(p3).all(1).sum() >= 60:
                 return p3, vw
     raise MimicaError(f"{what}: no face found in renders from the front, back, sides, top or bottom; "
-                      "give --landmarks FILE (JSON: {\"scheme\": \"ibug68\", \"points\": [[x,y,z], ...]})")
+                      "give its 68 landmarks in a file (JSON: {\"scheme\": \"ibug68\", \"points\": [[x,y,z], ...]})")

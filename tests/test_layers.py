@@ -1,0 +1,171 @@
+"""The package's layers (DESIGN.md, "The data flow"), checked from its module graph: every
+import in every module (those inside functions too), no cycle, no stage importing a stage
+above it, and no process-wide side effect on import."""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import mimica
+
+PACKAGE = Path(mimica.__file__).resolve().parent
+
+# bottom to top; a stage may import its own modules and any stage on a lower line.  The
+# foundations hold no method; the template store reads meshes, and data (the template's
+# facts) reads through it; image is io for pictures
+# (read, write, and the rasterizer every picture is drawn with); the users sit on top.
+LAYERS = [
+    {"errors", "_extras", "_memory", "outputs", "solver"},
+    {"mesh"},
+    {"store"},
+    {"data"},
+    {"image"},
+    {"landmarks"},
+    {"align"},
+    {"correspond"},
+    {"rig"},
+    {"anim"},
+    {"physics"},
+    {"wrinkles"},
+    {"transfer"},
+    {"render", "export"},
+    {"pipeline"},
+    {"cli", "viewer", "batch", "blender", "demo", ""},   # "": the package's own __init__
+]
+LAYER = {stage: i for i, stages in enumerate(LAYERS) for stage in stages}
+FOUNDATIONS, USERS = LAYERS[0], LAYERS[-1]
+
+
+def module_name(path: Path) -> str:
+    parts = ["mimica", *path.relative_to(PACKAGE).with_suffix("").parts]
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def modules() -> dict[str, Path]:
+    return {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def imports(name: str, path: Path, known) -> set[str]:
+    """The mimica modules `name` imports anywhere in its file (a `from X import y` of a
+    submodule y counts as importing X.y)."""
+    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out |= {a.name for a in node.names if a.name.split(".")[0] == "mimica"}
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target.split(".")[0] != "mimica":
+                continue
+            subs = {f"{target}.{a.name}" for a in node.names} & set(known)
+            out |= subs
+            if len(subs) < len(node.names):
+                out.add(target)
+    return out - {name}
+
+
+def stage(name: str) -> str:
+    parts = name.split(".")
+    return parts[1] if len(parts) > 1 else ""
+
+
+def graph() -> dict[str, set[str]]:
+    mods = modules()
+    return {n: imports(n, p, mods) for n, p in mods.items()}
+
+
+def test_every_module_has_a_layer():
+    unplaced = sorted({stage(n) for n in modules()} - set(LAYER))
+    assert not unplaced, f"place these in DESIGN.md's layers (and in LAYERS here): {unplaced}"
+
+
+def test_the_graph_sees_the_imports():
+    """The check itself: the edges it must find are found (lazy and relative imports too)."""
+    g = graph()
+    assert "mimica.correspond.remesh" in g["mimica.demo"]                 # `from .correspond.remesh import`
+    assert "mimica.landmarks.detect2d" in g["mimica.landmarks.detect3d"]   # `from . import detect2d`
+    assert "mimica.physics.face" in g["mimica.physics.fullface"]
+    assert "mimica.landmarks.detect3d" in g["mimica.landmarks.auto"]
+    assert "mimica.store" in g["mimica.data"]
+    assert any(t.startswith("mimica.wrinkles") for t in g["mimica.cli"])    # inside functions
+
+
+def test_no_stage_imports_a_stage_above_it():
+    bad = []
+    for src, targets in graph().items():
+        for t in targets:
+            a, b = stage(src), stage(t)
+            if a == b:
+                continue
+            # siblings on one line stay apart, but for the foundations and the users
+            if LAYER[b] > LAYER[a] or (LAYER[b] == LAYER[a] and a not in FOUNDATIONS | USERS):
+                bad.append(f"{src} -> {t}")
+    assert not bad, "imports against DESIGN.md's layers:\n" + "\n".join(sorted(bad))
+
+
+def test_no_import_cycles():
+    g = graph()
+    index, low, on, stack, cycles = {}, {}, set(), [], []
+
+    def visit(v):                                   # Tarjan's strongly connected components
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in g.get(v, ()):
+            if w not in g:
+                continue
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            # a package importing its own submodule, which imports a sibling, is no cycle;
+            # a component of two or more modules is
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for v in sorted(g):
+        if v not in index:
+            visit(v)
+    assert not cycles, f"import cycles: {cycles}"
+
+
+def test_importing_mimica_changes_nothing_process_wide():
+    """Every module imported: the allocator (mallopt), signal handlers, numpy's error state,
+    warning filters and the environment are as before (threadpoolctl's import sets an
+    environment variable: it is imported where it is used)."""
+    names = sorted(n for n in modules() if not n.endswith("__main__"))
+    code = f"""
+import json, os, signal, sys, warnings
+import numpy as np
+import scipy.sparse, scipy.spatial, scipy.special, scipy.linalg  # their own filters, set on their import
+before = (dict(os.environ), signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM), np.geterr(),
+          len(warnings.filters))
+import importlib
+for n in {names!r}:
+    importlib.import_module(n)
+import mimica._memory as m
+after = (dict(os.environ), signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM), np.geterr(),
+         len(warnings.filters))
+print(json.dumps({{"same": [a == b for a, b in zip(before, after)], "mallopt": m._done}}))
+"""
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    got = json.loads(r.stdout.strip().splitlines()[-1])
+    assert got == {"same": [True] * 5, "mallopt": False}, got
