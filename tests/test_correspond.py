@@ -63,3 +63,34 @@ def test_correspondence_lands_near_the_true_point(head_model, scans):
     d = np.linalg.norm(got - true, axis=1)[cor.matched]
     width = np.linalg.norm(ls[16] - ls[0])
     assert np.median(d) < 0.02 * width                        # median within 2% of the face width
+
+
+def _split_seam(mesh, vertices):
+    """The mesh with `vertices` split in two, as an exporter writes a uv seam: the faces of
+    odd index use copies (same positions), those of even index the originals."""
+    from mimica.mesh import Mesh
+    n = mesh.n_vertices
+    copy_of = np.arange(n)
+    copy_of[vertices] = n + np.arange(len(vertices))
+    face = np.repeat(np.arange(mesh.n_faces), np.diff(mesh.face_starts))
+    fi = np.where(face % 2 == 1, copy_of[mesh.face_indices], mesh.face_indices)
+    used = np.unique(fi)                               # an original only odd faces used goes
+    new = np.full(n + len(vertices), -1)
+    new[used] = np.arange(len(used))
+    v = np.vstack([mesh.vertices, mesh.vertices[vertices]])
+    return Mesh(v[used], new[fi], mesh.face_starts), np.r_[np.arange(n), vertices][used]   # and each one's original
+
+
+def test_an_unwelded_seam_stays_closed(head_model, scans):
+    """A target with a uv seam saved as copies of 400 vertices (across the cheek and mouth):
+    the copies move together, and the result is the seamless target's (the copies were
+    solved apart before: the seam opened by 0.8% of the largest displacement)."""
+    S = head_model.mesh
+    ls = ict_landmarks(S)
+    tv, rs, lt = scans[0]
+    frames = np.stack([head_model.neutral + head_model.delta(EXPRESSIONS[e]) for e in ("happiness", "surprise")])
+    plain = ExpressionTransfer(S, rs.mesh, ls, lt).apply(frames)
+    seam, orig = _split_seam(rs.mesh, np.arange(2000, 2400))
+    assert seam.n_vertices > rs.mesh.n_vertices + 300
+    got = ExpressionTransfer(S, seam, ls, Landmarks.snap(seam, lt.positions(rs.mesh))).apply(frames)
+    np.testing.assert_allclose(got, plain[:, orig], atol=1e-9 * np.ptp(tv))

@@ -122,3 +122,14 @@ def test_mesh_derived_topology():
     sq = Mesh.from_faces(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]]), [[0, 1, 2, 3]])
     assert sq.edges.tolist() == [[0, 1], [0, 3], [1, 2], [2, 3]]     # no fan diagonal
     np.testing.assert_allclose(sq.vertex_normals(), [[0, 0, 1]] * 4)
+
+
+def test_welded_merges_exact_copies_only():
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [1, 0, 0], [0, 1, 0]], float)
+    seam = Mesh.from_faces(v, [[0, 1, 2], [4, 3, 5]])          # 4, 5: copies of 1, 2
+    w, index = seam.welded()
+    assert w.n_vertices == 4 and index.tolist() == [0, 1, 2, 3, 1, 2]
+    np.testing.assert_array_equal(w.vertices[index], seam.vertices)
+    assert w.triangles.tolist() == [[0, 1, 2], [1, 3, 2]]
+    apart = seam.with_vertices(v + np.array([[0, 0, 0]] * 4 + [[1e-12, 0, 0]] * 2))   # a slit: not welded
+    assert apart.welded()[0] is apart

@@ -93,6 +93,22 @@ class Mesh:
                 m.__dict__[k] = self.__dict__[k]
         return m
 
+    def welded(self) -> tuple["Mesh", np.ndarray]:
+        """Coincident vertices made one (an unwelded seam: a uv or normal split saved as copies
+        of a vertex) and, for each vertex, its index in the welded mesh; (self, arange) when no
+        two coincide.  Only exact copies are welded: a slit that is meant to open is not."""
+        uniq, first, inv = np.unique(self.vertices, axis=0, return_index=True, return_inverse=True)
+        inv = inv.ravel()
+        if len(uniq) == self.n_vertices:
+            return self, np.arange(self.n_vertices)
+        order = np.argsort(first)                 # welded vertices keep the order of first use
+        rank = np.empty_like(order)
+        rank[order] = np.arange(len(order))
+        new = rank[inv]
+        # uv stays per corner (the OBJ model), so the welded mesh keeps its texture seams
+        return Mesh(self.vertices[first[order]], new[self.face_indices], self.face_starts, self.uv,
+                    self.face_uv_indices, self.name), new
+
     def same_topology(self, other: "Mesh") -> bool:
         return (self.n_vertices == other.n_vertices
                 and np.array_equal(self.face_starts, other.face_starts)

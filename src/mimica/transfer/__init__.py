@@ -37,6 +37,15 @@ class ExpressionTransfer:
                  static: np.ndarray | None = None, solver_kind: str | None = None):
         self.source, self.target, self.method = source, target, method
         same = source.same_topology(target)
+        # an unwelded seam (copies of a vertex, e.g. a uv split) would open under the solve:
+        # the target is solved welded and its copies take their vertex's result
+        self._copies = None
+        if not same:
+            welded, index = target.welded()
+            if welded is not target:
+                if target_landmarks is not None:
+                    target_landmarks = Landmarks.snap(welded, target_landmarks.positions(target))
+                target, self._copies = welded, index
         if source_landmarks is not None and target_landmarks is not None:
             ls = source_landmarks.positions(source)
             lt = target_landmarks.positions(target)
@@ -75,7 +84,8 @@ class ExpressionTransfer:
         frames = np.asarray(frames, dtype=np.float64)
         single = frames.ndim == 2
         f = frames[None] if single else frames
-        out = np.empty((len(f), self.target.n_vertices, 3))
+        n = self.target.n_vertices if self._copies is None else int(self._copies.max()) + 1
+        out = np.empty((len(f), n, 3))
         starts = range(0, len(f), batch)
         workers = min(workers or os.cpu_count() or 1, len(starts))
         if workers <= 1:
@@ -88,4 +98,6 @@ class ExpressionTransfer:
                         for i in starts]
                 for j in jobs:
                     j.result()
+        if self._copies is not None:
+            out = out[:, self._copies]
         return out[0] if single else out
