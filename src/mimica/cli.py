@@ -45,6 +45,17 @@ def _landmarks(mesh, path, flag, what):
         raise
 
 
+def _warn_sealed_eyes(mesh, lm, what):
+    """One line when a face's eyes are closed surfaces (blinks then move the lids over them)."""
+    if lm is None:
+        return
+    from .correspond.mouth import sealed_eyes
+    shut = sealed_eyes(mesh, lm.positions(mesh))
+    if shut:
+        _say(f"note: {what}: the {' and '.join(shut)} eye{'s are' if len(shut) > 1 else ' is'} one closed "
+             "surface; lids move over it, they do not open or close")
+
+
 def _say(msg):
     print(msg, file=sys.stderr)
 
@@ -98,8 +109,13 @@ def cmd_transfer(a):
         lt = _landmarks(target, a.target_landmarks, "--target-landmarks", str(a.target))
     t1 = time.perf_counter()
     xfer = ExpressionTransfer(source, target, ls, lt, method=a.method,
-                              static=static_vertices(source.vertices, frames))
+                              static=static_vertices(source.vertices, frames), cut_mouth=a.cut_mouth == "auto")
     t2 = time.perf_counter()
+    if xfer.mouth is not None:
+        _say(f"{a.target}: the lips were sealed; cut apart along {len(xfer.mouth.seam)} vertices, "
+             f"{len(xfer.mouth.copies_of)} added after the target's own (--cut-mouth off to keep them sealed)")
+    _warn_sealed_eyes(target, lt, a.target)
+    target = xfer.output_mesh
     out = np.empty((len(frames), target.n_vertices, 3))
     step = 32
     for i in _progress(range(0, len(frames), step), (len(frames) + step - 1) // step, "transferring"):
@@ -112,7 +128,10 @@ def cmd_transfer(a):
             write_mesh(d / name, target.with_vertices(v))
     cor = xfer.correspondence
     _say(f"aligned target to source: residual {100 * xfer.alignment_residual:.2f}% of the face size"
-         + ("" if cor is None else f"; correspondence: {100 * cor.matched.mean():.1f}% of target vertices matched"))
+         + ("" if cor is None else f"; correspondence: {100 * cor.matched.mean():.1f}% of the target's skin matched"))
+    if xfer.parts is not None:
+        _say(f"parts: source {xfer.parts[0].summary()}; target {xfer.parts[1].summary()} (skin to skin; "
+             "eyeballs and teeth rigid, lashes and shells with the skin)")
     _say(f"{len(frames)} expression(s) -> {outdir}/ ({a.method}; read {t1 - t0:.2f}s, "
          f"precompute {t2 - t1:.2f}s, transfer {t3 - t2:.2f}s = {len(frames) / max(t3 - t2, 1e-9):.0f} frames/s)")
     return 0
@@ -620,10 +639,11 @@ def cmd_blendshapes(a):
     t0 = time.perf_counter()
     head = read_mesh(a.head)
     lm = read_landmarks(a.landmarks, head) if a.landmarks else None
-    shapes = arkit_blendshapes(head, lm, progress=_say)
+    shapes = arkit_blendshapes(head, lm, progress=_say, cut_mouth=a.cut_mouth == "auto")
+    _warn_sealed_eyes(head, shapes.landmarks, a.head)
     with atomic_path(out) as tmp:
-        write_glb(tmp, head, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb")
-    _say(f"{out}: {len(ARKIT_52)} ARKit morph targets on {head.n_vertices} vertices "
+        write_glb(tmp, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb")
+    _say(f"{out}: {len(ARKIT_52)} ARKit morph targets on {shapes.mesh.n_vertices} vertices "
          f"({time.perf_counter() - t0:.1f}s; tongueOut stays at rest: ICT-FaceKit has no tongue shape)")
     return 0
 
@@ -699,6 +719,9 @@ def build_parser():
     t.add_argument("--target-landmarks", help="68-point landmark JSON of the target (built in for ICT-FaceKit)")
     t.add_argument("--method", choices=["vtc", "dt"], default="vtc",
                    help="vtc: vertex-tent coordinates (Song); dt: Sumner-Popovic deformation transfer")
+    t.add_argument("--cut-mouth", choices=["auto", "off"], default="auto",
+                   help="auto: a target whose lips are sealed has them cut apart, so the mouth can open "
+                        "(its vertices keep their order; the cut's copies come after them)")
     t.add_argument("--out", required=True, help="output folder")
     t.set_defaults(func=cmd_transfer)
 
@@ -820,6 +843,9 @@ def build_parser():
     bs = sub.add_parser("blendshapes", help="the 52 ARKit blendshapes on any head mesh, as one GLB")
     bs.add_argument("head", help="head mesh (OBJ/PLY/glTF), any topology, neutral")
     bs.add_argument("--landmarks", help="68-point landmark JSON (found automatically otherwise)")
+    bs.add_argument("--cut-mouth", choices=["auto", "off"], default="auto",
+                    help="auto: sealed lips are cut apart so jawOpen opens the mouth (the cut's vertices "
+                         "come after the head's own)")
     bs.add_argument("--out", required=True, help="head_arkit.glb")
     bs.set_defaults(func=cmd_blendshapes)
 

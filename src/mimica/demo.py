@@ -66,8 +66,39 @@ def run_demo(out: Path, quick=False, shown: Path | None = None) -> int:
     sheet = contact_sheet(tiles, labels, columns=len(exprs) + 1, row_labels=[r[0] for r in rows],
                           title="mimica: ICT-FaceKit expressions transferred (VTC, Song et al.)")
     save_png(out / "contact_sheet.png", sheet)
+    real = _real_head_shapes(out, log)
     out = shown or out
-    log(f"demo done in {time.perf_counter() - t0:.1f}s: meshes in {out}/, picture {out / 'contact_sheet.png'}")
+    log(f"demo done in {time.perf_counter() - t0:.1f}s: meshes in {out}/, picture {out / 'contact_sheet.png'}"
+        + (f", the real head's 52 ARKit shapes {out / real}" if real else ""))
     log(f"try: mimica transfer {out}/source/neutral.obj {out}/source --target {out}/identity_C/neutral.obj "
         f"--target-landmarks {out}/identity_C/neutral.landmarks.json --out {out}/again")
     return 0
+
+
+def _real_head_shapes(out: Path, log):
+    """The 52 ARKit shapes on the shared real head (another topology, eyes and lips sealed):
+    a glTF of morph targets and one picture of them all.  None without the data."""
+    import json
+    from .data import data_dir
+    from .export import ARKIT_52, arkit_blendshapes
+    from .mesh import read_mesh, write_glb
+    d = data_dir()
+    head_dir = d / "real-heads" / "mediapipe-canonical" if d else None
+    if head_dir is None or not (head_dir / "head.obj").is_file():
+        log("real head: not in the data directory; skipped")
+        return None
+    t = time.perf_counter()
+    head = read_mesh(head_dir / "head.obj")
+    ids = json.loads((head_dir / "head.json").read_text())["landmark_vertices"]
+    shapes = arkit_blendshapes(head, Landmarks.from_vertex_indices(head, ids))
+    cut = shapes.mesh                          # its sealed lips cut apart: the cut's vertices appended
+    (out / "real_head").mkdir(parents=True, exist_ok=True)
+    write_glb(out / "real_head" / "arkit_52.glb", cut, {n: shapes[n] for n in ARKIT_52})
+    frame = shared_frame([head.vertices])
+    tiles = [render_mesh(cut, shapes[n], size=(190, 190), frame=frame) for n in ARKIT_52]
+    save_png(out / "real_head" / "arkit_52.png",
+             contact_sheet(tiles, ARKIT_52, columns=13, title=f"the 52 ARKit shapes on {head_dir.name} "
+                           f"({head.n_vertices} vertices, eyes and lips sealed)"))
+    log(f"real head ({head.n_vertices} vertices" + (f", lips cut apart: {cut.n_vertices - head.n_vertices} vertices "
+        "added" if shapes.mouth is not None else "") + f"): 52 ARKit shapes in {time.perf_counter() - t:.1f}s")
+    return Path("real_head") / "arkit_52.png"

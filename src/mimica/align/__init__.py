@@ -31,11 +31,12 @@ class Similarity:
         return cls(1.0, np.eye(3), np.zeros(3))
 
 
-def fit_similarity(src, dst, what="landmarks") -> Similarity:
+def fit_similarity(src, dst, what="landmarks", scale=True) -> Similarity:
     """Least-squares similarity mapping src points onto dst points, (m, 3) each; NaN rows skipped.
 
     Centroids, cross-covariance SVD for the rotation (reflection excluded), scale from the
-    singular values, translation from the centroids (Challis 1995).
+    singular values (1 with scale=False: the best rigid motion), translation from the
+    centroids (Challis 1995).
     """
     src, dst = np.asarray(src, float), np.asarray(dst, float)
     ok = np.isfinite(src).all(1) & np.isfinite(dst).all(1)
@@ -51,7 +52,7 @@ def fit_similarity(src, dst, what="landmarks") -> Similarity:
     var = (a0 ** 2).sum()
     if var <= 0:
         raise MimicaError(f"{what}: the landmarks all sit on one point")
-    scale = float((s * np.diag(dm)).sum() / var)
+    scale = float((s * np.diag(dm)).sum() / var) if scale else 1.0
     t = cb - scale * r @ ca
     res = float(np.sqrt(((scale * a @ r.T + t - b) ** 2).sum(1).mean()))
     return Similarity(scale, r, t, res)

@@ -34,8 +34,15 @@ class Resampled:
         return np.einsum("ij,ijk->ik", self.bary, vertices[t])
 
 
+# the openings a resampled face can have sealed (iBUG 68 contours: inner lips to the mouth's
+# corners, each eye's rim)
+SEALS = {"mouth": [list(range(60, 68)) + [48, 54]], "eyes": [list(range(36, 42)), list(range(42, 48))]}
+
+
 def resample_face(mesh: Mesh, landmarks: np.ndarray, n_vertices: int = 12000, seed: int = 0,
-                  nostril_holes: bool = True, rings: int = 6) -> Resampled:
+                  nostril_holes: bool = True, rings: int = 6, seal=()) -> Resampled:
+    """seal: openings ("mouth", "eyes") bridged by the new triangulation instead of cut, as
+    scans and game heads have them: the lips (or lids) joined by a membrane of triangles."""
     rng = np.random.default_rng(seed)
     cyl = face_cylinder(landmarks)
     uv, r = cyl.project(mesh.vertices)
@@ -74,6 +81,14 @@ def resample_face(mesh: Mesh, landmarks: np.ndarray, n_vertices: int = 12000, se
         ring.data[:] = 1
     for i in range(3):
         ok &= np.asarray(ring[near_v[d[:, i]], near_v[d[:, (i + 1) % 3]]]).ravel() > 0
+    lm_uv = cyl.project(np.asarray(landmarks, float))[0]
+    for region in seal:
+        for contour in SEALS[region]:
+            # the rim's hull grown by about a grid step each way: the row of triangles that
+            # bridges the opening (a closed mouth's inner rim is nearly a line)
+            poly = lm_uv[contour]
+            grow = 1.5 * h * np.array([[1, 0], [-1, 0], [0, 1], [0, -1]])
+            ok |= Delaunay((poly[:, None] + grow[None]).reshape(-1, 2)).find_simplex(probes[0]) >= 0
     faces = d[ok]
     if nostril_holes:
         lm = np.asarray(landmarks)

@@ -1,6 +1,8 @@
 """The 52 ARKit blendshapes on any head: ICT-FaceKit's expression shapes (ARKit naming, split
 _L/_R) moved onto the user's head by the expression transfer (Song et al.; landmarks found
-automatically on other topologies), written as named morph targets."""
+automatically on other topologies), written as named morph targets.  The head's parts
+(correspond.parts) move as their kind does: teeth and tongue with the jaw, eyeballs rigidly,
+lashes with the lids."""
 
 from __future__ import annotations
 
@@ -37,9 +39,17 @@ def ict_sources(arkit: str) -> list[str]:
     return [arkit]
 
 
-def arkit_blendshapes(head, landmarks=None, progress=None, store=None) -> dict:
-    """{ARKit name: (n, 3) positions} on `head` (a Mesh of any topology)."""
-    from ..data import ICT_HEAD_FACES, ICT_HEAD_VERTICES
+class Blendshapes(dict):
+    """{ARKit name: (n, 3) positions}; `mesh` is the head they belong to: the user's, or with its
+    sealed lips cut apart (its vertices first, the cut's copies after them); `mouth` the cut."""
+    mesh = None
+    mouth = None
+    landmarks = None              # the head's landmarks (given, or found)
+
+
+def arkit_blendshapes(head, landmarks=None, progress=None, store=None, cut_mouth=True) -> Blendshapes:
+    """The 52 ARKit shapes on `head` (a Mesh of any topology)."""
+    from ..data import ICT_N_VERTICES
     from ..landmarks import ict_landmarks, landmarks_for
     from ..mesh import read_mesh
     from ..transfer import ExpressionTransfer, static_vertices
@@ -47,20 +57,27 @@ def arkit_blendshapes(head, landmarks=None, progress=None, store=None) -> dict:
 
     store = store or default_store()
     say = progress or (lambda m: None)
-    full = read_mesh(store.path("generic_neutral_mesh", say))
-    src, _ = full.submesh(np.arange(ICT_HEAD_FACES))
-    if src.n_vertices != ICT_HEAD_VERTICES:
-        raise MimicaError("ICT-FaceKit neutral: unexpected topology (face + head part)")
+    # the whole ICT-FaceKit mesh: its teeth, gums and tongue give the jaw's motion, and a head
+    # with the same parts (or ICT's own) gets them moved as ICT moves them
+    src = read_mesh(store.path("generic_neutral_mesh", say))
+    if src.n_vertices != ICT_N_VERTICES:
+        raise MimicaError("ICT-FaceKit neutral: unexpected topology")
     names = sorted({n for a in ARKIT_52 for n in ict_sources(a)})
     say(f"reading {len(names)} ICT-FaceKit shapes")
-    shapes = store.shapes(names, ICT_HEAD_VERTICES, say)
+    shapes = store.shapes(names, ICT_N_VERTICES, say)
     lt = landmarks if landmarks is not None else landmarks_for(head, None, "head")
     frames = np.stack([src.vertices + sum((shapes[n] - src.vertices for n in ict_sources(a)),
                                           np.zeros_like(src.vertices)) for a in ARKIT_52])
     say("transferring 52 shapes")
     xfer = ExpressionTransfer(src, head, ict_landmarks(src), lt, method="vtc",
-                              static=static_vertices(src.vertices, frames))
+                              static=static_vertices(src.vertices, frames), cut_mouth=cut_mouth)
+    if xfer.mouth is not None:
+        say(f"the lips were sealed: cut apart along {len(xfer.mouth.seam)} vertices "
+            f"({len(xfer.mouth.copies_of)} added after the head's own)")
+    if xfer.parts is not None:
+        say(f"parts of the head: {xfer.parts[1].summary()}")
     out = xfer.apply(frames)
-    res = dict(zip(ARKIT_52, out))
-    res["tongueOut"] = head.vertices.copy()
+    res = Blendshapes(zip(ARKIT_52, out))
+    res.mesh, res.mouth, res.landmarks = xfer.output_mesh, xfer.mouth, lt
+    res["tongueOut"] = res.mesh.vertices.copy()
     return res

@@ -36,6 +36,8 @@ class Mesh:
     vertices: (n, 3) float64.  face_indices / face_starts: polygons, flat (see module).
     uv: optional (t, 2) texture coordinates, with face_uv_indices parallel to
     face_indices (the OBJ model: a corner has its own uv index).
+    groups: optional (n_faces,) index into group_names: each face's material or group (OBJ
+    `usemtl`, else `g`/`o`), kept through submesh, with_vertices and OBJ writing.
     """
 
     vertices: np.ndarray
@@ -44,6 +46,8 @@ class Mesh:
     uv: np.ndarray | None = None
     face_uv_indices: np.ndarray | None = None
     name: str = ""
+    groups: np.ndarray | None = None
+    group_names: tuple = ()
     _cache: dict = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -86,7 +90,7 @@ class Mesh:
         if v.shape != self.vertices.shape:
             raise ValueError(f"expected vertices of shape {self.vertices.shape}, got {v.shape}")
         m = Mesh(v, self.face_indices, self.face_starts, self.uv, self.face_uv_indices,
-                 self.name if name is None else name)
+                 self.name if name is None else name, self.groups, self.group_names)
         for k in ("triangles", "tri_face", "_fan_corners", "uv_triangles", "edges", "adjacency", "face_sizes",
                   "outward_oriented"):
             if k in self.__dict__:
@@ -96,18 +100,43 @@ class Mesh:
     def welded(self) -> tuple["Mesh", np.ndarray]:
         """Coincident vertices made one (an unwelded seam: a uv or normal split saved as copies
         of a vertex) and, for each vertex, its index in the welded mesh; (self, arange) when no
-        two coincide.  Only exact copies are welded: a slit that is meant to open is not."""
-        uniq, first, inv = np.unique(self.vertices, axis=0, return_index=True, return_inverse=True)
-        inv = inv.ravel()
+        two coincide.  Only exact copies are welded, within one material (OBJ usemtl/group),
+        and only where the surface stays a manifold: parts that merely touch (lashes rooted on
+        a lid, a shell on the eye's rim) stay apart; a slit meant to open is not welded."""
+        key = self.vertices
+        if self.groups is not None:               # copies in different materials are different parts
+            vg = np.full(self.n_vertices, -1.0)
+            vg[self.face_indices[::-1]] = np.repeat(self.groups, np.diff(self.face_starts))[::-1]
+            key = np.c_[self.vertices, vg]
+        uniq, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        group = inv.ravel()
         if len(uniq) == self.n_vertices:
+            return self, np.arange(self.n_vertices)
+        for _ in range(8):                         # un-weld where an edge would get a third face
+            a = group[self.face_indices]
+            b = group[np.roll(self.face_indices, -1)]
+            last = self.face_starts[1:] - 1        # each polygon's closing edge
+            b[last] = group[self.face_indices[self.face_starts[:-1]]]
+            e = np.sort(np.stack([a, b], 1), axis=1)
+            _, eid, cnt = np.unique(e, axis=0, return_inverse=True, return_counts=True)
+            bad = np.unique(e[cnt[eid.ravel()] > 2])
+            sizes = np.bincount(group)
+            bad = bad[sizes[bad] > 1]              # only welds can be undone
+            if not len(bad):
+                break
+            undo = np.isin(group, bad)
+            group = group.copy()
+            group[undo] = group.max() + 1 + np.arange(undo.sum())
+        _, first, group = np.unique(group, return_index=True, return_inverse=True)
+        if len(first) == self.n_vertices:
             return self, np.arange(self.n_vertices)
         order = np.argsort(first)                 # welded vertices keep the order of first use
         rank = np.empty_like(order)
         rank[order] = np.arange(len(order))
-        new = rank[inv]
+        new = rank[group.ravel()]
         # uv stays per corner (the OBJ model), so the welded mesh keeps its texture seams
         return Mesh(self.vertices[first[order]], new[self.face_indices], self.face_starts, self.uv,
-                    self.face_uv_indices, self.name), new
+                    self.face_uv_indices, self.name, self.groups, self.group_names), new
 
     def same_topology(self, other: "Mesh") -> bool:
         return (self.n_vertices == other.n_vertices
@@ -232,7 +261,9 @@ class Mesh:
             uremap = np.full(len(self.uv), -1, dtype=np.int64)
             uremap[uold] = np.arange(len(uold))
             uv, fuv = self.uv[uold], uremap[self.face_uv_indices[idx]]
-        m = Mesh(self.vertices[old], remap[self.face_indices[idx]], starts, uv, fuv, self.name)
+        groups = self.groups[face_ids] if self.groups is not None else None
+        m = Mesh(self.vertices[old], remap[self.face_indices[idx]], starts, uv, fuv, self.name, groups,
+                 self.group_names)
         return m, old
 
     def bounding_box_diagonal(self) -> float:

@@ -101,7 +101,28 @@ def _read_obj(path: Path) -> Mesh:
         fu = np.where(tidx < 0, tidx + len(uv), tidx - 1)
         if fu.size and fu.min() >= 0 and fu.max() < len(uv):
             mesh.uv, mesh.face_uv_indices = uv, fu
+    mesh.groups, mesh.group_names = _obj_groups(lines)
     return mesh
+
+
+def _obj_groups(lines):
+    """Each face's material (`usemtl`), else its group (`g`, then `o`): (groups, names) or (None, ())."""
+    for key in ("usemtl ", "g ", "o "):
+        marks = [(i, ln[len(key):].strip()) for i, ln in enumerate(lines) if ln.startswith(key)]
+        if marks:
+            break
+    else:
+        return None, ()
+    names = tuple(dict.fromkeys(n or "(unnamed)" for _, n in marks))
+    at = np.array([i for i, _ in marks])
+    ids = np.array([names.index(n or "(unnamed)") for _, n in marks])
+    faces = np.array([i for i, ln in enumerate(lines) if ln.startswith("f ")])
+    k = np.searchsorted(at, faces) - 1                 # the last mark before each face
+    if (k < 0).any():                                  # faces before the first mark
+        names = names + ("(none)",)
+        ids = np.r_[ids, len(names) - 1]
+        k = np.where(k < 0, len(ids) - 1, k)
+    return ids[k].astype(np.int32), names
 
 
 def read_vertices(path) -> np.ndarray:
@@ -185,7 +206,12 @@ def _write_obj(mesh: Mesh, path: Path) -> None:
         fi = np.char.add(np.char.add(fi, "/"), (mesh.face_uv_indices + 1).astype(str))
     st = mesh.face_starts
     corners = fi.tolist()
-    out.append("".join("f " + " ".join(corners[st[k]:st[k + 1]]) + "\n" for k in range(mesh.n_faces)))
+    lines = ["f " + " ".join(corners[st[k]:st[k + 1]]) + "\n" for k in range(mesh.n_faces)]
+    if mesh.groups is not None and mesh.group_names:   # each run of faces under its material
+        g = mesh.groups
+        for k in np.nonzero(np.r_[True, g[1:] != g[:-1]])[0][::-1]:
+            lines.insert(k, f"usemtl {mesh.group_names[g[k]]}\n")
+    out.append("".join(lines))
     path.write_text("".join(out))
 
 

@@ -34,18 +34,51 @@ class ExpressionTransfer:
 
     def __init__(self, source: Mesh, target: Mesh, source_landmarks: Landmarks | None = None,
                  target_landmarks: Landmarks | None = None, method: str = "vtc",
-                 static: np.ndarray | None = None, solver_kind: str | None = None):
-        self.source, self.target, self.method = source, target, method
+                 static: np.ndarray | None = None, solver_kind: str | None = None, parts: bool = True,
+                 cut_mouth: bool = True, inward: np.ndarray | None = None, weld: bool = True):
+        """Across topologies (target landmarks given):
+
+        - a target whose seams are saved as copies of a vertex (uv splits) is solved welded;
+        - cut_mouth: a target with sealed lips has them cut apart (correspond.mouth); the
+          results then have the cut's copies appended (`output_mesh` is the mesh they belong
+          to; `mouth` the cut);
+        - parts: both heads are split into their parts (correspond.parts): the skin is
+          transferred skin to skin, eyeballs, teeth and tongue move rigidly, lashes and shells
+          follow the skin (transfer.parts); `self.parts` is then (source's, target's).
+
+        inward: (n_target, 3) offsets of where each target vertex's correspondence is looked
+        up (the two sides of a cut seam look inside their own lip)."""
+        self.source, self.method = source, method
         same = source.same_topology(target)
-        # an unwelded seam (copies of a vertex, e.g. a uv split) would open under the solve:
-        # the target is solved welded and its copies take their vertex's result
-        self._copies = None
-        if not same:
+        self.parts = self._parts = self.mouth = None
+        self.output_mesh = target
+        # user vertex -> solved vertex, and the solved vertices appended after the user's
+        self._copies, self._appended = None, 0
+        if not same and weld:
+            # an unwelded seam (copies of a vertex, e.g. a uv split) would open under the solve
             welded, index = target.welded()
             if welded is not target:
                 if target_landmarks is not None:
                     target_landmarks = Landmarks.snap(welded, target_landmarks.positions(target))
                 target, self._copies = welded, index
+        if not same and cut_mouth and target_landmarks is not None:
+            from ..correspond.mouth import cut_mouth as cut
+            mc = cut(target, target_landmarks.positions(target))
+            if mc.cut:
+                self.mouth = mc
+                self._appended = len(mc.copies_of)
+                self.output_mesh = _user_cut(self.output_mesh, target, mc)
+                target_landmarks = Landmarks(target_landmarks.triangle, target_landmarks.bary)
+                inward = mc.inward
+                target = mc.mesh
+        self.target = target
+        if parts and not same and source_landmarks is not None and target_landmarks is not None:
+            from ..correspond.parts import split_parts
+            ls_pos, lt_pos = source_landmarks.positions(source), target_landmarks.positions(target)
+            ps, pt = split_parts(source, ls_pos), split_parts(target, lt_pos)
+            if not (ps.only_skin and pt.only_skin):
+                self._init_parts(ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward)
+                return
         if source_landmarks is not None and target_landmarks is not None:
             ls = source_landmarks.positions(source)
             lt = target_landmarks.positions(target)
@@ -65,7 +98,9 @@ class ExpressionTransfer:
         if same:
             vmap, matched, fixed = None, None, static
         else:
-            self.correspondence = correspond(source, ls, aligned, self.similarity.apply(lt))
+            match = aligned if inward is None else aligned.with_vertices(aligned.vertices + self.similarity.scale
+                                                                         * np.asarray(inward) @ self.similarity.rotation.T)
+            self.correspondence = correspond(source, ls, match, self.similarity.apply(lt))
             vmap = self.correspondence.matrix(source.triangles)
             matched = self.correspondence.matched
             moving = vmap @ (~static).astype(float)
@@ -73,6 +108,22 @@ class ExpressionTransfer:
         self.solver = TransferSolver(source, aligned, method, vertex_map=vmap, matched=matched,
                                      fixed=fixed, solver_kind=solver_kind)
         self._back = self.similarity.inverse()
+
+    def _init_parts(self, ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward=None):
+        """The skin-to-skin transfer and the motion of the other parts (transfer.parts)."""
+        from .parts import PartMotion
+        s_skin, s_idx = self.source.submesh(ps.skin_faces)
+        t_skin, t_idx = self.target.submesh(pt.skin_faces)
+        self.parts = (ps, self._user_parts(pt))
+        st = None if static is None else np.asarray(static, bool)[s_idx]
+        self._skin = ExpressionTransfer(s_skin, t_skin, Landmarks.snap(s_skin, ls_pos), Landmarks.snap(t_skin, lt_pos),
+                                        method, st, solver_kind, parts=False, cut_mouth=False, weld=False,
+                                        inward=None if inward is None else np.asarray(inward)[t_idx])
+        self._source_skin = s_idx
+        self.similarity = self._skin.similarity
+        self.alignment_residual = self._skin.alignment_residual
+        self.correspondence = self._skin.correspondence
+        self._parts = PartMotion(self.source, ps, self.target, pt, t_skin, t_idx, self.similarity, ls_pos)
 
     def apply(self, frames: np.ndarray, batch: int = 32, workers: int | None = None) -> np.ndarray:
         """Source frames (F, n_S, 3) or (n_S, 3) -> target frames (F, n_T, 3) or (n_T, 3).
@@ -84,8 +135,10 @@ class ExpressionTransfer:
         frames = np.asarray(frames, dtype=np.float64)
         single = frames.ndim == 2
         f = frames[None] if single else frames
-        n = self.target.n_vertices if self._copies is None else int(self._copies.max()) + 1
-        out = np.empty((len(f), n, 3))
+        if self._parts is not None:
+            out = self._to_user(self._parts.apply(f, self._skin.apply(f[:, self._source_skin], batch, workers)))
+            return out[0] if single else out
+        out = np.empty((len(f), self.target.n_vertices, 3))
         starts = range(0, len(f), batch)
         workers = min(workers or os.cpu_count() or 1, len(starts))
         if workers <= 1:
@@ -98,6 +151,35 @@ class ExpressionTransfer:
                         for i in starts]
                 for j in jobs:
                     j.result()
-        if self._copies is not None:
-            out = out[:, self._copies]
+        out = self._to_user(out)
         return out[0] if single else out
+
+    def _user_parts(self, pt):
+        """The target's parts on the user's vertices (and a cut's copies after them)."""
+        if self._copies is None:
+            return pt
+        from ..correspond.parts import Parts
+        n = self.target.n_vertices
+        idx = np.r_[self._copies, np.arange(n - self._appended, n)]
+        return Parts(pt.label[idx], pt.names, pt.role[idx], pt.skin_faces)
+
+    def _to_user(self, out: np.ndarray) -> np.ndarray:
+        """Solved vertices -> the user's (each copy of a welded vertex, then a cut's copies)."""
+        if self._copies is None:
+            return out
+        keep = out[:, self._copies]
+        if self._appended:
+            keep = np.concatenate([keep, out[:, self.target.n_vertices - self._appended:]], axis=1)
+        return keep
+
+
+def _user_cut(user: Mesh, welded: Mesh, mc) -> Mesh:
+    """The user's mesh with the mouth cut: its vertices in their order, the cut's copies after
+    them, the faces below the seam on the copies."""
+    if user is welded:
+        return mc.mesh
+    n_w, n_u = welded.n_vertices, user.n_vertices
+    fi = mc.mesh.face_indices
+    new = np.where(fi >= n_w, n_u + fi - n_w, user.face_indices)
+    v = np.vstack([user.vertices, mc.mesh.vertices[n_w:]])
+    return Mesh(v, new, user.face_starts, user.uv, user.face_uv_indices, user.name, user.groups, user.group_names)

@@ -1,0 +1,156 @@
+"""Sealed lips (issue 16, part 3): a head whose mouth is one closed surface cannot open it.
+
+`cut_mouth` finds the seam between the lips -- the shortest path over the mesh's edges from one
+inner mouth corner (iBUG 60) through the meeting points of the inner lips (61/67, 62/66,
+63/65) to the other corner (64) -- and cuts it: every vertex inside the path is doubled, the
+faces below the path take the copies.  The user's vertices keep their order and indices; the
+copies are appended.  A mouth that already has an opening (a boundary loop between the lips)
+is left alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.spatial import cKDTree
+
+from ..align import face_cylinder
+from ..mesh import Mesh
+
+WAYPOINTS = [(60,), (61, 67), (62, 66), (63, 65), (64,)]
+
+
+@dataclass
+class MouthCut:
+    mesh: Mesh                    # the cut mesh (the input's vertices first, then the copies)
+    copies_of: np.ndarray         # (k,) for each appended vertex, the vertex it copies
+    seam: np.ndarray              # the seam's vertices, corner to corner
+    inward: np.ndarray | None = None   # (n + k, 3) offsets into each seam vertex's own lip (0 elsewhere)
+
+    @property
+    def cut(self) -> bool:
+        return len(self.copies_of) > 0
+
+
+def mouth_is_open(mesh: Mesh, landmarks) -> bool:
+    """A boundary between the lips at the middle of the mouth: the mouth already opens (a
+    small hole elsewhere, at a corner, does not open it)."""
+    lm = np.asarray(landmarks, float)
+    width = float(np.linalg.norm(lm[64] - lm[60]))
+    centre = lm[[62, 66]].mean(0)
+    b = mesh.boundary_vertices()
+    if not b.any():
+        return False
+    d = np.linalg.norm(mesh.vertices[b] - centre, axis=1)
+    return bool((d < 0.2 * width).any())
+
+
+def sealed_eyes(mesh: Mesh, landmarks) -> list[str]:
+    """The eyes ("left", "right") whose lids are one closed surface: no boundary at the eye."""
+    lm = np.asarray(landmarks, float)
+    b = mesh.boundary_vertices()
+    out = []
+    for side, rim in (("right", slice(36, 42)), ("left", slice(42, 48))):
+        pts = lm[rim]
+        if not np.isfinite(pts).all():
+            continue
+        width = float(np.linalg.norm(pts[3] - pts[0]))
+        d = np.linalg.norm(mesh.vertices[b] - pts.mean(0), axis=1) if b.any() else np.zeros(0)
+        if not (d < 0.35 * width).any():
+            out.append(side)
+    return out
+
+
+def _seam(mesh: Mesh, lm) -> np.ndarray:
+    """The path of vertices between the lips, corner to corner (Dijkstra over edge lengths)."""
+    tree = cKDTree(mesh.vertices)
+    stops = [int(tree.query(lm[list(w)].mean(0))[1]) for w in WAYPOINTS]
+    e = mesh.edges
+    w = np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1)
+    g = sp.coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+                      shape=(mesh.n_vertices,) * 2).tocsr()
+    path = [stops[0]]
+    for a, b in zip(stops[:-1], stops[1:]):
+        _, pred = dijkstra(g, indices=a, return_predecessors=True)
+        seg, v = [], b
+        while v != a and v >= 0:
+            seg.append(v)
+            v = pred[v]
+        if v < 0:
+            return np.zeros(0, np.int64)
+        path += seg[::-1]
+    out = [path[0]]
+    for v in path[1:]:                       # no vertex twice (waypoints can coincide)
+        if v != out[-1]:
+            out.append(v)
+    return np.array(out, np.int64)
+
+
+def cut_mouth(mesh: Mesh, landmarks) -> MouthCut:
+    """The mesh with its lips cut apart along the seam; unchanged when the mouth is open."""
+    lm = np.asarray(landmarks, float)
+    none = MouthCut(mesh, np.zeros(0, np.int64), np.zeros(0, np.int64))
+    if not np.isfinite(lm[60:68]).all() or mouth_is_open(mesh, lm):
+        return none
+    seam = _seam(mesh, lm)
+    if len(seam) < 3 or len(np.unique(seam)) != len(seam):
+        return none
+    inner = seam[1:-1]
+    # the faces around the seam, split into the two lips: faces meet across shared edges,
+    # except the seam's own edges
+    fi, st = mesh.face_indices, mesh.face_starts
+    face_of = np.repeat(np.arange(mesh.n_faces), np.diff(st))
+    on = np.isin(fi, inner)
+    faces = np.unique(face_of[on])
+    seam_edges = {frozenset(p) for p in zip(seam[:-1], seam[1:])}
+    edge_faces = {}
+    for f in faces:
+        c = fi[st[f]:st[f + 1]]
+        for a, b in zip(c, np.roll(c, -1)):
+            key = frozenset((int(a), int(b)))
+            if key not in seam_edges:
+                edge_faces.setdefault(key, []).append(f)
+    pos = {f: k for k, f in enumerate(faces)}
+    rows, cols = [], []
+    for fs in edge_faces.values():
+        for a in fs:
+            for b in fs:
+                if a != b:
+                    rows.append(pos[a])
+                    cols.append(pos[b])
+    adj = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(faces),) * 2).tocsr()
+    nc, comp = connected_components(adj, directed=False)
+    up = face_cylinder(lm).axes[1]
+    cent = mesh.face_centroids()[faces]
+    # each face's side: above or below the seam where it touches it
+    seam_pos = mesh.vertices[inner]
+    near = cKDTree(seam_pos).query(cent)[1]
+    below_face = (cent - seam_pos[near]) @ up < 0
+    below_comp = np.array([below_face[comp == c].mean() > 0.5 for c in range(nc)])
+    if below_comp.all() or not below_comp.any():
+        return none                          # not two lips: leave the mesh alone
+    copy = np.full(mesh.n_vertices, -1, np.int64)
+    copy[inner] = mesh.n_vertices + np.arange(len(inner))
+    new_fi = fi.copy()
+    lower_faces = faces[below_comp[comp]]
+    sel = np.isin(face_of, lower_faces) & on
+    new_fi[sel] = copy[fi[sel]]
+    v = np.vstack([mesh.vertices, mesh.vertices[inner]])
+    cut = Mesh(v, new_fi, st, name=mesh.name, groups=mesh.groups, group_names=mesh.group_names)
+    if mesh.uv is not None and mesh.face_uv_indices is not None:
+        cut.uv, cut.face_uv_indices = mesh.uv, mesh.face_uv_indices
+    # where each side's seam vertex sits inside its own lip: half way to its faces' centroids
+    # (a correspondence looks the two copies up there, so each follows its own lip)
+    inward = np.zeros_like(v)
+    centroids = cut.face_centroids()
+    for ids in (inner, copy[inner]):
+        hit = np.isin(new_fi, ids)
+        sums = np.zeros_like(v)
+        cnt = np.zeros(len(v))
+        np.add.at(sums, new_fi[hit], centroids[face_of[hit]])
+        np.add.at(cnt, new_fi[hit], 1)
+        inward[ids] = 0.5 * (sums[ids] / np.maximum(cnt[ids], 1)[:, None] - v[ids])
+    return MouthCut(cut, inner.copy(), seam, inward)

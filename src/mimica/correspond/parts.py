@@ -1,0 +1,226 @@
+"""The parts of a head (DESIGN.md, `Parts`): skin, eyeballs, teeth, gums and tongue, and the
+parts that ride on the skin (lashes, tear and occlusion shells, sockets, anything else).
+
+Correspondence is skin to skin only; every other part gets a role saying how it moves when
+an expression is transferred:
+
+- `skull`: stays (upper teeth and gums),
+- `jaw`: the jaw's rigid motion (lower teeth and gums, tongue),
+- `eye.left` / `eye.right`: rigid, rotating about the eyeball's centre,
+- `follow`: each vertex follows the skin nearest to it (lashes, shells, sockets).
+
+How parts are found: ICT-FaceKit's own topology from its table (README.upstream.md, "Face
+Model Topology"); any other head from its connected components and OBJ materials/groups:
+the skin is the component with the largest area; a component named like an eye, tooth,
+gum or tongue part (material or group names), or shaped like one where the landmarks say
+(a sphere behind an eye; a piece inside the mouth), gets that role; the rest follow.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse.csgraph import connected_components
+
+from ..align import face_cylinder
+from ..mesh import Mesh
+
+SKIN, SKULL, JAW, EYE_LEFT, EYE_RIGHT, FOLLOW = "skin", "skull", "jaw", "eye.left", "eye.right", "follow"
+ROLES = (SKIN, SKULL, JAW, EYE_LEFT, EYE_RIGHT, FOLLOW)
+
+# ICT-FaceKit's geometries (vertex ranges, end exclusive) and what each is
+ICT_PARTS = [("skin", 0, 11248), ("mouth socket", 11248, 13294), ("eye socket", 13294, 14062),
+             ("gums and tongue", 14062, 17039), ("teeth", 17039, 21451), ("eyeball.left", 21451, 23021),
+             ("eyeball.right", 23021, 24591), ("tear shells", 24591, 25047), ("occlusion shells", 25047, 25351),
+             ("lashes", 25351, 26719)]
+OCCLUSAL_TILT_DEG = 5.0
+ICT_SKIN_FACES = 11144                       # polygons [0:11144) are the face, head and neck
+
+_NAMED = [(re.compile(r"teeth|tooth|dent", re.I), "teeth"), (re.compile(r"gum|tongue", re.I), "gums and tongue"),
+          (re.compile(r"sclera|iris|pupil|cornea|eyeball|eye_?ball", re.I), "eyeball"),
+          (re.compile(r"lash", re.I), "lashes"), (re.compile(r"brow", re.I), "brows"),
+          (re.compile(r"lacrimal|tear|occlusion|eye_?blend|meniscus", re.I), "eye shells")]
+
+
+@dataclass
+class Parts:
+    """A head split into parts: per vertex its part and its role (an index into ROLES)."""
+
+    label: np.ndarray            # (n,) part index of each vertex
+    names: list                  # name of each part
+    role: np.ndarray             # (n,) index into ROLES
+    skin_faces: np.ndarray       # polygon indices of the skin (all their corners skin)
+
+    @property
+    def skin(self) -> np.ndarray:
+        return self.role == ROLES.index(SKIN)
+
+    def of(self, role: str) -> np.ndarray:
+        """Vertex indices with this role."""
+        return np.nonzero(self.role == ROLES.index(role))[0]
+
+    @property
+    def only_skin(self) -> bool:
+        return bool(self.skin.all())
+
+    def summary(self) -> str:
+        """One line: each part and its vertex count."""
+        counts = np.bincount(self.label, minlength=len(self.names))
+        seen = {}
+        for n, c in zip(self.names, counts):
+            if c:
+                seen[n] = seen.get(n, 0) + int(c)
+        return ", ".join(f"{n} {c:,}" for n, c in seen.items())
+
+
+def _eye_centres(lm):
+    """Centres of the left and right eye from the 68 landmarks (eye.left: points 42-47)."""
+    lm = np.asarray(lm, float)
+    return {EYE_LEFT: np.nanmean(lm[42:48], axis=0), EYE_RIGHT: np.nanmean(lm[36:42], axis=0)}
+
+
+def fit_sphere(p):
+    """Least-squares sphere through points: (centre, radius, RMS residual / radius)."""
+    a = np.c_[2 * p, np.ones(len(p))]
+    x, *_ = np.linalg.lstsq(a, (p * p).sum(1), rcond=None)
+    c = x[:3]
+    r = float(np.sqrt(max(x[3] + c @ c, 0.0)))
+    res = float(np.sqrt(((np.linalg.norm(p - c, axis=1) - r) ** 2).mean())) / max(r, 1e-300)
+    return c, r, res
+
+
+def _mouth_frame(lm):
+    """Face axes (right, up, forward) from the landmarks, the mouth's centre and the height of
+    the line between the lips, and the eye-to-eye width."""
+    cyl = face_cylinder(lm)
+    right, up, fwd = cyl.axes
+    lm = np.asarray(lm, float)
+    lips = np.nanmean(lm[[61, 62, 63, 65, 66, 67]], axis=0)       # the inner lip line
+    return right, up, fwd, lips, float(np.linalg.norm(lm[45] - lm[36]))
+
+
+def _ict_parts(mesh: Mesh, lm) -> Parts:
+    n = mesh.n_vertices
+    label = np.zeros(n, np.int64)
+    names = [p[0] for p in ICT_PARTS]
+    for k, (_, a, b) in enumerate(ICT_PARTS):
+        label[a:min(b, n)] = k
+    role = np.full(n, ROLES.index(FOLLOW))
+    role[:11248] = ROLES.index(SKIN)
+    if n > 11248:
+        role[21451:23021] = ROLES.index(EYE_LEFT)
+        role[23021:24591] = ROLES.index(EYE_RIGHT)
+        _split_mouth(mesh, lm, np.arange(14062, 21451), role)
+    return Parts(label, names, role, np.arange(min(ICT_SKIN_FACES, mesh.n_faces)))
+
+
+def _split_mouth(mesh, lm, idx, role):
+    """Teeth, gums and tongue: each connected piece above the line between the lips stays with
+    the skull, below it moves with the jaw; a piece spanning both (gums and tongue as one
+    component) is split vertex by vertex, the tongue with the jaw."""
+    if lm is None:
+        role[idx] = ROLES.index(SKULL)
+        return
+    idx = np.unique(idx)                              # in the order of the submatrix below
+    right, up, fwd, lips, width = _mouth_frame(lm)
+    q = mesh.vertices[idx] - lips
+    # the plane between the arches rises toward the back (measured on ICT-FaceKit's jawOpen: at
+    # 5 degrees 4.4% of its mouth vertices land on the wrong side, level 6.2%, 10 degrees 7.0%)
+    h = q @ up + (q @ fwd) * np.tan(np.radians(OCCLUSAL_TILT_DEG))
+    sub = np.zeros(mesh.n_vertices, bool)
+    sub[idx] = True
+    a = mesh.adjacency[sub][:, sub]
+    nc, comp = connected_components(a, directed=False)
+    mean_h = np.bincount(comp, h, nc) / np.bincount(comp, minlength=nc)
+    span = np.array([np.ptp(h[comp == c]) for c in range(nc)])
+    lower = np.where(span[comp] > 0.25 * width, h < 0, mean_h[comp] < 0)
+    role[idx] = np.where(lower, ROLES.index(JAW), ROLES.index(SKULL))
+
+
+def split_parts(mesh: Mesh, landmarks=None) -> Parts:
+    """The parts of `mesh` (landmarks: its 68 positions, (68, 3), used to place eyes and mouth)."""
+    from ..data import ICT_HEAD_VERTICES, is_ict_topology
+    lm = None if landmarks is None else np.asarray(landmarks, float)
+    if lm is not None and not (np.isfinite(lm[[8, 36, 45]]).all() and np.isfinite(lm[17:27]).any()):
+        lm = None
+    if mesh.n_vertices >= ICT_HEAD_VERTICES and is_ict_topology(mesh):
+        return _ict_parts(mesh, lm)
+    nc, comp = connected_components(mesh.adjacency, directed=False)
+    tri = mesh.triangles
+    area = np.bincount(comp[tri[:, 0]], mesh.triangle_areas(), nc)
+    skin_c = int(np.argmax(area))
+    if nc == 1:
+        return Parts(np.zeros(mesh.n_vertices, np.int64), ["skin"], np.zeros(mesh.n_vertices, np.int64),
+                     np.arange(mesh.n_faces))
+    group_of = _component_groups(mesh, comp, nc)
+    names, role_c = [], np.full(nc, ROLES.index(FOLLOW))
+    role = np.full(mesh.n_vertices, ROLES.index(FOLLOW))
+    eyes = _eye_centres(lm) if lm is not None else {}
+    _, _, _, lips, width = _mouth_frame(lm) if lm is not None else (None,) * 5
+    mouth = []
+    for c in range(nc):
+        idx = np.nonzero(comp == c)[0]
+        kind = group_of[c]
+        if c == skin_c:
+            kind = "skin"
+            role_c[c] = ROLES.index(SKIN)
+        elif kind == "eyeball" or (kind is None and eyes and len(idx) >= 8):
+            ctr, r, res = fit_sphere(mesh.vertices[idx])
+            side = min(eyes, key=lambda e: np.linalg.norm(ctr - eyes[e])) if eyes else None
+            near = side is not None and np.linalg.norm(ctr - eyes[side]) < 0.5 * width and r < 0.5 * width
+            # an eyeball surrounds its centre (ICT's: resultant of the directions 0.28-0.29);
+            # lashes and tear or occlusion shells are caps in front of it (0.77-0.95)
+            u = mesh.vertices[idx] - ctr
+            around = np.linalg.norm((u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)).mean(0)) < 0.6
+            if kind == "eyeball" or (res < 0.08 and near and around):
+                kind = "eyeball"
+                if side is not None:
+                    kind = f"eyeball.{side.split('.')[1]}"
+                    role_c[c] = ROLES.index(side)
+                else:
+                    role_c[c] = ROLES.index(SKULL)
+        if kind in ("teeth", "gums and tongue") or (kind is None and lm is not None and
+                                                     _inside_mouth(mesh.vertices[idx], lm)):
+            kind = kind or "teeth, gums or tongue"
+            mouth.append(idx)
+            role_c[c] = ROLES.index(SKULL)
+        names.append(kind or ("part" if len(idx) > 50 else "piece"))
+        role[idx] = role_c[c]
+    if mouth:
+        _split_mouth(mesh, lm, np.concatenate(mouth), role)
+    skin_v = comp == skin_c
+    faces = np.nonzero(np.add.reduceat(~skin_v[mesh.face_indices], mesh.face_starts[:-1]) == 0)[0]
+    return Parts(comp.astype(np.int64), names, role, faces)
+
+
+def _component_groups(mesh, comp, nc):
+    """For each component, the kind its faces' material or group names say (or None)."""
+    out = [None] * nc
+    if mesh.groups is None or not mesh.group_names:
+        return out
+    kinds = []
+    for name in mesh.group_names:
+        kinds.append(next((k for rx, k in _NAMED if rx.search(name)), None))
+    face_comp = comp[mesh.face_indices[mesh.face_starts[:-1]]]
+    for c in range(nc):
+        ks = [kinds[g] for g in np.unique(mesh.groups[face_comp == c])]
+        ks = [k for k in ks if k is not None]
+        if ks and len(set(ks)) == 1:
+            out[c] = ks[0]
+    return out
+
+
+def _inside_mouth(p, lm):
+    """All points behind the lips, between the mouth corners (with a margin) and between
+    halfway up the nose and the chin: a piece inside the mouth."""
+    right, up, fwd, lips, width = _mouth_frame(lm)
+    lm = np.asarray(lm, float)
+    q = p - lips
+    x, y, z = q @ right, q @ up, q @ fwd
+    half = 0.75 * abs(float((lm[54] - lm[48]) @ right))
+    top = float((0.5 * (lm[33] + lm[27]) - lips) @ up)       # halfway up the nose: the upper roots
+    bottom = float((lm[8] - lips) @ up)
+    return bool((np.abs(x) < half).all() and (y < top).all() and (y > bottom).all() and (z < 0.1 * width).all()
+                and (z > -1.5 * width).all())
