@@ -121,3 +121,22 @@ def test_cli_cuts_sealed_lips_in_one_line(head_model, sealed, tmp_path, capsys):
     assert cut.n_vertices > mesh.n_vertices and cut.n_faces == mesh.n_faces
     assert main(args + ["--out", str(tmp_path / "shut"), "--cut-mouth", "off"]) == 0
     assert read_mesh(tmp_path / "shut" / "jaw.obj").same_topology(mesh)
+
+
+def test_blinks_close_the_lids(head_model, sealed):
+    """ICT's eyeBlink closes its lid landmarks by 0.865; transferred onto the remeshed head the
+    lids now close as the source's do (transfer.contacts), where the gradients alone left them
+    half open."""
+    from mimica.transfer.contacts import closure
+    mesh, lm = sealed
+    S = head_model.mesh
+    frames = np.stack([head_model.shape("eyeBlink_L"), head_model.shape("eyeBlink_R")])
+    rest = lm.positions(mesh)
+    got = {}
+    for lids in (False, True):
+        x = ExpressionTransfer(S, mesh, ict_landmarks(S), lm, lids=lids)
+        out = x.apply(frames)
+        got[lids] = [closure(rest, lm.positions(x.output_mesh, out[k]), side) for k, side in enumerate(("left", "right"))]
+    assert min(got[True]) > 0.7 and min(got[True]) > min(got[False]) + 0.15, got
+    x = ExpressionTransfer(S, mesh, ict_landmarks(S), lm)
+    np.testing.assert_allclose(x.apply(S.vertices), x.output_mesh.vertices, atol=1e-6 * np.ptp(mesh.vertices))

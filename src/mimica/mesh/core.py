@@ -212,10 +212,14 @@ class Mesh:
 
     def boundary_vertices(self) -> np.ndarray:
         """bool (n,): vertices on an edge that only one polygon uses (outline and holes)."""
-        uq, cnt = np.unique(self._polygon_edges(), axis=0, return_counts=True)
         out = np.zeros(self.n_vertices, bool)
-        out[uq[cnt == 1].ravel()] = True
+        out[self.boundary_edges().ravel()] = True
         return out
+
+    def boundary_edges(self) -> np.ndarray:
+        """(B, 2) the edges only one polygon uses."""
+        uq, cnt = np.unique(self._polygon_edges(), axis=0, return_counts=True)
+        return uq[cnt == 1]
 
     def face_centroids(self) -> np.ndarray:
         """Mean of each polygon's corners, (F, 3)."""

@@ -35,7 +35,8 @@ class ExpressionTransfer:
     def __init__(self, source: Mesh, target: Mesh, source_landmarks: Landmarks | None = None,
                  target_landmarks: Landmarks | None = None, method: str = "vtc",
                  static: np.ndarray | None = None, solver_kind: str | None = None, parts: bool = True,
-                 cut_mouth: bool = True, inward: np.ndarray | None = None, weld: bool = True):
+                 cut_mouth: bool = True, inward: np.ndarray | None = None, weld: bool = True,
+                 lids: bool = True):
         """Across topologies (target landmarks given):
 
         - a target whose seams are saved as copies of a vertex (uv splits) is solved welded;
@@ -46,11 +47,13 @@ class ExpressionTransfer:
           transferred skin to skin, eyeballs, teeth and tongue move rigidly, lashes and shells
           follow the skin (transfer.parts); `self.parts` is then (source's, target's).
 
+        - lids: the target's open eyes close as far as the source's do (transfer.contacts).
+
         inward: (n_target, 3) offsets of where each target vertex's correspondence is looked
         up (the two sides of a cut seam look inside their own lip)."""
         self.source, self.method = source, method
         same = source.same_topology(target)
-        self.parts = self._parts = self.mouth = None
+        self.parts = self._parts = self.mouth = self._lids = None
         self.output_mesh = target
         # user vertex -> solved vertex, and the solved vertices appended after the user's
         self._copies, self._appended = None, 0
@@ -77,7 +80,7 @@ class ExpressionTransfer:
             ls_pos, lt_pos = source_landmarks.positions(source), target_landmarks.positions(target)
             ps, pt = split_parts(source, ls_pos), split_parts(target, lt_pos)
             if not (ps.only_skin and pt.only_skin):
-                self._init_parts(ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward)
+                self._init_parts(ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward, lids)
                 return
         if source_landmarks is not None and target_landmarks is not None:
             ls = source_landmarks.positions(source)
@@ -108,8 +111,13 @@ class ExpressionTransfer:
         self.solver = TransferSolver(source, aligned, method, vertex_map=vmap, matched=matched,
                                      fixed=fixed, solver_kind=solver_kind)
         self._back = self.similarity.inverse()
+        if lids and not same and lt is not None:
+            from .contacts import LidContacts
+            lc = LidContacts(target, lt, ls)
+            if lc.eyes:
+                self._lids, self._source_landmarks = lc, source_landmarks
 
-    def _init_parts(self, ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward=None):
+    def _init_parts(self, ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward=None, lids=True):
         """The skin-to-skin transfer and the motion of the other parts (transfer.parts)."""
         from .parts import PartMotion
         s_skin, s_idx = self.source.submesh(ps.skin_faces)
@@ -117,7 +125,7 @@ class ExpressionTransfer:
         self.parts = (ps, self._user_parts(pt))
         st = None if static is None else np.asarray(static, bool)[s_idx]
         self._skin = ExpressionTransfer(s_skin, t_skin, Landmarks.snap(s_skin, ls_pos), Landmarks.snap(t_skin, lt_pos),
-                                        method, st, solver_kind, parts=False, cut_mouth=False, weld=False,
+                                        method, st, solver_kind, parts=False, cut_mouth=False, weld=False, lids=lids,
                                         inward=None if inward is None else np.asarray(inward)[t_idx])
         self._source_skin = s_idx
         self.similarity = self._skin.similarity
@@ -151,6 +159,9 @@ class ExpressionTransfer:
                         for i in starts]
                 for j in jobs:
                     j.result()
+        if self._lids is not None:
+            src = self._source_landmarks
+            out = self._lids.apply(np.stack([src.positions(self.source, fr) for fr in f]), out)
         out = self._to_user(out)
         return out[0] if single else out
 

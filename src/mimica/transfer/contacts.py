@@ -1,0 +1,159 @@
+"""Lid contacts (issue 16, part 3): the target's lids close as far as the source's do.
+
+A transfer carries the source's deformation gradients, not where its lid rims meet: on a
+target of another topology a blink closes the lids part of the way (ICT's own eyeBlink closes
+its lid landmarks by 0.865; transferred onto remeshed heads 0.30-0.61, bench/real_heads.py).
+Here each open eye of the target has its rim found (the boundary loop of its opening) and
+split into the upper and the lower lid; every upper rim vertex is paired with the point of the
+lower rim across from it.  Per frame, the source's lid closure c (1 - lid gap / rest gap, its
+landmark pairs 37-41, 38-40, 43-47, 44-46) sets each pair's gap to (1 - c) x its rest gap; the
+rim moves there along the pair (the upper lid UPPER_SHARE of the way, as lids do), and the
+correction spreads over the lid by harmonic interpolation (zero at the edge of the eye's
+region), one factorization per target.  Our own step, not the paper's: Song et al. carry
+gradients only; measured in bench/real_heads.py.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from ..align import face_cylinder
+from ..mesh import Mesh
+from ..solver import SPDSolver
+
+EYES = {"right": (slice(36, 42), [(37, 41), (38, 40)], 36, 39),
+        "left": (slice(42, 48), [(43, 47), (44, 46)], 42, 45)}
+UPPER_SHARE = 0.8            # the upper lid makes most of a blink's travel
+REACH = 1.2                  # the correction's region: within REACH x the eye's width of its centre
+BAND = 0.12                  # the lid margin that moves with the rim, in eye widths
+
+
+def closure(lm_rest: np.ndarray, lm: np.ndarray, side: str) -> float:
+    """1 - lid gap / rest gap from the landmark pairs of one eye."""
+    return 1.0 - _lid_gap(lm, side) / max(_lid_gap(lm_rest, side), 1e-12)
+
+
+def _lid_gap(lm: np.ndarray, side: str) -> float:
+    return float(np.mean([np.linalg.norm(lm[a] - lm[b]) for a, b in EYES[side][1]]))
+
+
+class _Eye:
+    def __init__(self, mesh: Mesh, lm: np.ndarray, side: str, up: np.ndarray):
+        rim_lm, _, c0, c1 = EYES[side]
+        self.ok = bool(np.isfinite(lm[rim_lm]).all())
+        if not self.ok:
+            return
+        centre = lm[rim_lm].mean(0)
+        width = float(np.linalg.norm(lm[c1] - lm[c0]))
+        v = mesh.vertices
+        rim = _opening(mesh, centre, 0.8 * width)
+        self.ok = len(rim) >= 6
+        if not self.ok:
+            return
+        axis = lm[c1] - lm[c0]
+        t = (v[rim] - lm[c0]) @ axis / (axis @ axis)
+        h = (v[rim] - (lm[c0] + np.outer(t, axis))) @ up
+        upper, lower = rim[h > 0], rim[h <= 0]
+        tu, tl = t[h > 0], t[h <= 0]
+        keep = (tu > 0.05) & (tu < 0.95)
+        upper, tu = upper[keep], tu[keep]
+        self.ok = len(upper) >= 2 and len(lower) >= 2
+        if not self.ok:
+            return
+        order = np.argsort(tl)
+        lower, tl = lower[order], tl[order]
+        j = np.clip(np.searchsorted(tl, tu), 1, len(tl) - 1)       # the lower rim across, interpolated
+        w = np.clip((tu - tl[j - 1]) / np.maximum(tl[j] - tl[j - 1], 1e-12), 0, 1)
+        self.upper, self.lo0, self.lo1, self.w = upper, lower[j - 1], lower[j], w
+        self.rest_gap = self._gap(v[None])[0]
+        # harmonic spread over the eye's region, the rim pairs' corrections as the constraints
+        region = np.nonzero(np.linalg.norm(v - centre, axis=1) < REACH * width)[0]
+        # the lid margin: skin within BAND x the eye's width of the rim moves with its rim
+        # vertex (fading out), so the lid closes as a band, not as a thread at its edge
+        rim_ids = np.unique(np.r_[upper, self.lo0, self.lo1])       # the paired rim (the rest is free)
+        near = region[~np.isin(region, rim)]
+        dist, k = cKDTree(v[rim_ids]).query(v[near])
+        inband = dist < BAND * width
+        self.band, self.band_of = near[inband], rim_ids[k[inband]]
+        self.band_w = 1.0 - dist[inband] / (BAND * width)
+        fixed = np.zeros(mesh.n_vertices, bool)
+        fixed[np.r_[rim_ids, self.band]] = True
+        a = mesh.adjacency.tocsr()
+        inside = np.zeros(mesh.n_vertices, bool)
+        inside[region] = True
+        outer = inside & (np.asarray(a[:, ~inside].sum(1)).ravel() > 0)    # the region's own edge
+        free = np.nonzero(inside & ~fixed & ~outer)[0]
+        self.cons = np.nonzero(fixed)[0]
+        lap = sp.diags(np.asarray(a.sum(1)).ravel()) - a                   # graph Laplacian
+        self.free = free
+        self.solver = SPDSolver(lap[free][:, free].tocsc()) if len(free) else None
+        self.coupling = lap[free][:, self.cons].tocsr()
+
+    def _partner(self, v):
+        """The lower rim's point across each upper rim vertex; v: (..., n, 3)."""
+        return (1 - self.w)[:, None] * v[..., self.lo0, :] + self.w[:, None] * v[..., self.lo1, :]
+
+    def _gap(self, v):
+        return np.linalg.norm(self._partner(v) - v[..., self.upper, :], axis=-1)
+
+    def correct(self, v: np.ndarray, c: np.ndarray) -> np.ndarray:
+        """Frames v (F, n, 3) with this eye's rim gaps set to (1 - c) x their rest gaps (c: (F,)
+        closures), spread smoothly; one back-substitution for all frames."""
+        d = self._partner(v) - v[:, self.upper]                      # (F, k, 3)
+        gap = np.linalg.norm(d, axis=2)
+        want = np.maximum(1.0 - np.asarray(c, float), 0.0)[:, None] * self.rest_gap[None]
+        step = ((gap - want) / np.maximum(gap, 1e-12))[..., None] * d   # closes each pair to `want`
+        delta = np.zeros_like(v)
+        delta[:, self.upper] = UPPER_SHARE * step
+        acc, wsum = np.zeros_like(v), np.zeros(v.shape[1])          # a lower vertex: its pairs' mean
+        for idx, wt in ((self.lo0, 1 - self.w), (self.lo1, self.w)):
+            np.add.at(acc, (slice(None), idx), -(1 - UPPER_SHARE) * step * wt[None, :, None])
+            np.add.at(wsum, idx, wt)
+        lower = np.unique(np.r_[self.lo0, self.lo1])
+        delta[:, lower] = acc[:, lower] / np.maximum(wsum[lower], 1e-12)[None, :, None]
+        delta[:, self.band] = self.band_w[None, :, None] * delta[:, self.band_of]
+        out = v.copy()
+        dc = delta[:, self.cons]                                      # (F, m, 3)
+        out[:, self.cons] += dc
+        if self.solver is not None:
+            f = len(v)
+            rhs = -(self.coupling @ dc.transpose(1, 0, 2).reshape(len(self.cons), -1))
+            out[:, self.free] += self.solver.solve(rhs).reshape(len(self.free), f, 3).transpose(1, 0, 2)
+        return out
+
+
+def _opening(mesh: Mesh, centre, radius) -> np.ndarray:
+    """The vertices of the boundary loop nearest `centre` (the eye's opening), if it lies
+    within `radius`; small holes beside it are other loops."""
+    from scipy.sparse.csgraph import connected_components
+    be = mesh.boundary_edges()
+    if not len(be):
+        return np.zeros(0, np.int64)
+    n = mesh.n_vertices
+    g = sp.coo_matrix((np.ones(len(be)), (be[:, 0], be[:, 1])), shape=(n, n))
+    _, loop = connected_components(g, directed=False)
+    b = np.unique(be)
+    d = np.linalg.norm(mesh.vertices[b] - centre, axis=1)
+    if d.min() > radius:
+        return np.zeros(0, np.int64)
+    members = b[loop[b] == loop[b[np.argmin(d)]]]
+    return members[np.linalg.norm(mesh.vertices[members] - centre, axis=1) < radius]
+
+
+class LidContacts:
+    """Per target: its open eyes' rims, paired; `apply` closes them as the source's close."""
+
+    def __init__(self, target: Mesh, target_lm: np.ndarray, source_lm_rest: np.ndarray):
+        up = face_cylinder(target_lm).axes[1]
+        given = [s for s in EYES if np.isfinite(source_lm_rest[np.ravel(EYES[s][1])]).all()]
+        self.eyes = {s: e for s in given if (e := _Eye(target, target_lm, s, up)).ok}
+        self.source_rest = source_lm_rest
+
+    def apply(self, source_lm_frames, out: np.ndarray) -> np.ndarray:
+        """source_lm_frames: (F, 68, 3) the source's landmarks in each frame; out: (F, n, 3)."""
+        for side, eye in self.eyes.items():
+            c = np.array([closure(self.source_rest, lm, side) for lm in source_lm_frames])
+            out = eye.correct(out, c)
+        return out
