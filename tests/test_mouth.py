@@ -114,9 +114,13 @@ def test_cli_cuts_sealed_lips_in_one_line(head_model, sealed, tmp_path, capsys):
     args = ["transfer", str(tmp_path / "S.obj"), str(tmp_path / "jaw.obj"), "--target", str(tmp_path / "T.obj"),
             "--target-landmarks", str(tmp_path / "T.json")]
     capsys.readouterr()
-    assert main(args + ["--out", str(tmp_path / "cut")]) == 0
+    assert main(args + ["--out", str(tmp_path / "cut"), "--show", str(tmp_path / "seen.png")]) == 0
     said = [ln for ln in capsys.readouterr().err.splitlines() if "lips were sealed" in ln]
     assert len(said) == 1 and "cut apart" in said[0]
+    from mimica.image import read_image
+    seen = read_image(tmp_path / "seen.png")                     # the parts picture: the seam in red
+    red = (seen[..., 0] > 0.8) & (seen[..., 1] < 0.25) & (seen[..., 2] < 0.25)
+    assert seen.shape[1] > 800 and red.sum() > 20
     cut = read_mesh(tmp_path / "cut" / "jaw.obj")
     assert cut.n_vertices > mesh.n_vertices and cut.n_faces == mesh.n_faces
     assert main(args + ["--out", str(tmp_path / "shut"), "--cut-mouth", "off"]) == 0

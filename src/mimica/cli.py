@@ -126,6 +126,11 @@ def cmd_transfer(a):
     with staged_dir(outdir, {"command": "transfer"}) as d:
         for name, v in zip(names, out):
             write_mesh(d / name, target.with_vertices(v))
+    if a.show:                                         # after the results: a failed run leaves none
+        from .render import save_png
+        from .render.diagnose import transfer_picture
+        save_png(a.show, transfer_picture(xfer, f"{Path(a.target).name} as the transfer sees it"))
+        _say(f"picture -> {a.show}")
     cor = xfer.correspondence
     _say(f"aligned target to source: residual {100 * xfer.alignment_residual:.2f}% of the face size"
          + ("" if cor is None else f"; correspondence: {100 * cor.matched.mean():.1f}% of the target's skin matched"))
@@ -643,6 +648,11 @@ def cmd_blendshapes(a):
     _warn_sealed_eyes(head, shapes.landmarks, a.head)
     with atomic_path(out) as tmp:
         write_glb(tmp, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb")
+    if a.show:
+        from .render import save_png
+        from .render.diagnose import transfer_picture
+        save_png(a.show, transfer_picture(shapes.transfer, f"{Path(a.head).name} as the transfer sees it"))
+        _say(f"picture -> {a.show}")
     _say(f"{out}: {len(ARKIT_52)} ARKit morph targets on {shapes.mesh.n_vertices} vertices "
          f"({time.perf_counter() - t0:.1f}s; tongueOut stays at rest: ICT-FaceKit has no tongue shape)")
     return 0
@@ -719,6 +729,8 @@ def build_parser():
     t.add_argument("--target-landmarks", help="68-point landmark JSON of the target (built in for ICT-FaceKit)")
     t.add_argument("--method", choices=["vtc", "dt"], default="vtc",
                    help="vtc: vertex-tent coordinates (Song); dt: Sumner-Popovic deformation transfer")
+    t.add_argument("--show", help="PNG: the target as the transfer sees it (parts, unmatched skin, the mouth "
+                                   "seam, the paired lid rims)")
     t.add_argument("--cut-mouth", choices=["auto", "off"], default="auto",
                    help="auto: a target whose lips are sealed has them cut apart, so the mouth can open "
                         "(its vertices keep their order; the cut's copies come after them)")
@@ -843,6 +855,8 @@ def build_parser():
     bs = sub.add_parser("blendshapes", help="the 52 ARKit blendshapes on any head mesh, as one GLB")
     bs.add_argument("head", help="head mesh (OBJ/PLY/glTF), any topology, neutral")
     bs.add_argument("--landmarks", help="68-point landmark JSON (found automatically otherwise)")
+    bs.add_argument("--show", help="PNG: the head as the transfer sees it (parts, unmatched skin, the mouth "
+                                    "seam, the paired lid rims)")
     bs.add_argument("--cut-mouth", choices=["auto", "off"], default="auto",
                     help="auto: sealed lips are cut apart so jawOpen opens the mouth (the cut's vertices "
                          "come after the head's own)")

@@ -45,6 +45,7 @@ class Blendshapes(dict):
     mesh = None
     mouth = None
     landmarks = None              # the head's landmarks (given, or found)
+    transfer = None               # the ExpressionTransfer that made them (vertex_report, pictures)
 
 
 def arkit_blendshapes(head, landmarks=None, progress=None, store=None, cut_mouth=True) -> Blendshapes:
@@ -78,6 +79,6 @@ def arkit_blendshapes(head, landmarks=None, progress=None, store=None, cut_mouth
         say(f"parts of the head: {xfer.parts[1].summary()}")
     out = xfer.apply(frames)
     res = Blendshapes(zip(ARKIT_52, out))
-    res.mesh, res.mouth, res.landmarks = xfer.output_mesh, xfer.mouth, lt
+    res.mesh, res.mouth, res.landmarks, res.transfer = xfer.output_mesh, xfer.mouth, lt, xfer
     res["tongueOut"] = res.mesh.vertices.copy()
     return res

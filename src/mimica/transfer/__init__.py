@@ -123,11 +123,12 @@ class ExpressionTransfer:
         s_skin, s_idx = self.source.submesh(ps.skin_faces)
         t_skin, t_idx = self.target.submesh(pt.skin_faces)
         self.parts = (ps, self._user_parts(pt))
+        self._parts_role = pt.role
         st = None if static is None else np.asarray(static, bool)[s_idx]
         self._skin = ExpressionTransfer(s_skin, t_skin, Landmarks.snap(s_skin, ls_pos), Landmarks.snap(t_skin, lt_pos),
                                         method, st, solver_kind, parts=False, cut_mouth=False, weld=False, lids=lids,
                                         inward=None if inward is None else np.asarray(inward)[t_idx])
-        self._source_skin = s_idx
+        self._source_skin, self._target_skin = s_idx, t_idx
         self.similarity = self._skin.similarity
         self.alignment_residual = self._skin.alignment_residual
         self.correspondence = self._skin.correspondence
@@ -164,6 +165,29 @@ class ExpressionTransfer:
             out = self._lids.apply(np.stack([src.positions(self.source, fr) for fr in f]), out)
         out = self._to_user(out)
         return out[0] if single else out
+
+    def vertex_report(self) -> dict:
+        """Per vertex of `output_mesh`, for pictures and reports: 'role' (index into
+        correspond.parts.ROLES; all skin without parts), 'matched' (skin with a source partner),
+        'seam' (the cut mouth's two sides), 'rim' (the lid rims the contacts pair)."""
+        from ..correspond.parts import ROLES
+        n = self.target.n_vertices
+        role = np.full(n, ROLES.index("skin"))
+        matched, seam, rim = np.ones(n, bool), np.zeros(n, bool), np.zeros(n, bool)
+        inner, idx = self, np.arange(n)
+        if self._parts is not None:
+            role = self._parts_role
+            inner, idx = self._skin, self._target_skin
+        if inner.correspondence is not None:
+            matched[idx] = inner.correspondence.matched
+        if inner._lids is not None:
+            for eye in inner._lids.eyes.values():
+                rim[idx[np.r_[eye.upper, eye.lo0, eye.lo1]]] = True
+        if self.mouth is not None:
+            seam[np.r_[self.mouth.seam, np.arange(n - self._appended, n)]] = True
+        def user(a):                     # solved vertices -> the user's, as _to_user
+            return a if self._copies is None else np.r_[a[self._copies], a[n - self._appended:]]
+        return {"role": user(role), "matched": user(matched), "seam": user(seam), "rim": user(rim)}
 
     def _user_parts(self, pt):
         """The target's parts on the user's vertices (and a cut's copies after them)."""
