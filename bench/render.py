@@ -108,6 +108,7 @@ def viewer():
     import asyncio
     import json
     from mimica.data import ICT_FACE_AREA_VERTICES
+    from mimica.physics import precompute
     from mimica.rig import build_rig
     from viewer_probe import browser_page, chromium_path, drag_fps, viewer_process, ws_url
     from websockets.asyncio.client import connect
@@ -115,7 +116,7 @@ def viewer():
         print("viewer: no Chromium on this machine (apt install chromium)")
         return float("nan")
     face = ICTModel(ICT_FACE_AREA_VERTICES)
-    rig = build_rig(face.mesh, face.neutral[ICT_LANDMARKS_68])
+    rig = precompute(build_rig(face.mesh, face.neutral[ICT_LANDMARKS_68]))   # as `mimica rig` saves it
     with tempfile.TemporaryDirectory() as tmp:
         rig.save(Path(tmp) / "face.rig")
         with viewer_process("face.obj", Path(tmp) / "face.rig") as (url, _):
