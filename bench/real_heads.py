@@ -40,20 +40,13 @@ from mimica.export.blendshapes import ict_sources  # noqa: E402
 from mimica.landmarks import Landmarks, ict_landmarks  # noqa: E402
 from mimica.mesh import Mesh, read_mesh  # noqa: E402
 from mimica.transfer import ExpressionTransfer, relative_error, static_vertices  # noqa: E402
+from mimica.transfer.contacts import closure  # noqa: E402
 import mimica  # noqa: E402
 mimica.keep_memory()
-
-LIDS = {"right": [(37, 41), (38, 40)], "left": [(43, 47), (44, 46)]}
-
 
 def held_out(model, seed):
     rng = np.random.default_rng(1000 + seed)
     return model.identity(rng.normal(0, 0.8, 20))
-
-
-def blink_closure(lm_rest, lm_blink, side):
-    gap = lambda lm: np.mean([np.linalg.norm(lm[a] - lm[b]) for a, b in LIDS[side]])  # noqa: E731
-    return 1.0 - gap(lm_blink) / max(gap(lm_rest), 1e-12)
 
 
 def jaw_ratio(lm):
@@ -76,8 +69,8 @@ def ict_own(full_model):
     n = head.neutral
     own = {a: n + sum((head.shape(s) - n for s in ict_sources(a)), np.zeros_like(n)) for a in ARKIT_52}
     lm = lambda v: v[ICT_LANDMARKS_68]  # noqa: E731
-    return {"blink": {"left": blink_closure(lm(n), lm(own["eyeBlinkLeft"]), "left"),
-                      "right": blink_closure(lm(n), lm(own["eyeBlinkRight"]), "right")},
+    return {"blink": {"left": closure(lm(n), lm(own["eyeBlinkLeft"]), "left"),
+                      "right": closure(lm(n), lm(own["eyeBlinkRight"]), "right")},
             "jaw": jaw_ratio(lm(own["jawOpen"])), "damage": {a: damage(head.mesh, own[a]) for a in ARKIT_52}}
 
 
@@ -155,15 +148,15 @@ def rigid_residual(full_model):
              group_names=full.group_names)
     lt = Landmarks.snap(m, m.vertices[inv[ICT_LANDMARKS_68]])
     shapes = arkit_blendshapes(m, lt)
-    x = ExpressionTransfer(full, m, ict_landmarks(full), lt)
+    parts = shapes.transfer.parts[1]
     worst = 0.0
     for role in ("jaw", "skull", "eye.left", "eye.right"):
-        v = x.parts[1].of(role)
+        v = parts.of(role)
         size = float(np.ptp(m.vertices[v]))
         for a in ARKIT_52:
             fit = fit_similarity(m.vertices[v], shapes[a][v], scale=False)
             worst = max(worst, float(np.abs(fit.apply(m.vertices[v]) - shapes[a][v]).max()) / size)
-    return worst, x.parts[1].summary()
+    return worst, parts.summary()
 
 
 def main():
@@ -187,8 +180,8 @@ def main():
         cut = f", lips cut ({out_mesh.n_vertices - mesh.n_vertices} vertices added)" if shapes.mouth is not None else ""
         line = f"[{name}] {mesh.n_vertices} vertices{cut}, {el:.1f}s: jaw ratio {jaw:.3f} (ICT {own['jaw']:.3f})"
         if eyes_open:
-            bl = blink_closure(rest, pos["eyeBlinkLeft"], "left")
-            br = blink_closure(rest, pos["eyeBlinkRight"], "right")
+            bl = closure(rest, pos["eyeBlinkLeft"], "left")
+            br = closure(rest, pos["eyeBlinkRight"], "right")
             blinks += [bl, br]
             line += f", blink closure left {bl:.3f} right {br:.3f} (ICT {own['blink']['left']:.3f})"
         bad = []

@@ -158,7 +158,8 @@ def split_parts(mesh: Mesh, landmarks=None) -> Parts:
     names, role_c = [], np.full(nc, ROLES.index(FOLLOW))
     role = np.full(mesh.n_vertices, ROLES.index(FOLLOW))
     eyes = _eye_centres(lm) if lm is not None else {}
-    _, _, _, lips, width = _mouth_frame(lm) if lm is not None else (None,) * 5
+    frame = _mouth_frame(lm) if lm is not None else None          # once for every component
+    width = frame[4] if frame is not None else None
     mouth = []
     for c in range(nc):
         idx = np.nonzero(comp == c)[0]
@@ -182,7 +183,7 @@ def split_parts(mesh: Mesh, landmarks=None) -> Parts:
                 else:
                     role_c[c] = ROLES.index(SKULL)
         if kind in ("teeth", "gums and tongue") or (kind is None and lm is not None and
-                                                     _inside_mouth(mesh.vertices[idx], lm)):
+                                                     _inside_mouth(mesh.vertices[idx], lm, frame)):
             kind = kind or "teeth, gums or tongue"
             mouth.append(idx)
             role_c[c] = ROLES.index(SKULL)
@@ -212,11 +213,10 @@ def _component_groups(mesh, comp, nc):
     return out
 
 
-def _inside_mouth(p, lm):
+def _inside_mouth(p, lm, frame):
     """All points behind the lips, between the mouth corners (with a margin) and between
-    halfway up the nose and the chin: a piece inside the mouth."""
-    right, up, fwd, lips, width = _mouth_frame(lm)
-    lm = np.asarray(lm, float)
+    halfway up the nose and the chin: a piece inside the mouth (frame: _mouth_frame(lm))."""
+    right, up, fwd, lips, width = frame
     q = p - lips
     x, y, z = q @ right, q @ up, q @ fwd
     half = 0.75 * abs(float((lm[54] - lm[48]) @ right))

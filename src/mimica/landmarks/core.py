@@ -62,11 +62,15 @@ class Landmarks:
 
     def positions(self, mesh: Mesh, vertices=None) -> np.ndarray:
         """(68, 3) positions on `mesh` (or on `vertices` of the same topology); NaN where missing."""
-        v = mesh.vertices if vertices is None else vertices
-        out = np.full((N_POINTS, 3), np.nan)
+        return self.positions_in(mesh, np.asarray(mesh.vertices if vertices is None else vertices)[None])[0]
+
+    def positions_in(self, mesh: Mesh, frames: np.ndarray) -> np.ndarray:
+        """(F, 68, 3) positions in every frame (F, n, 3) of `mesh`'s topology; NaN where missing."""
+        frames = np.asarray(frames)
+        out = np.full((len(frames), N_POINTS, 3), np.nan)
         ok = self.present
         t = mesh.triangles[self.triangle[ok]]
-        out[ok] = np.einsum("ij,ijk->ik", self.bary[ok], v[t])
+        out[:, ok] = np.einsum("ij,fijk->fik", self.bary[ok], frames[:, t])
         return out
 
     @classmethod

@@ -71,8 +71,7 @@ class ExpressionTransfer:
                 self.mouth = mc
                 self._appended = len(mc.copies_of)
                 self.output_mesh = _user_cut(self.output_mesh, target, mc)
-                target_landmarks = Landmarks(target_landmarks.triangle, target_landmarks.bary)
-                inward = mc.inward
+                inward = mc.inward             # the landmarks stay: the cut keeps every triangle
                 target = mc.mesh
         self.target = target
         if parts and not same and source_landmarks is not None and target_landmarks is not None:
@@ -161,8 +160,7 @@ class ExpressionTransfer:
                 for j in jobs:
                     j.result()
         if self._lids is not None:
-            src = self._source_landmarks
-            out = self._lids.apply(np.stack([src.positions(self.source, fr) for fr in f]), out)
+            out = self._lids.apply(self._source_landmarks.positions_in(self.source, f), out)
         out = self._to_user(out)
         return out[0] if single else out
 

@@ -30,13 +30,15 @@ REACH = 1.2                  # the correction's region: within REACH x the eye's
 BAND = 0.12                  # the lid margin that moves with the rim, in eye widths
 
 
-def closure(lm_rest: np.ndarray, lm: np.ndarray, side: str) -> float:
-    """1 - lid gap / rest gap from the landmark pairs of one eye."""
-    return 1.0 - _lid_gap(lm, side) / max(_lid_gap(lm_rest, side), 1e-12)
+def closure(lm_rest: np.ndarray, lm: np.ndarray, side: str):
+    """1 - lid gap / rest gap from the landmark pairs of one eye; lm: (68, 3), or (F, 68, 3)
+    for every frame at once."""
+    return 1.0 - _lid_gap(lm, side) / max(float(_lid_gap(lm_rest, side)), 1e-12)
 
 
-def _lid_gap(lm: np.ndarray, side: str) -> float:
-    return float(np.mean([np.linalg.norm(lm[a] - lm[b]) for a, b in EYES[side][1]]))
+def _lid_gap(lm: np.ndarray, side: str):
+    a, b = np.array(EYES[side][1]).T
+    return np.linalg.norm(lm[..., a, :] - lm[..., b, :], axis=-1).mean(-1)
 
 
 class _Eye:
@@ -154,6 +156,5 @@ class LidContacts:
     def apply(self, source_lm_frames, out: np.ndarray) -> np.ndarray:
         """source_lm_frames: (F, 68, 3) the source's landmarks in each frame; out: (F, n, 3)."""
         for side, eye in self.eyes.items():
-            c = np.array([closure(self.source_rest, lm, side) for lm in source_lm_frames])
-            out = eye.correct(out, c)
+            out = eye.correct(out, closure(self.source_rest, source_lm_frames, side))
         return out
