@@ -36,17 +36,74 @@ def test_remeshed_scan_has_its_own_topology_and_holes(scans):
 
 
 def test_transfer_onto_remeshed_scans(head_model, scans):
+    """The registration (the default) against Song's cylinder map on the same two held-out
+    scans: measured 0.092 / 0.123 against 0.160 / 0.124 (bench/transfer.py's own: 0.092 vs 0.132;
+    the exact correspondence the remesh was made with gives 0.090 there)."""
     S = head_model.mesh
     frames = np.stack([S.vertices + head_model.delta(EXPRESSIONS[e]) for e in EXPRESSIONS])
-    errs = []
+    errs = {"nicp": [], "cylinder": []}
     for tv, rs, lt in scans:
-        x = ExpressionTransfer(S, rs.mesh, ict_landmarks(S), lt, static=static_vertices(S.vertices, frames))
-        out = x.apply(frames)
-        assert out.shape == (len(frames), rs.mesh.n_vertices, 3)       # the target's own topology
-        assert x.correspondence.matched.mean() > 0.97
-        errs.append(np.mean([relative_error(o, rs.carry(tv[FACE] + f[FACE] - S.vertices[FACE]), rs.mesh.vertices)
-                             for o, f in zip(out, frames)]))
-    assert max(errs) < 0.18 and np.mean(errs) <= 0.15, errs
+        for match in errs:
+            x = ExpressionTransfer(S, rs.mesh, ict_landmarks(S), lt, static=static_vertices(S.vertices, frames),
+                                   match=match)
+            out = x.apply(frames)
+            assert out.shape == (len(frames), rs.mesh.n_vertices, 3)       # the target's own topology
+            assert x.correspondence.matched.mean() > 0.97
+            errs[match].append(np.mean([relative_error(o, rs.carry(tv[FACE] + f[FACE] - S.vertices[FACE]),
+                                                       rs.mesh.vertices) for o, f in zip(out, frames)]))
+    assert max(errs["cylinder"]) < 0.18 and np.mean(errs["cylinder"]) <= 0.15, errs
+    assert max(errs["nicp"]) < 0.13 and np.mean(errs["nicp"]) <= 0.115, errs
+    assert np.mean(errs["nicp"]) < np.mean(errs["cylinder"]) - 0.02, errs
+
+
+def test_confidence_marks_where_the_surfaces_part(head_model, scans):
+    """Confidence near 1 where the registered source lies on the target; a patch of the target
+    lifted 1 cm off the face (where the source cannot follow) drops under Correspondence.LOW."""
+    from mimica.align import fit_similarity
+    from mimica.correspond import Correspondence, correspond
+    S = head_model.mesh
+    ls = S.vertices[ICT_LANDMARKS_68]
+    tv, rs, lt = scans[0]
+    T = rs.mesh
+    mid = 0.5 * (lt.positions(T)[3] + lt.positions(T)[31])
+    cheek = T.vertices[np.argmin(np.linalg.norm(T.vertices - mid, axis=1))]     # on the cheek
+    patch = np.linalg.norm(T.vertices - cheek, axis=1) < 0.8
+    assert patch.sum() > 20
+    lifted = T.vertices + 1.0 * patch[:, None] * T.vertex_normals()
+    sim = fit_similarity(lt.positions(T), ls)
+    for verts, low in ((T.vertices, False), (lifted, True)):
+        Tl = T.with_vertices(sim.apply(verts))
+        cor = correspond(S, ls, Tl, sim.apply(lt.positions(T)))
+        c = cor.confidence
+        assert c.shape == (T.n_vertices,) and (c >= 0).all() and (c <= 1).all()
+        assert (c[~patch] > Correspondence.LOW).mean() > 0.9
+        if low:
+            core = patch & (np.linalg.norm(T.vertices - cheek, axis=1) < 0.5)
+            assert (c[core] < Correspondence.LOW).mean() > 0.9
+        else:
+            assert (c[patch] > Correspondence.LOW).mean() > 0.9
+
+
+def test_target_beyond_the_source_has_no_partner(head_model, scans):
+    """A source cut off above the brows: the target's forehead finds the source's edge, and is
+    left unmatched (it keeps its rest shape), as Song's topology correction does."""
+    from mimica.align import fit_similarity
+    from mimica.correspond import correspond
+    S = head_model.mesh
+    ls = S.vertices[ICT_LANDMARKS_68]
+    up = ls[27] - ls[8]
+    up /= np.linalg.norm(up)
+    brow = ls[17:27].mean(0)
+    keep = (S.face_centroids() - brow) @ up < 0.5
+    low, _ = S.submesh(np.nonzero(keep)[0])
+    tv, rs, lt = scans[0]
+    T = rs.mesh
+    sim = fit_similarity(lt.positions(T), ls)
+    Ta = T.with_vertices(sim.apply(T.vertices))
+    cor = correspond(low, ls, Ta, sim.apply(lt.positions(T)))
+    height = (Ta.vertices - brow) @ up
+    assert (~cor.matched[height > 2.5]).mean() > 0.95          # well above the cut: no partner
+    assert cor.matched[height < 0].mean() > 0.98               # below the brows: matched
 
 
 def test_correspondence_lands_near_the_true_point(head_model, scans):

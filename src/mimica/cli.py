@@ -45,6 +45,22 @@ def _landmarks(mesh, path, flag, what):
         raise
 
 
+MATCH_HELP = ("across topologies, how target vertices find their source partners: nicp, a non-rigid "
+              "registration of the source onto the target (default); cylinder, Song et al.'s cylinder map")
+
+
+def _correspondence_line(xfer) -> str:
+    """'; correspondence (nicp): 99.8% of the target's skin matched, 2.1% with low confidence'."""
+    cor = xfer.correspondence                  # the skin's, when the heads have parts
+    if cor is None:
+        return ""
+    line = f"; correspondence ({xfer.match}): {100 * cor.matched.mean():.1f}% of the target's skin matched"
+    if cor.confidence is not None:
+        low = cor.matched & (cor.confidence < cor.LOW)
+        line += f", {100 * low.mean():.1f}% with low confidence (< {cor.LOW}; --show draws where)"
+    return line
+
+
 def _warn_sealed_eyes(mesh, lm, what):
     """One line when a face's eyes are closed surfaces (blinks then move the lids over them)."""
     if lm is None:
@@ -109,7 +125,8 @@ def cmd_transfer(a):
         lt = _landmarks(target, a.target_landmarks, "--target-landmarks", str(a.target))
     t1 = time.perf_counter()
     xfer = ExpressionTransfer(source, target, ls, lt, method=a.method,
-                              static=static_vertices(source.vertices, frames), cut_mouth=a.cut_mouth == "auto")
+                              static=static_vertices(source.vertices, frames), cut_mouth=a.cut_mouth == "auto",
+                              match=a.match)
     t2 = time.perf_counter()
     if xfer.mouth is not None:
         _say(f"{a.target}: the lips were sealed; cut apart along {len(xfer.mouth.seam)} vertices, "
@@ -131,9 +148,8 @@ def cmd_transfer(a):
         from .render.diagnose import transfer_picture
         save_png(a.show, transfer_picture(xfer, f"{Path(a.target).name} as the transfer sees it"))
         _say(f"picture -> {a.show}")
-    cor = xfer.correspondence
     _say(f"aligned target to source: residual {100 * xfer.alignment_residual:.2f}% of the face size"
-         + ("" if cor is None else f"; correspondence: {100 * cor.matched.mean():.1f}% of the target's skin matched"))
+         + _correspondence_line(xfer))
     if xfer.parts is not None:
         _say(f"parts: source {xfer.parts[0].summary()}; target {xfer.parts[1].summary()} (skin to skin; "
              "eyeballs and teeth rigid, lashes and shells with the skin)")
@@ -644,7 +660,9 @@ def cmd_blendshapes(a):
     t0 = time.perf_counter()
     head = read_mesh(a.head)
     lm = read_landmarks(a.landmarks, head) if a.landmarks else None
-    shapes = arkit_blendshapes(head, lm, progress=_say, cut_mouth=a.cut_mouth == "auto")
+    shapes = arkit_blendshapes(head, lm, progress=_say, cut_mouth=a.cut_mouth == "auto", match=a.match)
+    if line := _correspondence_line(shapes.transfer).lstrip("; "):
+        _say(line)
     _warn_sealed_eyes(head, shapes.landmarks, a.head)
     with atomic_path(out) as tmp:
         write_glb(tmp, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb")
@@ -730,7 +748,8 @@ def build_parser():
     t.add_argument("--method", choices=["vtc", "dt"], default="vtc",
                    help="vtc: vertex-tent coordinates (Song); dt: Sumner-Popovic deformation transfer")
     t.add_argument("--show", help="PNG: the target as the transfer sees it (parts, unmatched skin, the mouth "
-                                   "seam, the paired lid rims)")
+                                   "seam, the paired lid rims, the correspondence's confidence)")
+    t.add_argument("--match", choices=["nicp", "cylinder"], default="nicp", help=MATCH_HELP)
     t.add_argument("--cut-mouth", choices=["auto", "off"], default="auto",
                    help="auto: a target whose lips are sealed has them cut apart, so the mouth can open "
                         "(its vertices keep their order; the cut's copies come after them)")
@@ -856,7 +875,8 @@ def build_parser():
     bs.add_argument("head", help="head mesh (OBJ/PLY/glTF), any topology, neutral")
     bs.add_argument("--landmarks", help="68-point landmark JSON (found automatically otherwise)")
     bs.add_argument("--show", help="PNG: the head as the transfer sees it (parts, unmatched skin, the mouth "
-                                    "seam, the paired lid rims)")
+                                    "seam, the paired lid rims, the correspondence's confidence)")
+    bs.add_argument("--match", choices=["nicp", "cylinder"], default="nicp", help=MATCH_HELP)
     bs.add_argument("--cut-mouth", choices=["auto", "off"], default="auto",
                     help="auto: sealed lips are cut apart so jawOpen opens the mouth (the cut's vertices "
                          "come after the head's own)")

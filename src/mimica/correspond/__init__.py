@@ -1,4 +1,14 @@
-"""Dense correspondence between two aligned faces of different topologies (Song §V.A).
+"""Dense correspondence between two aligned faces of different topologies.
+
+Two methods.  `method="nicp"` (the default): the source is registered onto the target by a
+non-rigid ICP held at the landmarks (correspond.register, after Amberg et al. 2007), and every
+target vertex takes the closest point of the registered source; a target vertex whose closest
+point lies on the source's edge, farther than an edge length, has no partner (the target
+reaches beyond the source there).  Each vertex also gets a confidence in [0, 1]: how close and
+how parallel the two surfaces came there, exp(-d^2 / 2h^2) x max(0, n_t . n_s), h the target's
+median edge length.
+
+`method="cylinder"`: Song et al.'s map (§V.A):
 
 1. Both faces are projected onto a cylinder around the head's vertical axis
    (u = angle, v = height; Song §V.A.1, u = arccos(x/r)).
@@ -14,7 +24,9 @@
    hole, or outside the source) is left unmatched; the transfer keeps its rest shape there.
 
 The result is a `Correspondence`: for each target vertex a source triangle and barycentric
-coordinates (DESIGN.md), and the sparse matrix of those weights.
+coordinates (DESIGN.md), and the sparse matrix of those weights.  Measured (bench/transfer.py,
+remeshed held-out identity): the transfer's relative error 0.132 with the cylinder map, 0.087
+with the registration (0.090 with the exact correspondence the remesh was made with).
 """
 
 from __future__ import annotations
@@ -28,7 +40,8 @@ from scipy.spatial import Delaunay, cKDTree
 from ..align import face_cylinder
 from ..errors import MimicaError
 from ..mesh import Mesh
-from ..mesh.query import barycentric_2d
+from ..mesh.query import TriangleLocator, barycentric_2d
+from .register import median_edge, on_boundary, register, rows_of
 
 @dataclass
 class Correspondence:
@@ -37,6 +50,9 @@ class Correspondence:
     triangle: np.ndarray
     bary: np.ndarray
     n_source: int
+    confidence: np.ndarray | None = None     # (n_target,) in [0, 1]; None for the cylinder map
+
+    LOW = 0.5                                # below it a vertex counts as low-confidence
 
     @property
     def matched(self) -> np.ndarray:
@@ -78,16 +94,28 @@ def _locate(points, pts_mesh, tris):
     return tri_out, bary_out
 
 
+METHODS = ("nicp", "cylinder")
+
+
 def correspond(source: Mesh, source_lm: np.ndarray, target: Mesh, target_lm: np.ndarray,
-               k: int = 24) -> Correspondence:
+               k: int = 24, method: str = "nicp", lookup: np.ndarray | None = None) -> Correspondence:
     """Correspondence from target vertices to the source surface; both faces already aligned.
 
     source_lm / target_lm: (68, 3) landmark positions (NaN = missing) on each face.
+    lookup: (n_target, 3) where each target vertex looks its partner up (default: where it
+    is; the two sides of a cut seam look a little inside their own lip).
     """
+    if method not in METHODS:
+        raise MimicaError(f"unknown correspondence method {method!r}; use one of {', '.join(METHODS)}")
     both = np.isfinite(source_lm).all(1) & np.isfinite(target_lm).all(1)
     if both.sum() < 6:
         raise MimicaError("landmarks: at least 6 landmarks present on both faces are needed "
                           "for a dense correspondence")
+    if method == "nicp":
+        return _registered(source, source_lm[both], target, target_lm[both],
+                           target.vertices if lookup is None else np.asarray(lookup, float))
+    if lookup is not None:
+        target = target.with_vertices(np.asarray(lookup, float))
     cyl = face_cylinder(np.where(both[:, None], source_lm, np.nan))
     uv_s, r_s = cyl.project(source.vertices)
     uv_t, r_t = cyl.project(target.vertices)
@@ -147,3 +175,19 @@ def correspond(source: Mesh, source_lm: np.ndarray, target: Mesh, target_lm: np.
     bb = np.where(hit[:, None], bc[rows, pick], clamped[rows, pick])
     bary[qi[good]] = bb[good]
     return Correspondence(triangle, bary, source.n_vertices)
+
+
+def _registered(source: Mesh, source_lm, target: Mesh, target_lm, lookup) -> Correspondence:
+    """The correspondence through a non-rigid registration of the source onto the target."""
+    tri, bary, _, _ = TriangleLocator(source.vertices, source.triangles).closest(source_lm)
+    reg = register(source, rows_of(source, tri, bary), target, target_lm)
+    tri, bary, _, dist = TriangleLocator(reg.vertices, source.triangles).closest(lookup)
+    h = median_edge(target)
+    beyond = on_boundary(source, tri, bary) & (dist > h)
+    ns = np.einsum("ij,ijk->ik", bary, source.vertex_normals(reg.vertices)[source.triangles[tri]])
+    ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-300)
+    facing = np.clip(np.einsum("ij,ij->i", ns, target.vertex_normals()), 0, 1)
+    confidence = np.exp(-0.5 * (dist / h) ** 2) * facing
+    confidence[beyond] = 0.0
+    tri = np.where(beyond, -1, tri)
+    return Correspondence(tri, np.where(beyond[:, None], 0.0, bary), source.n_vertices, confidence)

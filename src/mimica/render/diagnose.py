@@ -1,10 +1,12 @@
 """A picture of how a transfer sees its target (issue 16, part 5): the parts in colour, the
-skin without a source partner, the cut mouth's seam and the lid rims the contacts pair."""
+skin without a source partner, the cut mouth's seam and the lid rims the contacts pair; and the
+correspondence's confidence per vertex as a map."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..correspond import Correspondence
 from ..correspond.parts import ROLES
 from ..image.raster import render_mesh
 from .sheet import _font, contact_sheet
@@ -20,7 +22,8 @@ _ROLE_KEY = {"skin": 0, "skull": 1, "jaw": 2, "eye.left": 3, "eye.right": 3, "fo
 
 
 def transfer_picture(xfer, title: str = "", size: int = 420) -> np.ndarray:
-    """The target of an ExpressionTransfer in two views, coloured by what the transfer does."""
+    """The target of an ExpressionTransfer in two views, coloured by what the transfer does,
+    and a front view of the correspondence's confidence (red 0 -> yellow 0.5 -> green 1)."""
     mesh = xfer.output_mesh
     r = xfer.vertex_report()
     role_key = np.array([_ROLE_KEY[ROLES[i]] for i in range(len(ROLES))])[r["role"]]
@@ -33,9 +36,26 @@ def transfer_picture(xfer, title: str = "", size: int = 420) -> np.ndarray:
     frame = shared_frame_all_views(mesh.vertices, views)
     tiles = [render_mesh(mesh, size=(size, size), yaw=VIEWS[v][0], pitch=VIEWS[v][1], colors=colors[key],
                          frame=frame) for v in views]
-    tiles.append(_legend([(f"{name}: {int((key == k).sum()):,}", c) for k, (name, c) in enumerate(KEY)
-                          if (key == k).any()], size))
-    return contact_sheet(tiles, list(views) + ["vertices"], title=title or None)
+    conf = np.clip(r["confidence"], 0, 1)
+    tiles.append(render_mesh(mesh, size=(size, size), yaw=VIEWS["front"][0], pitch=VIEWS["front"][1],
+                             colors=confidence_colors(conf), frame=frame))
+    skin = role_key == 0
+    low = skin & r["matched"] & (conf < LOW)
+    entries = [(f"{name}: {int((key == k).sum()):,}", c) for k, (name, c) in enumerate(KEY) if (key == k).any()]
+    entries.append((f"skin matched, confidence < {LOW}: {int(low.sum()):,}", tuple(confidence_colors(np.array([0.2]))[0])))
+    tiles.append(_legend(entries, size))
+    return contact_sheet(tiles, list(views) + ["confidence", "vertices"], title=title or None)
+
+
+LOW = Correspondence.LOW
+
+
+def confidence_colors(c: np.ndarray) -> np.ndarray:
+    """Confidence in [0, 1] -> RGB: red at 0, yellow at 0.5, green at 1."""
+    c = np.clip(np.asarray(c, float), 0, 1)[:, None]
+    red, yellow, green = np.array([0.85, 0.15, 0.1]), np.array([0.95, 0.85, 0.2]), np.array([0.2, 0.7, 0.3])
+    lo = red + (yellow - red) * np.clip(2 * c, 0, 1)
+    return np.where(c < 0.5, lo, yellow + (green - yellow) * np.clip(2 * c - 1, 0, 1))
 
 
 def _legend(entries, size) -> np.ndarray:

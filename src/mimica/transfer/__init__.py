@@ -36,7 +36,7 @@ class ExpressionTransfer:
                  target_landmarks: Landmarks | None = None, method: str = "vtc",
                  static: np.ndarray | None = None, solver_kind: str | None = None, parts: bool = True,
                  cut_mouth: bool = True, inward: np.ndarray | None = None, weld: bool = True,
-                 lids: bool = True):
+                 lids: bool = True, match: str = "nicp", fill: bool = True):
         """Across topologies (target landmarks given):
 
         - a target whose seams are saved as copies of a vertex (uv splits) is solved welded;
@@ -48,12 +48,17 @@ class ExpressionTransfer:
           follow the skin (transfer.parts); `self.parts` is then (source's, target's).
 
         - lids: the target's open eyes close as far as the source's do (transfer.contacts).
+        - fill: skin whose correspondence has low confidence takes its motion from the skin
+          around it (transfer.fill).
+        - match: how target vertices find their source partners (correspond.METHODS): "nicp",
+          a non-rigid registration of the source onto the target, or "cylinder", Song et
+          al.'s cylinder map.
 
         inward: (n_target, 3) offsets of where each target vertex's correspondence is looked
         up (the two sides of a cut seam look inside their own lip)."""
-        self.source, self.method = source, method
+        self.source, self.method, self.match = source, method, match
         same = source.same_topology(target)
-        self.parts = self._parts = self.mouth = self._lids = None
+        self.parts = self._parts = self.mouth = self._lids = self._fill = None
         self.output_mesh = target
         # user vertex -> solved vertex, and the solved vertices appended after the user's
         self._copies, self._appended = None, 0
@@ -79,7 +84,7 @@ class ExpressionTransfer:
             ls_pos, lt_pos = source_landmarks.positions(source), target_landmarks.positions(target)
             ps, pt = split_parts(source, ls_pos), split_parts(target, lt_pos)
             if not (ps.only_skin and pt.only_skin):
-                self._init_parts(ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward, lids)
+                self._init_parts(ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward, lids, match, fill)
                 return
         if source_landmarks is not None and target_landmarks is not None:
             ls = source_landmarks.positions(source)
@@ -100,9 +105,10 @@ class ExpressionTransfer:
         if same:
             vmap, matched, fixed = None, None, static
         else:
-            match = aligned if inward is None else aligned.with_vertices(aligned.vertices + self.similarity.scale
-                                                                         * np.asarray(inward) @ self.similarity.rotation.T)
-            self.correspondence = correspond(source, ls, match, self.similarity.apply(lt))
+            lookup = None if inward is None else (aligned.vertices + self.similarity.scale
+                                                  * np.asarray(inward) @ self.similarity.rotation.T)
+            self.correspondence = correspond(source, ls, aligned, self.similarity.apply(lt), method=match,
+                                             lookup=lookup)
             vmap = self.correspondence.matrix(source.triangles)
             matched = self.correspondence.matched
             moving = vmap @ (~static).astype(float)
@@ -110,13 +116,18 @@ class ExpressionTransfer:
         self.solver = TransferSolver(source, aligned, method, vertex_map=vmap, matched=matched,
                                      fixed=fixed, solver_kind=solver_kind)
         self._back = self.similarity.inverse()
+        if fill and self.correspondence is not None and self.correspondence.confidence is not None:
+            from .fill import LowConfidenceFill
+            lf = LowConfidenceFill(target, self.correspondence.confidence, self.correspondence.LOW)
+            self._fill = lf if lf.ok else None
         if lids and not same and lt is not None:
             from .contacts import LidContacts
             lc = LidContacts(target, lt, ls)
             if lc.eyes:
                 self._lids, self._source_landmarks = lc, source_landmarks
 
-    def _init_parts(self, ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward=None, lids=True):
+    def _init_parts(self, ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward=None, lids=True,
+                    match="nicp", fill=True):
         """The skin-to-skin transfer and the motion of the other parts (transfer.parts)."""
         from .parts import PartMotion
         s_skin, s_idx = self.source.submesh(ps.skin_faces)
@@ -126,6 +137,7 @@ class ExpressionTransfer:
         st = None if static is None else np.asarray(static, bool)[s_idx]
         self._skin = ExpressionTransfer(s_skin, t_skin, Landmarks.snap(s_skin, ls_pos), Landmarks.snap(t_skin, lt_pos),
                                         method, st, solver_kind, parts=False, cut_mouth=False, weld=False, lids=lids,
+                                        match=match, fill=fill,
                                         inward=None if inward is None else np.asarray(inward)[t_idx])
         self._source_skin, self._target_skin = s_idx, t_idx
         self.similarity = self._skin.similarity
@@ -159,6 +171,8 @@ class ExpressionTransfer:
                         for i in starts]
                 for j in jobs:
                     j.result()
+        if self._fill is not None:
+            out = self._fill.apply(out)
         if self._lids is not None:
             out = self._lids.apply(self._source_landmarks.positions_in(self.source, f), out)
         out = self._to_user(out)
@@ -167,17 +181,22 @@ class ExpressionTransfer:
     def vertex_report(self) -> dict:
         """Per vertex of `output_mesh`, for pictures and reports: 'role' (index into
         correspond.parts.ROLES; all skin without parts), 'matched' (skin with a source partner),
-        'seam' (the cut mouth's two sides), 'rim' (the lid rims the contacts pair)."""
+        'seam' (the cut mouth's two sides), 'rim' (the lid rims the contacts pair), 'confidence'
+        (of the skin's correspondence, in [0, 1]; 1 elsewhere and on the same topology; 0 where
+        unmatched)."""
         from ..correspond.parts import ROLES
         n = self.target.n_vertices
         role = np.full(n, ROLES.index("skin"))
         matched, seam, rim = np.ones(n, bool), np.zeros(n, bool), np.zeros(n, bool)
+        confidence = np.ones(n)
         inner, idx = self, np.arange(n)
         if self._parts is not None:
             role = self._parts_role
             inner, idx = self._skin, self._target_skin
         if inner.correspondence is not None:
             matched[idx] = inner.correspondence.matched
+            c = inner.correspondence.confidence
+            confidence[idx] = inner.correspondence.matched if c is None else c
         if inner._lids is not None:
             for eye in inner._lids.eyes.values():
                 rim[idx[np.r_[eye.upper, eye.lo0, eye.lo1]]] = True
@@ -185,7 +204,8 @@ class ExpressionTransfer:
             seam[np.r_[self.mouth.seam, np.arange(n - self._appended, n)]] = True
         def user(a):                     # solved vertices -> the user's, as _to_user
             return a if self._copies is None else np.r_[a[self._copies], a[n - self._appended:]]
-        return {"role": user(role), "matched": user(matched), "seam": user(seam), "rim": user(rim)}
+        return {"role": user(role), "matched": user(matched), "seam": user(seam), "rim": user(rim),
+                "confidence": user(confidence)}
 
     def _user_parts(self, pt):
         """The target's parts on the user's vertices (and a cut's copies after them)."""

@@ -66,6 +66,14 @@ class _Eye:
             return
         order = np.argsort(tl)
         lower, tl = lower[order], tl[order]
+        # the lids matched by arc length between the landmarks (corner, the two lid points,
+        # corner): the upper rim's point at a share s of the way from 37 to 38 meets the lower
+        # rim's point at the same share from 41 to 40, as the source's lids meet
+        knots_up, knots_lo = ((c0, c0 + 1, c0 + 2, c1), (c0, c0 + 5, c0 + 4, c1))
+        su = _arc_param(v[upper[np.argsort(tu)]], lm[list(knots_up)])
+        upper = upper[np.argsort(tu)]
+        sl = _arc_param(v[lower], lm[list(knots_lo)])
+        tu, tl = su, np.maximum.accumulate(sl)
         j = np.clip(np.searchsorted(tl, tu), 1, len(tl) - 1)       # the lower rim across, interpolated
         w = np.clip((tu - tl[j - 1]) / np.maximum(tl[j] - tl[j - 1], 1e-12), 0, 1)
         self.upper, self.lo0, self.lo1, self.w = upper, lower[j - 1], lower[j], w
@@ -124,6 +132,26 @@ class _Eye:
             rhs = -(self.coupling @ dc.transpose(1, 0, 2).reshape(len(self.cons), -1))
             out[:, self.free] += self.solver.solve(rhs).reshape(len(self.free), f, 3).transpose(1, 0, 2)
         return out
+
+
+def _arc_param(chain: np.ndarray, knots: np.ndarray) -> np.ndarray:
+    """Each point of a polyline (corner to corner, in order) -> its place along it in landmark
+    units: 0 at the first knot, 1 at the second ..., linear in arc length between knots (the
+    knots placed where the polyline passes nearest them)."""
+    pts = np.vstack([knots[:1], chain, knots[-1:]])
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    arc = np.r_[0.0, np.cumsum(seg)]
+    # the arc length of the polyline point nearest each knot
+    a, b = pts[:-1], pts[1:]
+    at = []
+    for k in knots:
+        ab = b - a
+        t = np.clip(np.einsum("ij,ij->i", k - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300), 0, 1)
+        d = np.linalg.norm(a + t[:, None] * ab - k, axis=1)
+        i = int(np.argmin(d))
+        at.append(arc[i] + t[i] * seg[i])
+    at = np.maximum.accumulate(np.array(at))
+    return np.interp(arc[1:-1], at, np.arange(len(knots), dtype=float))
 
 
 def _opening(mesh: Mesh, centre, radius) -> np.ndarray:

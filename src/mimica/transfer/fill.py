@@ -1,0 +1,50 @@
+"""Low-confidence skin takes its motion from the skin around it (issue 16, parts 2 and 3).
+
+Where the correspondence is weak -- a sealed eye's skin across an opening the source has, a
+target reaching past the source's edge -- the source's deformation there is the wrong one
+(a lid rim's closing squeezed onto a membrane spikes it: 2.3 eye-widths on the shared real
+head's eyeBlinkLeft).  Here every skin vertex whose confidence c is under LOW gets its
+displacement blended toward the harmonic interpolation of its neighbours' (a graph-Laplacian
+fill of the low-confidence region, the confident skin around it as the boundary), with the
+weight 1 - c / LOW; one factorization per target, one back-substitution per batch of frames.
+Our own step, not the paper's; measured in bench/real_heads.py.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..mesh import Mesh
+from ..solver import SPDSolver
+
+
+class LowConfidenceFill:
+    def __init__(self, mesh: Mesh, confidence: np.ndarray, low: float):
+        c = np.asarray(confidence, float)
+        weak = c < low
+        a = mesh.adjacency.tocsr()
+        lap = (sp.diags(np.asarray(a.sum(1)).ravel()) - a).tocsr()
+        inside = np.nonzero(weak)[0]
+        ring = np.nonzero(~weak & (np.asarray(a[:, weak].sum(1)).ravel() > 0))[0]
+        self.ok = len(inside) > 0 and len(ring) > 0
+        if not self.ok:
+            return
+        # pieces of the weak region that touch no confident skin keep their own motion
+        m = lap[inside][:, inside] + 1e-9 * sp.identity(len(inside))
+        self.inside, self.ring = inside, ring
+        self.solver = SPDSolver(m.tocsc())
+        self.coupling = lap[inside][:, ring].tocsr()
+        self.blend = (1.0 - c[inside] / low)[None, :, None]
+        self.rest = mesh.vertices
+
+    def apply(self, out: np.ndarray) -> np.ndarray:
+        """out: (F, n, 3) results; the weak skin's displacements blended toward the fill."""
+        if not self.ok:
+            return out
+        f = len(out)
+        d_ring = (out[:, self.ring] - self.rest[self.ring]).transpose(1, 0, 2).reshape(len(self.ring), -1)
+        filled = self.solver.solve(-(self.coupling @ d_ring)).reshape(len(self.inside), f, 3).transpose(1, 0, 2)
+        own = out[:, self.inside] - self.rest[self.inside]
+        out[:, self.inside] = self.rest[self.inside] + own + self.blend * (filled - own)
+        return out

@@ -1,0 +1,46 @@
+"""Closest points on a mesh (mesh.query.TriangleLocator): libigl's AABB tree and the k-d tree
+search agree with a brute-force scan over every triangle, near the surface and far from it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mimica.mesh.query import TriangleLocator, closest_point_on_triangles
+
+
+def brute(mesh, p):
+    t = mesh.triangles
+    a, b, c = (np.broadcast_to(mesh.vertices[t[:, j]], (len(t), 3)) for j in range(3))
+    q, _ = closest_point_on_triangles(np.broadcast_to(p, (len(t), 3)).copy(), a, b, c)
+    return np.linalg.norm(q - p, axis=1).min()
+
+
+@pytest.mark.parametrize("use_igl", [True, False])
+def test_closest_points_are_exact(head_model, use_igl):
+    m = head_model.mesh
+    rng = np.random.default_rng(0)
+    size = np.ptp(m.vertices, axis=0).max()
+    near = m.vertices[rng.choice(m.n_vertices, 120, replace=False)] + rng.normal(0, 0.01 * size, (120, 3))
+    far = m.vertices.mean(0) + rng.normal(0, size, (40, 3))            # inside the head and far out
+    p = np.vstack([near, far])
+    loc = TriangleLocator(m.vertices, m.triangles, use_igl=use_igl)
+    if use_igl:
+        assert loc.use_igl, "libigl is a dependency: its import failed"
+    tri, bary, q, d = loc.closest(p)
+    assert np.allclose(bary.sum(1), 1) and (bary >= -1e-12).all()
+    np.testing.assert_allclose(np.einsum("ij,ijk->ik", bary, m.vertices[m.triangles[tri]]), q, atol=1e-12 * size)
+    np.testing.assert_allclose(np.linalg.norm(q - p, axis=1), d, atol=1e-12 * size)
+    np.testing.assert_allclose(d, [brute(m, x) for x in p], atol=1e-12 * size)
+
+
+def test_max_distance_keeps_near_points_exact(head_model):
+    m = head_model.mesh
+    rng = np.random.default_rng(1)
+    p = m.vertices[rng.choice(m.n_vertices, 200, replace=False)] + rng.normal(0, 0.3, (200, 3))
+    loc = TriangleLocator(m.vertices, m.triangles, use_igl=False)
+    exact = loc.closest(p)[3]
+    capped = loc.closest(p, max_distance=0.5)[3]
+    inside = exact < 0.5
+    np.testing.assert_allclose(capped[inside], exact[inside], atol=1e-12)
+    assert (capped >= exact - 1e-12).all()
