@@ -130,7 +130,8 @@ def test_cli_cuts_sealed_lips_in_one_line(head_model, sealed, tmp_path, capsys):
 def test_blinks_close_the_lids(head_model, sealed):
     """ICT's eyeBlink closes its lid landmarks by 0.865; transferred onto the remeshed head the
     lids now close as the source's do (transfer.contacts), where the gradients alone left them
-    half open."""
+    half open.  The rims' pairs are matched by arc length between the landmarks (0.889 / 0.862;
+    paired straight across the corners' axis they closed 0.726 / 0.795)."""
     from mimica.transfer.contacts import closure
     mesh, lm = sealed
     S = head_model.mesh
@@ -141,6 +142,26 @@ def test_blinks_close_the_lids(head_model, sealed):
         x = ExpressionTransfer(S, mesh, ict_landmarks(S), lm, lids=lids)
         out = x.apply(frames)
         got[lids] = [closure(rest, lm.positions(x.output_mesh, out[k]), side) for k, side in enumerate(("left", "right"))]
-    assert min(got[True]) > 0.7 and min(got[True]) > min(got[False]) + 0.15, got
+    assert min(got[True]) > 0.82 and min(got[True]) > min(got[False]) + 0.15, got
     x = ExpressionTransfer(S, mesh, ict_landmarks(S), lm)
     np.testing.assert_allclose(x.apply(S.vertices), x.output_mesh.vertices, atol=1e-6 * np.ptp(mesh.vertices))
+
+
+def test_sealed_eyes_do_not_spike(full_model):
+    """The shared real head's eyes are closed surfaces; ICT's blinking lid rims, carried onto
+    the skin across them, threw a vertex 0.82 eye widths; that skin has low confidence and now
+    takes its motion from the skin around it (transfer.fill): 0.37."""
+    d = data_dir() / "real-heads" / "mediapipe-canonical"
+    head = read_mesh(d / "head.obj")
+    lm = Landmarks.from_vertex_indices(head, json.loads((d / "head.json").read_text())["landmark_vertices"])
+    S = full_model.mesh
+    frames = np.stack([full_model.shape("eyeBlink_L"), full_model.shape("eyeBlink_R")])
+    pos = lm.positions(head)
+    width = np.linalg.norm(pos[45] - pos[42])
+    worst = {}
+    for fill in (False, True):
+        x = ExpressionTransfer(S, head, ict_landmarks(S), lm, fill=fill)
+        assert (x.vertex_report()["confidence"] < 0.5).sum() > 5          # the sealed eyes' skin
+        out = x.apply(frames)[:, :head.n_vertices]
+        worst[fill] = np.linalg.norm(out - head.vertices, axis=2).max() / width
+    assert worst[True] < 0.45 and worst[False] > 0.6, worst
