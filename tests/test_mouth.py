@@ -149,8 +149,9 @@ def test_blinks_close_the_lids(head_model, sealed):
 
 def test_sealed_eyes_do_not_spike(full_model):
     """The shared real head's eyes are closed surfaces; ICT's blinking lid rims, carried onto
-    the skin across them, threw a vertex 0.82 eye widths; that skin has low confidence and now
-    takes its motion from the skin around it (transfer.fill): 0.37."""
+    the skin across them, pushed it out (0.82 eye widths at worst with the cylinder map; 0.23
+    now); that skin has low confidence and takes its motion from the skin around it
+    (transfer.fill): 0.17."""
     d = data_dir() / "real-heads" / "mediapipe-canonical"
     head = read_mesh(d / "head.obj")
     lm = Landmarks.from_vertex_indices(head, json.loads((d / "head.json").read_text())["landmark_vertices"])
@@ -164,4 +165,4 @@ def test_sealed_eyes_do_not_spike(full_model):
         assert (x.vertex_report()["confidence"] < 0.5).sum() > 5          # the sealed eyes' skin
         out = x.apply(frames)[:, :head.n_vertices]
         worst[fill] = np.linalg.norm(out - head.vertices, axis=2).max() / width
-    assert worst[True] < 0.45 and worst[False] > 0.6, worst
+    assert worst[True] < 0.2 and worst[True] < 0.8 * worst[False], worst

@@ -143,7 +143,15 @@ class TransferSolver:
         ok = matched & (rowsum > 0.5)
         D = sp.diags(ok.astype(float))
         if self.method == "vtc":
-            return (D @ Vm).tocsr()                              # vertex elements on both sides
+            P = (D @ Vm).tocsr()                                  # vertex elements on both sides
+            if self.same_topology:
+                return P
+            # across topologies a target vertex's tent spans its one-ring: it takes the mean of
+            # the source deformation at its own and its neighbours' partners, not at one point
+            # (remeshed error 0.0920 -> 0.0896 in bench/transfer.py, mean of four held-out
+            # remeshes 0.106 -> 0.103; two rings: 0.095)
+            ring = (sp.identity(Vm.shape[0]) + self.target.adjacency) @ D
+            return (sp.diags(ok / np.maximum(np.asarray(ring.sum(1)).ravel(), 1)) @ ring @ P).tocsr()
         tt = self.target.triangles
         corner_ok = ok[tt].all(axis=1).astype(float)
         if self.same_topology:

@@ -2,8 +2,9 @@
 
 Where the correspondence is weak -- a sealed eye's skin across an opening the source has, a
 target reaching past the source's edge -- the source's deformation there is the wrong one
-(a lid rim's closing squeezed onto a membrane spikes it: 2.3 eye-widths on the shared real
-head's eyeBlinkLeft).  Here every skin vertex whose confidence c is under LOW gets its
+(a lid rim's closing squeezed onto the skin across a sealed eye pushes it out: on the shared
+real head's blinks the worst vertex moves 0.23 eye widths without this step, 0.17 with it;
+before the transfer averaged each tent over its one-ring, 0.82 and 0.37).  Here every skin vertex whose confidence c is under LOW gets its
 displacement blended toward the harmonic interpolation of its neighbours' (a graph-Laplacian
 fill of the low-confidence region, the confident skin around it as the boundary), with the
 weight 1 - c / LOW; one factorization per target, one back-substitution per batch of frames.
