@@ -150,8 +150,7 @@ def test_blinks_close_the_lids(head_model, sealed):
 def test_sealed_eyes_do_not_spike(full_model):
     """The shared real head's eyes are closed surfaces; ICT's blinking lid rims, carried onto
     the skin across them, pushed it out (0.82 eye widths at worst before the transfer averaged
-    each tent over its one-ring; 0.23
-    now); that skin has low confidence and takes its motion from the skin around it
+    each tent over its one-ring; 0.23 now); that skin has low confidence and takes its motion from the skin around it
     (transfer.fill): 0.17."""
     d = data_dir() / "real-heads" / "mediapipe-canonical"
     head = read_mesh(d / "head.obj")
