@@ -151,3 +151,28 @@ def test_an_unwelded_seam_stays_closed(head_model, scans):
     assert seam.n_vertices > rs.mesh.n_vertices + 300
     got = ExpressionTransfer(S, seam, ls, Landmarks.snap(seam, lt.positions(rs.mesh))).apply(frames)
     np.testing.assert_allclose(got, plain[:, orig], atol=1e-9 * np.ptp(tv))
+
+
+def test_contours_pair_landmark_to_landmark(head_model, scans):
+    """The lid and lip contours are found on ICT and on a remeshed scan, traced over each mesh,
+    and paired sample by sample: the pairs start at the landmarks and, carried through the
+    remesh's exact map, land within a few edge lengths of their partner on the source."""
+    from mimica.correspond.contours import CONTOURS, PER_SEGMENT, matched_contours
+    from mimica.correspond.register import median_edge
+    S = head_model.mesh
+    ls = S.vertices[ICT_LANDMARKS_68]
+    tv, rs, lt = scans[0]
+    T = rs.mesh
+    rows, pts, names = matched_contours(S, ls, T, lt.positions(T))
+    assert names == list(CONTOURS)
+    n = sum(len(CONTOURS[c]) - 1 for c in names) * (PER_SEGMENT + 1)
+    assert rows.shape == (n, S.n_vertices) and pts.shape == (n, 3)
+    np.testing.assert_allclose(rows.sum(1), 1)
+    # the target's points as positions on ICT's neutral (through the remesh's exact map) against
+    # the source's samples on it: the same place on the face
+    on_source = rows @ S.vertices
+    from mimica.mesh.query import TriangleLocator
+    tri, bary, _, _ = TriangleLocator(T.vertices, T.triangles).closest(pts)
+    carried = np.einsum("ij,ijk->ik", bary, rs.carry(S.vertices[FACE])[T.triangles[tri]])
+    d = np.linalg.norm(carried - on_source, axis=1)
+    assert np.median(d) < 2 * median_edge(T), np.median(d)

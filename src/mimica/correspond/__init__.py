@@ -51,6 +51,7 @@ class Correspondence:
     bary: np.ndarray
     n_source: int
     confidence: np.ndarray | None = None     # (n_target,) in [0, 1]; None for the cylinder map
+    contours: list | None = None             # the lid and lip contours matched (correspond.contours)
 
     LOW = 0.5                                # below it a vertex counts as low-confidence
 
@@ -95,15 +96,22 @@ def _locate(points, pts_mesh, tris):
 
 
 METHODS = ("nicp", "cylinder")
+CONTOUR_WEIGHT = 1.0          # of a contour sample, against a landmark's (register.POINT_WEIGHT)
 
 
 def correspond(source: Mesh, source_lm: np.ndarray, target: Mesh, target_lm: np.ndarray,
-               k: int = 24, method: str = "nicp", lookup: np.ndarray | None = None) -> Correspondence:
+               k: int = 24, method: str = "nicp", lookup: np.ndarray | None = None,
+               contours: bool = False) -> Correspondence:
     """Correspondence from target vertices to the source surface; both faces already aligned.
 
     source_lm / target_lm: (68, 3) landmark positions (NaN = missing) on each face.
     lookup: (n_target, 3) where each target vertex looks its partner up (default: where it
     is; the two sides of a cut seam look a little inside their own lip).
+    contours: with "nicp", the lid and lip contours are also held, matched by arc length
+    (correspond.contours).  Off by default: on four held-out remeshes the transfer's mean
+    relative error was 0.1033 without them, 0.1035 with the eyes' rims, 0.1043 with the outer
+    lips, 0.1073 with the inner lips, 0.1068 with all four (the landmarks and closest points
+    already place the rims; a scan's ragged holes pull the source's rims off their place).
     """
     if method not in METHODS:
         raise MimicaError(f"unknown correspondence method {method!r}; use one of {', '.join(METHODS)}")
@@ -112,8 +120,8 @@ def correspond(source: Mesh, source_lm: np.ndarray, target: Mesh, target_lm: np.
         raise MimicaError("landmarks: at least 6 landmarks present on both faces are needed "
                           "for a dense correspondence")
     if method == "nicp":
-        return _registered(source, source_lm[both], target, target_lm[both],
-                           target.vertices if lookup is None else np.asarray(lookup, float))
+        return _registered(source, source_lm, target, target_lm,
+                           target.vertices if lookup is None else np.asarray(lookup, float), contours)
     if lookup is not None:
         target = target.with_vertices(np.asarray(lookup, float))
     cyl = face_cylinder(np.where(both[:, None], source_lm, np.nan))
@@ -177,10 +185,17 @@ def correspond(source: Mesh, source_lm: np.ndarray, target: Mesh, target_lm: np.
     return Correspondence(triangle, bary, source.n_vertices)
 
 
-def _registered(source: Mesh, source_lm, target: Mesh, target_lm, lookup) -> Correspondence:
+def _registered(source: Mesh, source_lm, target: Mesh, target_lm, lookup, contours=False) -> Correspondence:
     """The correspondence through a non-rigid registration of the source onto the target."""
-    tri, bary, _, _ = TriangleLocator(source.vertices, source.triangles).closest(source_lm)
-    reg = register(source, rows_of(source, tri, bary), target, target_lm)
+    both = np.isfinite(source_lm).all(1) & np.isfinite(target_lm).all(1)
+    tri, bary, _, _ = TriangleLocator(source.vertices, source.triangles).closest(source_lm[both])
+    rows, pts, names = rows_of(source, tri, bary), target_lm[both], []
+    if contours:
+        from .contours import matched_contours
+        c_rows, c_pts, names = matched_contours(source, source_lm, target, target_lm)
+        k = np.sqrt(CONTOUR_WEIGHT)
+        rows, pts = sp.vstack([rows, k * c_rows]).tocsr(), np.vstack([pts, k * c_pts])
+    reg = register(source, rows, target, pts)
     tri, bary, _, dist = TriangleLocator(reg.vertices, source.triangles).closest(lookup)
     h = median_edge(target)
     beyond = on_boundary(source, tri, bary) & (dist > h)
@@ -190,4 +205,4 @@ def _registered(source: Mesh, source_lm, target: Mesh, target_lm, lookup) -> Cor
     confidence = np.exp(-0.5 * (dist / h) ** 2) * facing
     confidence[beyond] = 0.0
     tri = np.where(beyond, -1, tri)
-    return Correspondence(tri, np.where(beyond[:, None], 0.0, bary), source.n_vertices, confidence)
+    return Correspondence(tri, np.where(beyond[:, None], 0.0, bary), source.n_vertices, confidence, names)
