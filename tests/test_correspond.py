@@ -176,3 +176,34 @@ def test_contours_pair_landmark_to_landmark(head_model, scans):
     carried = np.einsum("ij,ijk->ik", bary, rs.carry(S.vertices[FACE])[T.triangles[tri]])
     d = np.linalg.norm(carried - on_source, axis=1)
     assert np.median(d) < 2 * median_edge(T), np.median(d)
+
+
+def test_cli_says_how_the_target_was_matched(head_model, scans, tmp_path, capsys):
+    """transfer prints the correspondence's method, its matched and low-confidence shares and
+    the paired lids; --match cylinder takes Song's map; --show draws the confidence map."""
+    from mimica.cli import main
+    from mimica.image import read_image
+    from mimica.landmarks import write_landmarks
+    from mimica.mesh import read_mesh, write_mesh
+    tv, rs, lt = scans[0]
+    write_mesh(tmp_path / "S.obj", head_model.mesh)
+    write_mesh(tmp_path / "smile.obj", head_model.mesh.with_vertices(head_model.shape("mouthSmile_L")))
+    write_mesh(tmp_path / "T.obj", rs.mesh)
+    write_landmarks(tmp_path / "T.json", lt.positions(rs.mesh))
+    args = ["transfer", str(tmp_path / "S.obj"), str(tmp_path / "smile.obj"), "--target", str(tmp_path / "T.obj"),
+            "--target-landmarks", str(tmp_path / "T.json")]
+    out = {}
+    for match in ("nicp", "cylinder"):
+        capsys.readouterr()
+        assert main(args + ["--out", str(tmp_path / match), "--match", match, "--show", str(tmp_path / f"{match}.png")]) == 0
+        said = [ln for ln in capsys.readouterr().err.splitlines() if "correspondence (" in ln]
+        assert len(said) == 1 and f"correspondence ({match})" in said[0], said
+        assert ("low confidence" in said[0]) == (match == "nicp")
+        assert "lid rims paired by arc length: right and left eye" in said[0]
+        out[match] = read_mesh(tmp_path / match / "smile.obj").vertices
+        picture = read_image(tmp_path / f"{match}.png")
+        assert picture.shape[1] > 1200                        # two views, the confidence map, the legend
+    assert not np.allclose(out["nicp"], out["cylinder"])
+    with pytest.raises(SystemExit) as bad:                     # argparse: one line, exit 2
+        main(args + ["--out", str(tmp_path / "bad"), "--match", "nearest"])
+    assert bad.value.code == 2 and not (tmp_path / "bad").exists()

@@ -58,6 +58,8 @@ def _correspondence_line(xfer) -> str:
     if cor.confidence is not None:
         low = cor.matched & (cor.confidence < cor.LOW)
         line += f", {100 * low.mean():.1f}% with low confidence (< {cor.LOW}; --show draws where)"
+    if xfer.paired_eyes:
+        line += f"; lid rims paired by arc length: {' and '.join(xfer.paired_eyes)} eye"
     return line
 
 

@@ -178,6 +178,12 @@ class ExpressionTransfer:
         out = self._to_user(out)
         return out[0] if single else out
 
+    @property
+    def paired_eyes(self) -> list[str]:
+        """The target's eyes whose lid rims the contacts pair ("right", "left")."""
+        inner = self._skin if self._parts is not None else self
+        return [] if inner._lids is None else list(inner._lids.eyes)
+
     def vertex_report(self) -> dict:
         """Per vertex of `output_mesh`, for pictures and reports: 'role' (index into
         correspond.parts.ROLES; all skin without parts), 'matched' (skin with a source partner),
