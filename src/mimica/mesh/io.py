@@ -285,6 +285,14 @@ def _gltf_accessor(g, index) -> np.ndarray:
         np.ascontiguousarray(rows).view(dt).reshape(acc.count, nc)
 
 
+def _unit_normals(mesh: Mesh, vertices: np.ndarray) -> np.ndarray:
+    """Unit vertex normals; a vertex no triangle uses (no normal) gets +z, as glTF wants unit
+    normals on every vertex."""
+    n = mesh.vertex_normals(vertices)
+    n[np.linalg.norm(n, axis=1) < 0.5] = (0.0, 0.0, 1.0)
+    return n
+
+
 def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None) -> None:
     """Write a triangulated mesh, optionally with named morph targets {name: (n,3) positions}.
 
@@ -308,14 +316,22 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None)
         return len(accs) - 1
 
     ipos = add(v, gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT, True)
+    # smooth normals, so that viewers shade the surface smooth and a DCC's round trip keeps the
+    # vertices whole (without them three.js and Blender shade flat, and Blender's re-export
+    # splits every vertex); morph targets carry the change of the normal (glTF: deltas)
+    n0 = _unit_normals(mesh, mesh.vertices)
+    inrm = add(n0.astype(np.float32), gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT)
     iidx = add(t.reshape(-1), gl.ELEMENT_ARRAY_BUFFER, gl.SCALAR, gl.UNSIGNED_INT)
-    prim = gl.Primitive(attributes=gl.Attributes(POSITION=ipos), indices=iidx)
+    prim = gl.Primitive(attributes=gl.Attributes(POSITION=ipos, NORMAL=inrm), indices=iidx)
     names = []
     if morph_targets:
         prim.targets = []
         for name, pos in morph_targets.items():
-            prim.targets.append({"POSITION": add((np.asarray(pos) - mesh.vertices).astype(np.float32),
-                                                 gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT, True)})
+            pos = np.asarray(pos, dtype=np.float64)
+            prim.targets.append({"POSITION": add((pos - mesh.vertices).astype(np.float32),
+                                                 gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT, True),
+                                 "NORMAL": add((_unit_normals(mesh, pos) - n0).astype(np.float32),
+                                               gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT)})
             names.append(name)
     gmesh = gl.Mesh(primitives=[prim])
     if names:
