@@ -34,6 +34,17 @@ def _accessor(g, i):
     return _gltf_accessor(g, i)
 
 
+def _vertex_of(g) -> np.ndarray:
+    """The mesh vertex of each of the file's vertices (the uv seams split)."""
+    from mimica.mesh.io import VERTEX_MAP, _gltf_buffer
+    prim = g.meshes[0].primitives[0]
+    n = g.accessors[prim.attributes.POSITION].count
+    if not (isinstance(prim.extras, dict) and VERTEX_MAP in prim.extras):
+        return np.arange(n)
+    view = g.bufferViews[prim.extras[VERTEX_MAP]]
+    return np.frombuffer(_gltf_buffer(g, view.buffer), np.uint32, n, view.byteOffset or 0).astype(int)
+
+
 @pytest.fixture(scope="module")
 def written(head_model, tmp_path_factory):
     """One file of each kind: mesh (.glb, .gltf; quads triangulated; a vertex no face uses),
@@ -71,9 +82,31 @@ def test_normals_are_smooth_and_targets_carry_their_change(written, head_model):
     n0 = _accessor(g, prim.attributes.NORMAL)
     np.testing.assert_allclose(np.linalg.norm(n0, axis=1), 1, atol=1e-6)
     m = head_model.mesh
+    v = _vertex_of(g)
     base = head_model.shape("mouthSmile_L")                       # export's rest: the first frame
-    np.testing.assert_allclose(n0, m.vertex_normals(base), atol=1e-6)
+    np.testing.assert_allclose(n0, m.vertex_normals(base)[v], atol=1e-6)
     shape = head_model.shape("jawOpen")
     dn = _accessor(g, prim.targets[1]["NORMAL"])
-    np.testing.assert_allclose(n0 + dn, m.vertex_normals(shape), atol=1e-5)
-    np.testing.assert_allclose(_accessor(g, prim.targets[1]["POSITION"]), shape - base, atol=1e-5)
+    np.testing.assert_allclose(n0 + dn, m.vertex_normals(shape)[v], atol=1e-5)
+    np.testing.assert_allclose(_accessor(g, prim.targets[1]["POSITION"]), (shape - base)[v], atol=1e-5)
+
+
+def test_uv_seams_split_and_read_back_whole(written, head_model):
+    """TEXCOORD_0 from the mesh's uv: a vertex on a uv seam is written once per uv it has, and
+    mimica reads the file back onto the mesh's own vertices, in order, with each corner's uv."""
+    import pygltflib as gl
+    from mimica.mesh import read_mesh
+    m = head_model.mesh
+    g = gl.GLTF2().load(str(written / "head.glb"))
+    prim = g.meshes[0].primitives[0]
+    assert prim.attributes.TEXCOORD_0 is not None
+    n_file = g.accessors[prim.attributes.POSITION].count
+    assert n_file > m.n_vertices                                    # the seams, split
+    for name in ("head.glb", "head.gltf"):
+        back = read_mesh(written / name)
+        assert back.n_vertices == m.n_vertices
+        np.testing.assert_allclose(back.vertices, m.vertices, atol=1e-5 * np.ptp(m.vertices))
+        np.testing.assert_array_equal(back.face_indices, m.triangles.reshape(-1))
+        np.testing.assert_allclose(back.uv[back.face_uv_indices], m.uv[m.uv_triangles.reshape(-1)], atol=1e-6)
+    arkit = read_mesh(written / "arkit.glb")                        # the head's uv kept through blendshapes
+    assert arkit.uv is not None

@@ -255,14 +255,28 @@ def _read_gltf(path: Path) -> Mesh:
         idx = _gltf_accessor(g, prim.indices).reshape(-1, 3) if prim.indices is not None else \
             np.arange(len(pos)).reshape(-1, 3)
         uv = _gltf_accessor(g, prim.attributes.TEXCOORD_0) if prim.attributes.TEXCOORD_0 is not None else None
+        v_of = None
+        if isinstance(prim.extras, dict) and VERTEX_MAP in prim.extras:
+            view = g.bufferViews[int(prim.extras[VERTEX_MAP])]
+            v_of = np.frombuffer(_gltf_buffer(g, view.buffer), dtype=np.uint32, count=len(pos),
+                                 offset=view.byteOffset or 0).astype(np.int64)
     except MimicaError:
         raise
     except Exception as e:
         raise MimicaError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
-    mesh = Mesh.from_faces(pos.astype(np.float64), idx.astype(np.int64))
+    idx = idx.astype(np.int64)
+    if v_of is None:
+        mesh = Mesh.from_faces(pos.astype(np.float64), idx)
+    else:                                   # back to the mesh's own vertices (a uv seam split)
+        n = int(v_of.max()) + 1 if len(v_of) else 0
+        if len(v_of) != len(pos) or (idx >= len(v_of)).any():
+            raise MimicaError(f"{path}: its vertex map does not match its vertices")
+        verts = np.zeros((n, 3))
+        verts[v_of[::-1]] = pos[::-1]               # each mesh vertex from its first file vertex
+        mesh = Mesh.from_faces(verts, v_of[idx])
     if uv is not None:
         mesh.uv = uv.astype(np.float64) * [1, -1] + [0, 1]
-        mesh.face_uv_indices = mesh.face_indices.copy()
+        mesh.face_uv_indices = idx.reshape(-1).copy()
     return mesh
 
 
@@ -270,11 +284,15 @@ _COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 51
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 
 
+def _gltf_buffer(g, i) -> bytes:
+    """The bytes of buffer i (the GLB's own chunk, or a data URI)."""
+    return g.binary_blob() if g.buffers[i].uri is None else g.get_data_from_buffer_uri(g.buffers[i].uri)
+
+
 def _gltf_accessor(g, index) -> np.ndarray:
     acc = g.accessors[index]
     view = g.bufferViews[acc.bufferView]
-    data = g.binary_blob() if g.buffers[view.buffer].uri is None else g.get_data_from_buffer_uri(
-        g.buffers[view.buffer].uri)
+    data = _gltf_buffer(g, view.buffer)
     dt = np.dtype(_COMPONENT[acc.componentType])
     nc = _NCOMP[acc.type]
     start = (view.byteOffset or 0) + (acc.byteOffset or 0)
@@ -283,6 +301,23 @@ def _gltf_accessor(g, index) -> np.ndarray:
     rows = np.lib.stride_tricks.as_strided(raw, shape=(acc.count, dt.itemsize * nc), strides=(stride, 1))
     return np.ascontiguousarray(rows).view(dt).reshape(acc.count, nc).squeeze(-1) if nc == 1 else \
         np.ascontiguousarray(rows).view(dt).reshape(acc.count, nc)
+
+
+VERTEX_MAP = "mimica_vertex_of"     # primitive extras: buffer view of uint32, file vertex -> mesh vertex
+
+
+def _gltf_vertices(mesh: Mesh):
+    """(mesh vertex of each file vertex, uv index of each (-1: none) or None, file triangles):
+    one file vertex per (vertex, uv) pair the triangles use, then the vertices no triangle uses."""
+    tri = mesh.triangles
+    uvt = mesh.uv_triangles
+    if uvt is None:
+        return np.arange(mesh.n_vertices), None, tri
+    pairs, inv = np.unique(np.stack([tri.reshape(-1), uvt.reshape(-1)], 1), axis=0, return_inverse=True)
+    unused = np.setdiff1d(np.arange(mesh.n_vertices), pairs[:, 0])
+    v_of = np.r_[pairs[:, 0], unused]
+    uv_of = np.r_[pairs[:, 1], np.full(len(unused), -1)]
+    return v_of, uv_of, inv.reshape(-1, 3)
 
 
 def _unit_normals(mesh: Mesh, vertices: np.ndarray) -> np.ndarray:
@@ -300,8 +335,11 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None)
     this rate (weights interpolated linearly between frames), for frame sequences.
     """
     import pygltflib as gl
-    v = mesh.vertices.astype(np.float32)
-    t = mesh.triangles.astype(np.uint32)
+    # glTF keeps one uv per vertex: a vertex on a uv seam is written once per uv it has, and the
+    # map from the file's vertices back to the mesh's is kept (VERTEX_MAP) for mimica's reader
+    v_of, uv_of, t = _gltf_vertices(mesh)
+    v = mesh.vertices[v_of].astype(np.float32)
+    t = t.astype(np.uint32)
     blobs, views, accs = [], [], []
 
     def add(arr, target, acc_type, comp, minmax=False):
@@ -320,17 +358,25 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None)
     # vertices whole (without them three.js and Blender shade flat, and Blender's re-export
     # splits every vertex); morph targets carry the change of the normal (glTF: deltas)
     n0 = _unit_normals(mesh, mesh.vertices)
-    inrm = add(n0.astype(np.float32), gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT)
+    inrm = add(n0[v_of].astype(np.float32), gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT)
     iidx = add(t.reshape(-1), gl.ELEMENT_ARRAY_BUFFER, gl.SCALAR, gl.UNSIGNED_INT)
-    prim = gl.Primitive(attributes=gl.Attributes(POSITION=ipos, NORMAL=inrm), indices=iidx)
+    attrs = gl.Attributes(POSITION=ipos, NORMAL=inrm)
+    if uv_of is not None:
+        tex = np.where(uv_of[:, None] >= 0, mesh.uv[np.maximum(uv_of, 0)], 0.0) * [1, -1] + [0, 1]
+        attrs.TEXCOORD_0 = add(tex.astype(np.float32), gl.ARRAY_BUFFER, gl.VEC2, gl.FLOAT)
+    prim = gl.Primitive(attributes=attrs, indices=iidx)
+    if len(v_of) != mesh.n_vertices or (v_of != np.arange(len(v_of))).any():
+        add(v_of.astype(np.uint32), None, gl.SCALAR, gl.UNSIGNED_INT)
+        accs.pop()                                  # the map is a buffer view, not an accessor
+        prim.extras = {VERTEX_MAP: len(views) - 1}
     names = []
     if morph_targets:
         prim.targets = []
         for name, pos in morph_targets.items():
             pos = np.asarray(pos, dtype=np.float64)
-            prim.targets.append({"POSITION": add((pos - mesh.vertices).astype(np.float32),
+            prim.targets.append({"POSITION": add((pos - mesh.vertices)[v_of].astype(np.float32),
                                                  gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT, True),
-                                 "NORMAL": add((_unit_normals(mesh, pos) - n0).astype(np.float32),
+                                 "NORMAL": add((_unit_normals(mesh, pos) - n0)[v_of].astype(np.float32),
                                                gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT)})
             names.append(name)
     gmesh = gl.Mesh(primitives=[prim])
