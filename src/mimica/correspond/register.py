@@ -15,7 +15,7 @@ transforms (X_i, 12 unknowns).  The faces are already aligned (a similarity fit 
 landmarks), the stiffness term is the same unit-weight edge (node-arc) term, and x, y, z then
 share one matrix: one factorization of an n x n system per step instead of 4n x 4n, the
 symbolic analysis reused (CHOLMOD).  Measured on bench/transfer.py's remeshed target: the
-transfer's relative error 0.132 (cylinder map) -> 0.087 with this registration (0.090 with the
+transfer's relative error 0.132 (cylinder map) -> 0.092 with this registration (0.090 with the
 exact correspondence the remesh was made with); cotangent weights instead of unit ones: 0.236.
 """
 

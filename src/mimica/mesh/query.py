@@ -59,10 +59,11 @@ class TriangleLocator:
     """Exact closest point on a triangle mesh, for many query points.
 
     With libigl installed (a dependency), its AABB tree answers (point_mesh_squared_distance);
-    without it (or with use_igl=False), candidates come from k-d trees over triangle centroids, one tree per band of triangle
-    sizes (a few large triangles, e.g. at the back of a head, would otherwise make every
-    query unsure); a point whose k-th candidate could still hide a closer triangle is
-    queried again with twice the candidates, vectorized, until none can.
+    without it (or with use_igl=False), candidates come from k-d trees over triangle
+    centroids, one tree per band of triangle sizes (a few large triangles, e.g. at the back of
+    a head, would otherwise make every query unsure); a point whose k-th candidate could still
+    hide a closer triangle is queried again with twice the candidates, vectorized, until none
+    can.
     """
 
     def __init__(self, vertices, triangles, use_igl: bool = True):
