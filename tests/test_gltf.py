@@ -88,7 +88,7 @@ def test_normals_are_smooth_and_targets_carry_their_change(written, head_model):
     shape = head_model.shape("jawOpen")
     dn = _accessor(g, prim.targets[1]["NORMAL"])
     np.testing.assert_allclose(n0 + dn, m.vertex_normals(shape)[v], atol=1e-5)
-    np.testing.assert_allclose(_accessor(g, prim.targets[1]["POSITION"]), (shape - base)[v], atol=1e-5)
+    np.testing.assert_allclose(_accessor(g, prim.targets[1]["POSITION"]), 0.01 * (shape - base)[v], atol=1e-7)  # m
 
 
 def test_uv_seams_split_and_read_back_whole(written, head_model):
@@ -110,3 +110,26 @@ def test_uv_seams_split_and_read_back_whole(written, head_model):
         np.testing.assert_allclose(back.uv[back.face_uv_indices], m.uv[m.uv_triangles.reshape(-1)], atol=1e-6)
     arkit = read_mesh(written / "arkit.glb")                        # the head's uv kept through blendshapes
     assert arkit.uv is not None
+
+
+def test_files_are_in_metres(written, head_model, tmp_path):
+    """glTF is in metres: ICT-FaceKit (centimetres, 33 units tall) is written 0.33 m tall with
+    its unit kept, and read back in centimetres; --units m writes the numbers as they are."""
+    import pygltflib as gl
+    from mimica.errors import MimicaError
+    from mimica.mesh import read_mesh
+    m = head_model.mesh
+    g = gl.GLTF2().load(str(written / "head.glb"))
+    prim = g.meshes[0].primitives[0]
+    acc = g.accessors[prim.attributes.POSITION]
+    height = acc.max[1] - acc.min[1]
+    assert prim.extras["mimica_units"] == "cm"
+    assert abs(height - 0.01 * np.ptp(m.vertices[:, 1])) < 1e-4 and 0.2 < height < 0.5
+    write_mesh(tmp_path / "raw.glb", m, units="m")
+    raw = gl.GLTF2().load(str(tmp_path / "raw.glb"))
+    acc = raw.accessors[raw.meshes[0].primitives[0].attributes.POSITION]
+    assert abs((acc.max[1] - acc.min[1]) - np.ptp(m.vertices[:, 1])) < 1e-3
+    np.testing.assert_allclose(read_mesh(tmp_path / "raw.glb").vertices, m.vertices, atol=1e-5 * np.ptp(m.vertices))
+    with pytest.raises(MimicaError, match="units 'inch'"):
+        write_mesh(tmp_path / "bad.glb", m, units="inch")
+    assert not (tmp_path / "bad.glb").exists()

@@ -45,8 +45,17 @@ def _landmarks(mesh, path, flag, what):
         raise
 
 
+UNITS_HELP = ("the unit of the input's coordinates; glTF files are in metres (auto: a head up to 3 units "
+              "tall is in metres, up to 100 in cm, taller in mm)")
 MATCH_HELP = ("across topologies, how target vertices find their source partners: nicp, a non-rigid "
               "registration of the source onto the target (default); cylinder, Song et al.'s cylinder map")
+
+
+def _units_line(mesh, unit: str, asked: str) -> str:
+    """'units: cm (the head is 33.4 units tall; --units to say otherwise), written in metres'."""
+    how = (f"the head is {float(np.ptp(mesh.vertices[:, 1])):.3g} units tall; --units to say otherwise"
+           if asked == "auto" else "as --units says")
+    return f"units: {unit} ({how}), written in metres as glTF wants"
 
 
 def _correspondence_line(xfer) -> str:
@@ -637,8 +646,10 @@ def cmd_export(a):
         if base.n_vertices != mesh.n_vertices:
             raise MimicaError(f"{a.rest}: not the sequence's topology")
         with atomic_path(out) as tmp:
-            write_glb(tmp, base, {p.stem: f for p, f in zip(paths, frames)}, binary=suf == ".glb", fps=a.fps)
-        _say(f"{out}: {len(frames)} frames as morph targets, one animation at {a.fps:g} fps")
+            unit = write_glb(tmp, base, {p.stem: f for p, f in zip(paths, frames)}, binary=suf == ".glb", fps=a.fps,
+                             units=a.units)
+        _say(f"{out}: {len(frames)} frames as morph targets, one animation at {a.fps:g} fps; "
+             + _units_line(base, unit, a.units))
         return 0
     if suf:
         raise MimicaError(f"{out}: export to .glb/.gltf, or to a folder (with --format obj|ply)")
@@ -667,7 +678,9 @@ def cmd_blendshapes(a):
         _say(line)
     _warn_sealed_eyes(head, shapes.landmarks, a.head)
     with atomic_path(out) as tmp:
-        write_glb(tmp, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb")
+        unit = write_glb(tmp, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb",
+                         units=a.units)
+    _say(_units_line(shapes.mesh, unit, a.units))
     if a.show:
         from .render import save_png
         from .render.diagnose import transfer_picture
@@ -871,6 +884,7 @@ def build_parser():
     ex.add_argument("--rest", help="the rest mesh the morph targets are relative to (default: the first frame)")
     ex.add_argument("--fps", type=float, default=30.0)
     ex.add_argument("--format", default="obj", help="obj or ply, for a folder")
+    ex.add_argument("--units", choices=["auto", "cm", "mm", "m"], default="auto", help=UNITS_HELP)
     ex.set_defaults(func=cmd_export)
 
     bs = sub.add_parser("blendshapes", help="the 52 ARKit blendshapes on any head mesh, as one GLB")
@@ -883,6 +897,7 @@ def build_parser():
                     help="auto: sealed lips are cut apart so jawOpen opens the mouth (the cut's vertices "
                          "come after the head's own)")
     bs.add_argument("--out", required=True, help="head_arkit.glb")
+    bs.add_argument("--units", choices=["auto", "cm", "mm", "m"], default="auto", help=UNITS_HELP)
     bs.set_defaults(func=cmd_blendshapes)
 
     vw = sub.add_parser("view", help="a live viewer in the browser: muscles, facial actions, age, presets, "

@@ -256,7 +256,10 @@ def _read_gltf(path: Path) -> Mesh:
             np.arange(len(pos)).reshape(-1, 3)
         uv = _gltf_accessor(g, prim.attributes.TEXCOORD_0) if prim.attributes.TEXCOORD_0 is not None else None
         v_of = None
-        if isinstance(prim.extras, dict) and VERTEX_MAP in prim.extras:
+        extras = prim.extras if isinstance(prim.extras, dict) else {}
+        if UNITS.get(extras.get(UNITS_KEY)):                 # back to the mesh's own unit
+            pos = pos.astype(np.float64) / UNITS[extras[UNITS_KEY]]
+        if VERTEX_MAP in extras:
             view = g.bufferViews[int(prim.extras[VERTEX_MAP])]
             v_of = np.frombuffer(_gltf_buffer(g, view.buffer), dtype=np.uint32, count=len(pos),
                                  offset=view.byteOffset or 0).astype(np.int64)
@@ -304,6 +307,20 @@ def _gltf_accessor(g, index) -> np.ndarray:
 
 
 VERTEX_MAP = "mimica_vertex_of"     # primitive extras: buffer view of uint32, file vertex -> mesh vertex
+UNITS_KEY = "mimica_units"          # primitive extras: the mesh's own unit (the file is in metres)
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+
+def glb_units(mesh: Mesh, units: str = "auto") -> tuple[str, float]:
+    """(the mesh's unit, metres per unit).  auto: a head up to 3 units tall is in metres, up to
+    100 in centimetres (ICT-FaceKit: 33), taller in millimetres."""
+    if units != "auto":
+        if units not in UNITS:
+            raise MimicaError(f"units {units!r}: use one of auto, {', '.join(UNITS)}")
+        return units, UNITS[units]
+    height = float(np.ptp(mesh.vertices[:, 1])) if mesh.n_vertices else 0.0
+    name = "m" if height <= 3 else "cm" if height <= 100 else "mm"
+    return name, UNITS[name]
 
 
 def _gltf_vertices(mesh: Mesh):
@@ -328,17 +345,21 @@ def _unit_normals(mesh: Mesh, vertices: np.ndarray) -> np.ndarray:
     return n
 
 
-def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None) -> None:
+def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None, units: str = "auto") -> str:
     """Write a triangulated mesh, optionally with named morph targets {name: (n,3) positions}.
 
     fps: also write an animation that plays the morph targets in order, one per frame at
     this rate (weights interpolated linearly between frames), for frame sequences.
+    units: the mesh's unit ("m", "cm", "mm", or "auto": glb_units); glTF is in metres, so the
+    positions are scaled to metres and the unit is kept in the primitive's extras, which
+    mimica's reader undoes.  Returns the unit used.
     """
     import pygltflib as gl
     # glTF keeps one uv per vertex: a vertex on a uv seam is written once per uv it has, and the
     # map from the file's vertices back to the mesh's is kept (VERTEX_MAP) for mimica's reader
     v_of, uv_of, t = _gltf_vertices(mesh)
-    v = mesh.vertices[v_of].astype(np.float32)
+    unit, k = glb_units(mesh, units)
+    v = (k * mesh.vertices[v_of]).astype(np.float32)
     t = t.astype(np.uint32)
     blobs, views, accs = [], [], []
 
@@ -364,17 +385,17 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None)
     if uv_of is not None:
         tex = np.where(uv_of[:, None] >= 0, mesh.uv[np.maximum(uv_of, 0)], 0.0) * [1, -1] + [0, 1]
         attrs.TEXCOORD_0 = add(tex.astype(np.float32), gl.ARRAY_BUFFER, gl.VEC2, gl.FLOAT)
-    prim = gl.Primitive(attributes=attrs, indices=iidx)
+    prim = gl.Primitive(attributes=attrs, indices=iidx, extras={UNITS_KEY: unit})
     if len(v_of) != mesh.n_vertices or (v_of != np.arange(len(v_of))).any():
         add(v_of.astype(np.uint32), None, gl.SCALAR, gl.UNSIGNED_INT)
         accs.pop()                                  # the map is a buffer view, not an accessor
-        prim.extras = {VERTEX_MAP: len(views) - 1}
+        prim.extras[VERTEX_MAP] = len(views) - 1
     names = []
     if morph_targets:
         prim.targets = []
         for name, pos in morph_targets.items():
             pos = np.asarray(pos, dtype=np.float64)
-            prim.targets.append({"POSITION": add((pos - mesh.vertices)[v_of].astype(np.float32),
+            prim.targets.append({"POSITION": add((k * (pos - mesh.vertices)[v_of]).astype(np.float32),
                                                  gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT, True),
                                  "NORMAL": add((_unit_normals(mesh, pos) - n0)[v_of].astype(np.float32),
                                                gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT)})
@@ -404,6 +425,7 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None)
         g.buffers[0].uri = "data:application/octet-stream;base64," + __import__("base64").b64encode(blob).decode()
         g._glb_data = None
         g.save_json(str(path))
+    return unit
 
 
 # ------------------------------------------------------------------------ API
@@ -429,8 +451,8 @@ def read_mesh(path, validate_mesh=True, allow_degenerate=False) -> Mesh:
     return mesh
 
 
-def write_mesh(path, mesh: Mesh) -> Path:
-    """Write atomically; the format follows the extension."""
+def write_mesh(path, mesh: Mesh, units: str = "auto") -> Path:
+    """Write atomically; the format follows the extension (units: glTF only, see write_glb)."""
     path = Path(path)
     s = _suffix(path)
     with atomic_path(path) as tmp:
@@ -439,5 +461,5 @@ def write_mesh(path, mesh: Mesh) -> Path:
         elif s == ".ply":
             _write_ply(mesh, tmp)
         else:
-            write_glb(tmp, mesh, binary=(s == ".glb"))
+            write_glb(tmp, mesh, binary=(s == ".glb"), units=units)
     return path
