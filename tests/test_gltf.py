@@ -46,7 +46,7 @@ def _vertex_of(g) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def written(head_model, tmp_path_factory):
+def written(head_model, full_model, tmp_path_factory):
     """One file of each kind: mesh (.glb, .gltf; quads triangulated; a vertex no face uses),
     morph targets (blendshapes), morph targets with an animation (export, simulate)."""
     from mimica.cli import main
@@ -56,6 +56,7 @@ def written(head_model, tmp_path_factory):
     write_mesh(d / "head.gltf", m)
     loose = Mesh(np.vstack([m.vertices, m.vertices[:1] + 100.0]), m.face_indices, m.face_starts)
     write_glb(d / "loose.glb", loose)
+    write_mesh(d / "full.glb", full_model.mesh)                     # 12 materials: teeth, eyes, lashes ...
     frames = d / "frames"
     frames.mkdir()
     for i, name in enumerate(("mouthSmile_L", "jawOpen", "eyeBlink_R")):
@@ -69,7 +70,7 @@ def written(head_model, tmp_path_factory):
 
 def test_every_kind_passes_the_validator(written):
     files = sorted(p for p in written.iterdir() if p.suffix in (".glb", ".gltf"))
-    assert len(files) == 6
+    assert len(files) == 7
     for r in validate(files):
         assert r["errors"] == 0 and r["warnings"] == 0, (r["path"], r["messages"])
         assert r["info"]["maxAttributes"] >= 2                       # POSITION and NORMAL
@@ -133,3 +134,21 @@ def test_files_are_in_metres(written, head_model, tmp_path):
     with pytest.raises(MimicaError, match="units 'inch'"):
         write_mesh(tmp_path / "bad.glb", m, units="inch")
     assert not (tmp_path / "bad.glb").exists()
+
+
+def test_one_primitive_and_material_per_group(written, full_model):
+    """ICT-FaceKit's 12 materials (face, teeth, sclera ...) become 12 primitives on one set of
+    vertices, each with its material; read back, every triangle is in its own group again."""
+    import pygltflib as gl
+    from mimica.mesh import read_mesh
+    m = full_model.mesh
+    g = gl.GLTF2().load(str(written / "full.glb"))
+    assert [mat.name for mat in g.materials] == list(m.group_names)
+    prims = g.meshes[0].primitives
+    assert len(prims) == 12 and len({p.attributes.POSITION for p in prims}) == 1
+    assert [p.material for p in prims] == list(range(12))
+    back = read_mesh(written / "full.glb", allow_degenerate=True)
+    assert back.group_names == m.group_names and back.n_vertices == m.n_vertices
+    def tagged(mesh):
+        return {tuple(sorted(t)) + (mesh.group_names[k],) for t, k in zip(mesh.triangles, mesh.groups[mesh.tri_face])}
+    assert tagged(back) == tagged(m)

@@ -250,10 +250,18 @@ def _read_gltf(path: Path) -> Mesh:
     from pygltflib import GLTF2
     try:
         g = GLTF2().load(str(path))
-        prim = g.meshes[0].primitives[0]
+        prims = g.meshes[0].primitives
+        prim = prims[0]
         pos = _gltf_accessor(g, prim.attributes.POSITION)
-        idx = _gltf_accessor(g, prim.indices).reshape(-1, 3) if prim.indices is not None else \
-            np.arange(len(pos)).reshape(-1, 3)
+        # the primitives mimica writes (one per material) share one set of vertices; others
+        # are read as the first primitive only
+        same = [p for p in prims if p.attributes.POSITION == prim.attributes.POSITION and p.indices is not None]
+        idx = np.vstack([_gltf_accessor(g, p.indices).reshape(-1, 3) for p in same]) if prim.indices is not None \
+            else np.arange(len(pos)).reshape(-1, 3)
+        face_group = np.repeat(np.arange(len(same)), [g.accessors[p.indices].count // 3 for p in same]) \
+            if len(same) > 1 else None
+        group_names = tuple((g.materials[p.material].name if p.material is not None and g.materials[p.material].name
+                             else f"part{i}") for i, p in enumerate(same)) if face_group is not None else ()
         uv = _gltf_accessor(g, prim.attributes.TEXCOORD_0) if prim.attributes.TEXCOORD_0 is not None else None
         v_of = None
         extras = prim.extras if isinstance(prim.extras, dict) else {}
@@ -280,6 +288,8 @@ def _read_gltf(path: Path) -> Mesh:
     if uv is not None:
         mesh.uv = uv.astype(np.float64) * [1, -1] + [0, 1]
         mesh.face_uv_indices = idx.reshape(-1).copy()
+    if face_group is not None:
+        mesh.groups, mesh.group_names = face_group, group_names
     return mesh
 
 
@@ -380,16 +390,32 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
     # splits every vertex); morph targets carry the change of the normal (glTF: deltas)
     n0 = _unit_normals(mesh, mesh.vertices)
     inrm = add(n0[v_of].astype(np.float32), gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT)
-    iidx = add(t.reshape(-1), gl.ELEMENT_ARRAY_BUFFER, gl.SCALAR, gl.UNSIGNED_INT)
+    grouped = mesh.groups is not None and len(mesh.group_names) > 0
+    iidx = None if grouped else add(t.reshape(-1), gl.ELEMENT_ARRAY_BUFFER, gl.SCALAR, gl.UNSIGNED_INT)
     attrs = gl.Attributes(POSITION=ipos, NORMAL=inrm)
     if uv_of is not None:
         tex = np.where(uv_of[:, None] >= 0, mesh.uv[np.maximum(uv_of, 0)], 0.0) * [1, -1] + [0, 1]
         attrs.TEXCOORD_0 = add(tex.astype(np.float32), gl.ARRAY_BUFFER, gl.VEC2, gl.FLOAT)
-    prim = gl.Primitive(attributes=attrs, indices=iidx, extras={UNITS_KEY: unit})
+    extras = {UNITS_KEY: unit}
     if len(v_of) != mesh.n_vertices or (v_of != np.arange(len(v_of))).any():
         add(v_of.astype(np.uint32), None, gl.SCALAR, gl.UNSIGNED_INT)
         accs.pop()                                  # the map is a buffer view, not an accessor
-        prim.extras[VERTEX_MAP] = len(views) - 1
+        extras[VERTEX_MAP] = len(views) - 1
+    # one primitive and material per OBJ material / group, all on the same vertices
+    prims, materials = [], []
+    if grouped:
+        tri_group = np.asarray(mesh.groups)[mesh.tri_face]
+        for gi in np.unique(tri_group):
+            sel = t[tri_group == gi].reshape(-1)
+            materials.append(gl.Material(name=str(mesh.group_names[gi]), doubleSided=False,
+                                         pbrMetallicRoughness=gl.PbrMetallicRoughness(metallicFactor=0.0,
+                                                                                      roughnessFactor=0.6)))
+            prims.append(gl.Primitive(attributes=attrs, indices=add(sel, gl.ELEMENT_ARRAY_BUFFER, gl.SCALAR,
+                                                                    gl.UNSIGNED_INT),
+                                      material=len(materials) - 1, extras=extras))
+    else:
+        prims.append(gl.Primitive(attributes=attrs, indices=iidx, extras=extras))
+    prim = prims[0]
     names = []
     if morph_targets:
         prim.targets = []
@@ -400,7 +426,9 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
                                  "NORMAL": add((_unit_normals(mesh, pos) - n0)[v_of].astype(np.float32),
                                                gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT)})
             names.append(name)
-    gmesh = gl.Mesh(primitives=[prim])
+        for other in prims[1:]:                     # the same targets on every primitive
+            other.targets = prim.targets
+    gmesh = gl.Mesh(primitives=prims)
     if names:
         gmesh.extras = {"targetNames": names}
         gmesh.weights = [0.0] * len(names)
@@ -417,7 +445,7 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
     blob = b"".join(blobs)
     g = gl.GLTF2(scene=0, scenes=[gl.Scene(nodes=[0])], nodes=[gl.Node(mesh=0)], meshes=[gmesh],
                  accessors=accs, bufferViews=views, buffers=[gl.Buffer(byteLength=len(blob))],
-                 animations=animations)
+                 animations=animations, materials=materials)
     g.set_binary_blob(blob)
     if binary:
         g.save_binary(str(path))
