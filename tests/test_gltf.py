@@ -57,6 +57,9 @@ def written(head_model, full_model, tmp_path_factory):
     loose = Mesh(np.vstack([m.vertices, m.vertices[:1] + 100.0]), m.face_indices, m.face_starts)
     write_glb(d / "loose.glb", loose)
     write_mesh(d / "full.glb", full_model.mesh)                     # 12 materials: teeth, eyes, lashes ...
+    from mimica.mesh.io import SPARSE_TOLERANCE
+    write_glb(d / "sparse.glb", m, {"rest": m.vertices, "blink": head_model.shape("eyeBlink_R"),
+                                    "jaw": head_model.shape("jawOpen")}, sparse=SPARSE_TOLERANCE)
     frames = d / "frames"
     frames.mkdir()
     for i, name in enumerate(("mouthSmile_L", "jawOpen", "eyeBlink_R")):
@@ -70,7 +73,7 @@ def written(head_model, full_model, tmp_path_factory):
 
 def test_every_kind_passes_the_validator(written):
     files = sorted(p for p in written.iterdir() if p.suffix in (".glb", ".gltf"))
-    assert len(files) == 7
+    assert len(files) == 8
     for r in validate(files):
         assert r["errors"] == 0 and r["warnings"] == 0, (r["path"], r["messages"])
         assert r["info"]["maxAttributes"] >= 2                       # POSITION and NORMAL
@@ -88,8 +91,10 @@ def test_normals_are_smooth_and_targets_carry_their_change(written, head_model):
     np.testing.assert_allclose(n0, m.vertex_normals(base)[v], atol=1e-6)
     shape = head_model.shape("jawOpen")
     dn = _accessor(g, prim.targets[1]["NORMAL"])
-    np.testing.assert_allclose(n0 + dn, m.vertex_normals(shape)[v], atol=1e-5)
-    np.testing.assert_allclose(_accessor(g, prim.targets[1]["POSITION"]), 0.01 * (shape - base)[v], atol=1e-7)  # m
+    from mimica.mesh.io import SPARSE_NORMAL, SPARSE_TOLERANCE      # export writes sparse targets
+    np.testing.assert_allclose(n0 + dn, m.vertex_normals(shape)[v], atol=SPARSE_NORMAL + 1e-6)
+    np.testing.assert_allclose(_accessor(g, prim.targets[1]["POSITION"]), 0.01 * (shape - base)[v],  # metres
+                               atol=SPARSE_TOLERANCE * 1.001)
 
 
 def test_uv_seams_split_and_read_back_whole(written, head_model):
@@ -152,3 +157,24 @@ def test_one_primitive_and_material_per_group(written, full_model):
     def tagged(mesh):
         return {tuple(sorted(t)) + (mesh.group_names[k],) for t, k in zip(mesh.triangles, mesh.groups[mesh.tri_face])}
     assert tagged(back) == tagged(m)
+
+
+def test_sparse_targets_keep_what_moves(written, head_model):
+    """Sparse morph targets: a vertex moving less than the tolerance (0.01 mm) is left out, the
+    rest stored exactly; a target that does not move at all is still valid (one row)."""
+    import pygltflib as gl
+    from mimica.mesh.io import SPARSE_TOLERANCE
+    m = head_model.mesh
+    g = gl.GLTF2().load(str(written / "sparse.glb"))
+    prim = g.meshes[0].primitives[0]
+    v = _vertex_of(g)
+    kinds = []
+    for t, shape in zip(prim.targets, (m.vertices, head_model.shape("eyeBlink_R"), head_model.shape("jawOpen"))):
+        acc = g.accessors[t["POSITION"]]
+        kinds.append(None if acc.sparse is None else acc.sparse.count)
+        got = _accessor(g, t["POSITION"])
+        true = 0.01 * (shape - m.vertices)[v]                        # metres
+        assert np.abs(got - true).max() <= SPARSE_TOLERANCE * 1.001
+        moving = np.linalg.norm(true, axis=1) > SPARSE_TOLERANCE
+        np.testing.assert_allclose(got[moving], true[moving], atol=1e-7)
+    assert kinds[0] == 1 and kinds[1] is not None and kinds[1] < len(v) / 3, kinds

@@ -51,6 +51,13 @@ MATCH_HELP = ("across topologies, how target vertices find their source partners
               "registration of the source onto the target (default); cylinder, Song et al.'s cylinder map")
 
 
+def _sparse_line(path, info: dict, n: int) -> str:
+    """'34 of 52 morph targets sparse (moves under 0.01 mm left out), 4.2 MB'."""
+    from .mesh.io import SPARSE_TOLERANCE
+    return (f"{info['sparse']} of {n} morph targets sparse (moves under {SPARSE_TOLERANCE * 1e3:g} mm left out), "
+            f"{Path(path).stat().st_size / 1e6:.1f} MB")
+
+
 def _units_line(mesh, unit: str, asked: str) -> str:
     """'units: cm (the head is 33.4 units tall; --units to say otherwise), written in metres'."""
     how = (f"the head is {float(np.ptp(mesh.vertices[:, 1])):.3g} units tall; --units to say otherwise"
@@ -633,6 +640,7 @@ def cmd_render(a):
 
 def cmd_export(a):
     from .mesh import atomic_path, read_mesh, read_vertices, write_glb, write_mesh
+    from .mesh.io import SPARSE_TOLERANCE
     paths = _expand_frames([Path(p) for p in a.frames])
     mesh = read_mesh(paths[0])
     frames = [read_vertices(p) for p in _progress(paths, len(paths), "reading")]
@@ -646,10 +654,10 @@ def cmd_export(a):
         if base.n_vertices != mesh.n_vertices:
             raise MimicaError(f"{a.rest}: not the sequence's topology")
         with atomic_path(out) as tmp:
-            unit = write_glb(tmp, base, {p.stem: f for p, f in zip(paths, frames)}, binary=suf == ".glb", fps=a.fps,
-                             units=a.units)
+            info = write_glb(tmp, base, {p.stem: f for p, f in zip(paths, frames)}, binary=suf == ".glb", fps=a.fps,
+                             units=a.units, sparse=SPARSE_TOLERANCE)
         _say(f"{out}: {len(frames)} frames as morph targets, one animation at {a.fps:g} fps; "
-             + _units_line(base, unit, a.units))
+             + _units_line(base, info["units"], a.units) + "; " + _sparse_line(out, info, len(frames)))
         return 0
     if suf:
         raise MimicaError(f"{out}: export to .glb/.gltf, or to a folder (with --format obj|ply)")
@@ -667,6 +675,7 @@ def cmd_blendshapes(a):
     from .export import ARKIT_52, arkit_blendshapes
     from .landmarks import read_landmarks
     from .mesh import atomic_path, read_mesh, write_glb
+    from .mesh.io import SPARSE_TOLERANCE
     out = Path(a.out)
     if out.suffix.lower() not in (".glb", ".gltf"):
         raise MimicaError(f"{out}: blendshapes are written as glTF (.glb or .gltf)")
@@ -678,9 +687,9 @@ def cmd_blendshapes(a):
         _say(line)
     _warn_sealed_eyes(head, shapes.landmarks, a.head)
     with atomic_path(out) as tmp:
-        unit = write_glb(tmp, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb",
-                         units=a.units)
-    _say(_units_line(shapes.mesh, unit, a.units))
+        info = write_glb(tmp, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb",
+                         units=a.units, sparse=SPARSE_TOLERANCE)
+    _say(_units_line(shapes.mesh, info["units"], a.units) + "; " + _sparse_line(out, info, len(ARKIT_52)))
     if a.show:
         from .render import save_png
         from .render.diagnose import transfer_picture

@@ -304,6 +304,21 @@ def _gltf_buffer(g, i) -> bytes:
 
 def _gltf_accessor(g, index) -> np.ndarray:
     acc = g.accessors[index]
+    if acc.sparse is not None:                    # zeros (or its buffer view), then the listed rows
+        dt, nc = np.dtype(_COMPONENT[acc.componentType]), _NCOMP[acc.type]
+        out = np.zeros((acc.count, nc), dt) if acc.bufferView is None else \
+            _gltf_accessor_dense(g, acc).reshape(acc.count, nc).copy()
+        sp_ = acc.sparse
+        iv, vv = g.bufferViews[sp_.indices.bufferView], g.bufferViews[sp_.values.bufferView]
+        rows = np.frombuffer(_gltf_buffer(g, iv.buffer), _COMPONENT[sp_.indices.componentType], sp_.count,
+                             (iv.byteOffset or 0) + (sp_.indices.byteOffset or 0))
+        out[rows.astype(np.int64)] = np.frombuffer(_gltf_buffer(g, vv.buffer), dt, sp_.count * nc,
+                                                   (vv.byteOffset or 0) + (sp_.values.byteOffset or 0)).reshape(-1, nc)
+        return out.squeeze(-1) if nc == 1 else out
+    return _gltf_accessor_dense(g, acc)
+
+
+def _gltf_accessor_dense(g, acc) -> np.ndarray:
     view = g.bufferViews[acc.bufferView]
     data = _gltf_buffer(g, view.buffer)
     dt = np.dtype(_COMPONENT[acc.componentType])
@@ -319,6 +334,8 @@ def _gltf_accessor(g, index) -> np.ndarray:
 VERTEX_MAP = "mimica_vertex_of"     # primitive extras: buffer view of uint32, file vertex -> mesh vertex
 UNITS_KEY = "mimica_units"          # primitive extras: the mesh's own unit (the file is in metres)
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+SPARSE_TOLERANCE = 1e-5             # metres: 0.01 mm, below what a morph target's vertex counts as still
+SPARSE_NORMAL = 1e-3                # the change of a unit normal below which it counts as unturned
 
 
 def glb_units(mesh: Mesh, units: str = "auto") -> tuple[str, float]:
@@ -355,14 +372,19 @@ def _unit_normals(mesh: Mesh, vertices: np.ndarray) -> np.ndarray:
     return n
 
 
-def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None, units: str = "auto") -> str:
+def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None, units: str = "auto",
+              sparse: float | None = None) -> dict:
     """Write a triangulated mesh, optionally with named morph targets {name: (n,3) positions}.
 
     fps: also write an animation that plays the morph targets in order, one per frame at
     this rate (weights interpolated linearly between frames), for frame sequences.
     units: the mesh's unit ("m", "cm", "mm", or "auto": glb_units); glTF is in metres, so the
     positions are scaled to metres and the unit is kept in the primitive's extras, which
-    mimica's reader undoes.  Returns the unit used.
+    mimica's reader undoes.  Returns {"units": the unit used, "sparse": how many targets were
+    written sparse}.
+    sparse: morph targets as sparse accessors: a vertex that moves less than this many metres
+    (SPARSE_TOLERANCE: 0.01 mm) keeps zero, as does a normal that turns less than
+    SPARSE_NORMAL; None writes every target dense.
     """
     import pygltflib as gl
     # glTF keeps one uv per vertex: a vertex on a uv seam is written once per uv it has, and the
@@ -381,6 +403,31 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
         a = gl.Accessor(bufferView=len(views) - 1, componentType=comp, count=len(arr), type=acc_type)
         if minmax:
             a.min, a.max = np.atleast_1d(arr.min(0)).tolist(), np.atleast_1d(arr.max(0)).tolist()
+        accs.append(a)
+        return len(accs) - 1
+
+    def add_sparse(arr, keep, minmax=False):
+        """A VEC3 float accessor of len(arr) rows, zero but where `keep` (a sparse accessor);
+        dense where more than a third of the rows are kept (smaller so)."""
+        if not keep.any():                          # glTF wants one row at least
+            keep = np.r_[True, np.zeros(len(keep) - 1, bool)]
+        if keep.mean() > 1 / 3:
+            return add(np.where(keep[:, None], arr, 0).astype(np.float32), gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT, minmax)
+        rows = np.nonzero(keep)[0].astype(np.uint32)
+        vals = np.ascontiguousarray(arr[rows], dtype=np.float32)
+        add(rows, None, gl.SCALAR, gl.UNSIGNED_INT)
+        accs.pop()
+        i_rows = len(views) - 1
+        add(vals, None, gl.VEC3, gl.FLOAT)
+        accs.pop()
+        a = gl.Accessor(componentType=gl.FLOAT, count=len(arr), type=gl.VEC3,
+                        sparse=gl.Sparse(count=len(rows),
+                                         indices=gl.AccessorSparseIndices(bufferView=i_rows, componentType=gl.UNSIGNED_INT),
+                                         values=gl.AccessorSparseValues(bufferView=len(views) - 1)))
+        a.byteOffset = None                         # no buffer view of its own: zeros but the rows
+        if minmax:
+            full = np.zeros((1, 3), np.float32) if len(rows) == len(arr) else np.vstack([vals, np.zeros((1, 3))])
+            a.min, a.max = full.min(0).tolist(), full.max(0).tolist()
         accs.append(a)
         return len(accs) - 1
 
@@ -421,10 +468,16 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
         prim.targets = []
         for name, pos in morph_targets.items():
             pos = np.asarray(pos, dtype=np.float64)
-            prim.targets.append({"POSITION": add((k * (pos - mesh.vertices)[v_of]).astype(np.float32),
-                                                 gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT, True),
-                                 "NORMAL": add((_unit_normals(mesh, pos) - n0)[v_of].astype(np.float32),
-                                               gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT)})
+            dp = (k * (pos - mesh.vertices)[v_of]).astype(np.float32)
+            dn = (_unit_normals(mesh, pos) - n0)[v_of].astype(np.float32)
+            if sparse is None:
+                prim.targets.append({"POSITION": add(dp, gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT, True),
+                                     "NORMAL": add(dn, gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT)})
+            else:
+                # sparse targets: the vertices that move more than `sparse` metres, and the
+                # normals that turn by more than SPARSE_NORMAL, are stored; the rest are zero
+                prim.targets.append({"POSITION": add_sparse(dp, np.linalg.norm(dp, axis=1) > sparse, True),
+                                     "NORMAL": add_sparse(dn, np.linalg.norm(dn, axis=1) > SPARSE_NORMAL)})
             names.append(name)
         for other in prims[1:]:                     # the same targets on every primitive
             other.targets = prim.targets
@@ -453,7 +506,7 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
         g.buffers[0].uri = "data:application/octet-stream;base64," + __import__("base64").b64encode(blob).decode()
         g._glb_data = None
         g.save_json(str(path))
-    return unit
+    return {"units": unit, "sparse": sum(accs[tg["POSITION"]].sparse is not None for tg in (prim.targets or []))}
 
 
 # ------------------------------------------------------------------------ API
