@@ -103,7 +103,15 @@ def _expand_frames(items):
             files = sorted(f for f in p.iterdir() if f.suffix.lower() in MESH_SUFFIXES)
             if not files:
                 raise MimicaError(f"{p}: the folder holds no mesh files ({', '.join(MESH_SUFFIXES)})")
-            out += files
+            # a sequence is one format: files of another (a previous run's animation.glb beside
+            # its frames) are left out, and said
+            kinds = [f.suffix.lower() for f in files]
+            main = max(sorted(set(kinds)), key=kinds.count)
+            other = [f.name for f, k in zip(files, kinds) if k != main]
+            if other:
+                _say(f"{p}: its {kinds.count(main)} {main} files are the frames; left out "
+                     + (", ".join(other[:3]) + (f" and {len(other) - 3} more" if len(other) > 3 else "")))
+            out += [f for f, k in zip(files, kinds) if k == main]
         else:
             out.append(p)
     return out
@@ -618,6 +626,9 @@ def cmd_render(a):
             img = tiles[0] if len(tiles) == 1 else contact_sheet(tiles, labels=views)
         else:
             pick = np.unique(np.linspace(0, len(frames) - 1, min(len(frames), 12)).round().astype(int))
+            if len(pick) < len(frames):
+                _say(f"{src}: {len(frames)} meshes; the sheet shows {len(pick)} of them, evenly spaced "
+                     "(first and last included; an .mp4 output shows every one)")
             tiles = [render_mesh(mesh, frames[i], size=(size, size), yaw=VIEWS[views[0]][0], frame=frame,
                                  colors=colors) for i in pick]
             img = contact_sheet(tiles, labels=[names[i] for i in pick], columns=min(len(pick), 4))
