@@ -133,3 +133,24 @@ def test_welded_merges_exact_copies_only():
     assert w.triangles.tolist() == [[0, 1, 2], [1, 3, 2]]
     apart = seam.with_vertices(v + np.array([[0, 0, 0]] * 4 + [[1e-12, 0, 0]] * 2))   # a slit: not welded
     assert apart.welded()[0] is apart
+
+
+def test_ply_keeps_the_uv(head_model, tmp_path):
+    """PLY with uv (issue 17): written per face corner (MeshLab's "texcoord" lists), so the
+    vertices keep their order across uv seams; read back, every corner has its uv. A PLY with
+    per-vertex s/t (as other tools write) is read too."""
+    from plyfile import PlyData, PlyElement
+    from mimica.mesh import read_mesh, write_mesh
+    m = head_model.mesh
+    write_mesh(tmp_path / "head.ply", m)
+    back = read_mesh(tmp_path / "head.ply")
+    assert back.n_vertices == m.n_vertices
+    np.testing.assert_array_equal(back.face_indices, m.face_indices)
+    np.testing.assert_allclose(back.uv[back.face_uv_indices], m.uv[m.face_uv_indices], atol=1e-6)
+    v = np.zeros(3, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("s", "f4"), ("t", "f4")])
+    v["x"], v["y"], v["s"], v["t"] = [0, 1, 0], [0, 0, 1], [0.1, 0.9, 0.1], [0.2, 0.2, 0.8]
+    f = np.empty(1, dtype=[("vertex_indices", "O")])
+    f["vertex_indices"] = [np.array([0, 1, 2], np.int32)]
+    PlyData([PlyElement.describe(v, "vertex"), PlyElement.describe(f, "face")]).write(str(tmp_path / "st.ply"))
+    tri = read_mesh(tmp_path / "st.ply")
+    np.testing.assert_allclose(tri.uv[tri.face_uv_indices], [[0.1, 0.2], [0.9, 0.2], [0.1, 0.8]], atol=1e-6)

@@ -228,21 +228,39 @@ def _read_ply(path: Path) -> Mesh:
         else:
             name = "vertex_indices" if "vertex_indices" in fe.data.dtype.names else "vertex_index"
             faces = [np.asarray(f, dtype=np.int64) for f in fe[name]]
+        # uv: per face corner ("texcoord" lists, as MeshLab writes them), else per vertex
+        # ("s"/"t", "u"/"v" or "texture_u"/"texture_v")
+        fuv = [np.asarray(t, dtype=np.float64).reshape(-1, 2) for t in fe["texcoord"]] \
+            if fe is not None and "texcoord" in fe.data.dtype.names else None
+        names = vx.data.dtype.names
+        pair = next((p for p in (("s", "t"), ("u", "v"), ("texture_u", "texture_v")) if set(p) <= set(names)), None)
+        vuv = np.stack([vx[pair[0]], vx[pair[1]]], 1).astype(np.float64) if pair else None
     except MimicaError:
         raise
     except Exception as e:  # plyfile raises several types for malformed input
         raise MimicaError(f"{path}: not a readable PLY file ({e})") from None
-    return Mesh.from_faces(v, faces)
+    mesh = Mesh.from_faces(v, faces)
+    if fuv is not None and all(len(t) == len(f) for t, f in zip(fuv, faces)) and len(fuv):
+        mesh.uv = np.vstack(fuv)
+        mesh.face_uv_indices = np.arange(len(mesh.uv))
+    elif vuv is not None:
+        mesh.uv, mesh.face_uv_indices = vuv, mesh.face_indices.copy()
+    return mesh
 
 
 def _write_ply(mesh: Mesh, path: Path) -> None:
     from plyfile import PlyData, PlyElement
     v = np.empty(mesh.n_vertices, dtype=[("x", "f8"), ("y", "f8"), ("z", "f8")])
     v["x"], v["y"], v["z"] = mesh.vertices.T
-    f = np.empty(mesh.n_faces, dtype=[("vertex_indices", "O")])
-    f["vertex_indices"] = [np.asarray(p, dtype=np.int32) for p in
-                           np.split(mesh.face_indices, mesh.face_starts[1:-1])]
-    PlyData([PlyElement.describe(v, "vertex"), PlyElement.describe(f, "face")], text=False).write(str(path))
+    corners = np.split(np.arange(len(mesh.face_indices)), mesh.face_starts[1:-1])
+    has_uv = mesh.uv is not None and mesh.face_uv_indices is not None
+    f = np.empty(mesh.n_faces, dtype=[("vertex_indices", "O")] + ([("texcoord", "O")] if has_uv else []))
+    f["vertex_indices"] = [mesh.face_indices[c].astype(np.int32) for c in corners]
+    if has_uv:         # per face corner (MeshLab's "texcoord" list): the vertices keep their order
+        f["texcoord"] = [mesh.uv[mesh.face_uv_indices[c]].astype(np.float32).reshape(-1) for c in corners]
+    PlyData([PlyElement.describe(v, "vertex"),
+             PlyElement.describe(f, "face", val_types={"texcoord": "f4"} if has_uv else {})],
+            text=False).write(str(path))
 
 
 # ------------------------------------------------------------------------ glTF
