@@ -161,8 +161,8 @@ def test_blendshapes_on_another_topology(tmp_path, head_model):
 
 def test_folder_inputs_say_what_they_take(tmp_path):
     """A folder of frames is one format: a previous run's animation.glb beside the OBJ frames is
-    left out (it used to become frame 0), and said; a sheet of more than 12 meshes says that it
-    shows 12 of them."""
+    left out (it used to become frame 0), and said; frames come in natural order (f2 before
+    f10); a sheet of more than 12 meshes says that it shows 12 of them."""
     import pygltflib
     from mimica.mesh import plane_grid, write_mesh
     seq = tmp_path / "seq"
@@ -170,12 +170,12 @@ def test_folder_inputs_say_what_they_take(tmp_path):
     for i in range(13):
         v = grid.vertices.copy()
         v[:, 2] = 0.05 * i * np.sin(3 * v[:, 0])
-        write_mesh(seq / f"f{i:02d}.obj", grid.with_vertices(v))
+        write_mesh(seq / f"f{i}.obj", grid.with_vertices(v))
     r = _run("export", seq, "--out", seq / "animation.glb")
     assert r.returncode == 0, r.stderr
     r = _run("export", seq, "--out", tmp_path / "again.glb")
     assert r.returncode == 0 and "left out animation.glb" in r.stderr, r.stderr
     g = pygltflib.GLTF2().load(str(tmp_path / "again.glb"))
-    assert g.meshes[0].extras["targetNames"] == [f"f{i:02d}" for i in range(13)]
+    assert g.meshes[0].extras["targetNames"] == [f"f{i}" for i in range(13)]
     r = _run("render", seq, "--out", tmp_path / "sheet.png", "--size", 64)
     assert r.returncode == 0 and "13 meshes; the sheet shows 12" in r.stderr, r.stderr

@@ -94,13 +94,19 @@ def _say(msg):
     print(msg, file=sys.stderr)
 
 
+def _natural(path: Path):
+    """Natural order: frame2 before frame10."""
+    import re
+    return [(0, int(t), "") if t.isdigit() else (1, 0, t.lower()) for t in re.split(r"(\d+)", path.name) if t]
+
+
 def _expand_frames(items):
     from .mesh import MESH_SUFFIXES
     out = []
     for it in items:
         p = Path(it)
         if p.is_dir():
-            files = sorted(f for f in p.iterdir() if f.suffix.lower() in MESH_SUFFIXES)
+            files = sorted((f for f in p.iterdir() if f.suffix.lower() in MESH_SUFFIXES), key=_natural)
             if not files:
                 raise MimicaError(f"{p}: the folder holds no mesh files ({', '.join(MESH_SUFFIXES)})")
             # a sequence is one format: files of another (a previous run's animation.glb beside
