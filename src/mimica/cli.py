@@ -688,6 +688,23 @@ def cmd_export(a):
     return 0
 
 
+def cmd_animate(a):
+    from .export.take import animate_glb, read_take
+    from .mesh import atomic_path
+    out = Path(a.out)
+    if out.suffix.lower() != ".glb":
+        raise MimicaError(f"{out}: an animated take is written as .glb")
+    head = Path(a.head)
+    if not head.is_file():
+        raise MimicaError(f"{head}: no such file")
+    times, weights, rate = read_take(a.arkit, fps=a.fps)
+    with atomic_path(out) as tmp:
+        n = animate_glb(head, tmp, times, weights)
+    _say(f"{a.arkit}: {len(times)} frames over {times[-1]:.2f}s ({rate:.3g} fps) drive {n} morph targets of "
+         f"{head.name} -> {out}")
+    return 0
+
+
 def cmd_blendshapes(a):
     from .export import ARKIT_52, arkit_blendshapes
     from .landmarks import read_landmarks
@@ -912,6 +929,14 @@ def build_parser():
     ex.add_argument("--format", default="obj", help="obj or ply, for a folder")
     ex.add_argument("--units", choices=["auto", "cm", "mm", "m"], default="auto", help=UNITS_HELP)
     ex.set_defaults(func=cmd_export)
+
+    an = sub.add_parser("animate", help="play an ARKit take (a Live Link Face CSV) on a head's ARKit blendshapes")
+    an.add_argument("head", help="the head's ARKit blendshapes, a .glb (as `mimica blendshapes` writes it)")
+    an.add_argument("--arkit", required=True, help="the take: a Live Link Face CSV (Timecode, BlendShapeCount, the "
+                                                  "52 weights ...) or a CSV of the 52 weights with a time column")
+    an.add_argument("--fps", type=float, help="the frame rate of a Timecode column (default: from its frame numbers)")
+    an.add_argument("--out", required=True, help="take.glb: the head with the take as an animation")
+    an.set_defaults(func=cmd_animate)
 
     bs = sub.add_parser("blendshapes", help="the 52 ARKit blendshapes on any head mesh, as one GLB")
     bs.add_argument("head", help="head mesh (OBJ/PLY/glTF), any topology, neutral")
