@@ -178,3 +178,34 @@ def test_sparse_targets_keep_what_moves(written, head_model):
         moving = np.linalg.norm(true, axis=1) > SPARSE_TOLERANCE
         np.testing.assert_allclose(got[moving], true[moving], atol=1e-7)
     assert kinds[0] == 1 and kinds[1] is not None and kinds[1] < len(v) / 3, kinds
+
+
+def test_a_clip_as_a_few_basis_shapes(head_model, tmp_path, capsys):
+    """export writes a clip as basis shapes and per-frame weights when every vertex stays
+    within 0.1 mm: a 40-frame blend of three expressions becomes 3 basis shapes, the frames
+    rebuilt from them within the bound; --compact off keeps one target per frame."""
+    import pygltflib as gl
+    from mimica.cli import main
+    m = head_model.mesh
+    t = np.linspace(0, 1, 40)[:, None, None]
+    d = [head_model.shape(n) - m.vertices for n in ("mouthSmile_L", "jawOpen", "browDown_R")]
+    frames = m.vertices + np.sin(3 * t) * d[0] + t ** 2 * d[1] + np.cos(5 * t) ** 2 * d[2]
+    seq = tmp_path / "seq"
+    for i, f in enumerate(frames):
+        write_mesh(seq / f"f{i}.obj", m.with_vertices(f))
+    capsys.readouterr()
+    assert main(["export", str(seq), "--rest", str(seq / "f0.obj"), "--out", str(tmp_path / "c.glb")]) == 0
+    assert "3 basis shapes" in capsys.readouterr().err
+    assert main(["export", str(seq), "--out", str(tmp_path / "d.glb"), "--compact", "off"]) == 0
+    g = gl.GLTF2().load(str(tmp_path / "c.glb"))
+    prim, ex = g.meshes[0].primitives[0], g.meshes[0].extras
+    assert len(prim.targets) == 3 and len(ex["frames"]) == 40 and ex["maxErrorMetres"] <= 1e-4
+    v = _vertex_of(g)
+    basis = np.stack([_accessor(g, tg["POSITION"]) for tg in prim.targets])       # metres
+    w = _accessor(g, g.animations[0].samplers[0].output).reshape(40, 3)
+    rebuilt = np.einsum("fk,knd->fnd", w, basis)
+    true = 0.01 * (frames - frames[0])[:, v]
+    assert np.linalg.norm(rebuilt - true, axis=2).max() <= 1e-4 + 2e-5            # 0.1 mm (+ sparse/float32)
+    assert (tmp_path / "c.glb").stat().st_size * 5 < (tmp_path / "d.glb").stat().st_size
+    r = validate([tmp_path / "c.glb"])[0]
+    assert r["errors"] == 0 and r["warnings"] == 0, r["messages"]

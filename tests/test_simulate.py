@@ -195,7 +195,10 @@ def test_cli_rig_and_simulate(tmp_path, face, capsys):
     assert len(frames) == 16 and (out / "strip.png").is_file()
     from pygltflib import GLTF2
     g = GLTF2().load(str(out / "animation.glb"))
-    assert len(g.meshes[0].primitives[0].targets) == 16 and g.animations[0].channels[0].target.path == "weights"
+    # 16 frames: one morph target each, or a few basis shapes with per-frame weights (compact)
+    n_targets = len(g.meshes[0].primitives[0].targets)
+    assert len(g.meshes[0].extras.get("frames", g.meshes[0].extras["targetNames"])) == 16 and n_targets <= 16
+    assert g.animations[0].channels[0].target.path == "weights"
     assert g.accessors[g.animations[0].samplers[0].input].max == [pytest.approx(0.25)]
     tl = tmp_path / "t.json"
     tl.write_text(json.dumps({"format": "mimica-timeline/1", "channels": {"buccinator_R": {"keys": [[0, 1]]}}}))

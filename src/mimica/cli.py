@@ -51,6 +51,31 @@ MATCH_HELP = ("across topologies, how target vertices find their source partners
               "registration of the source onto the target (default); cylinder, Song et al.'s cylinder map")
 
 
+CLIP_MAX_ERROR_M = 1e-4          # a compact clip's bound: 0.1 mm, in metres
+
+
+def _write_clip(path, rest, names, frames, fps, units="auto", compact=True, binary=True) -> str:
+    """A clip as one GLB: a few basis shapes and per-frame weights where that keeps every
+    vertex within 0.1 mm (export.compact), else one morph target per frame.  Returns what to say."""
+    from .export.compact import compact_clip
+    from .mesh import write_glb
+    from .mesh.io import SPARSE_TOLERANCE, glb_units
+    unit, k = glb_units(rest, units)
+    c = compact_clip(rest.vertices, frames, CLIP_MAX_ERROR_M / k) if compact else None
+    if c is None:
+        info = write_glb(path, rest, dict(zip(names, frames)), binary=binary, fps=fps, units=units,
+                         sparse=SPARSE_TOLERANCE)
+        how = f"{len(frames)} frames as morph targets" + (" (no smaller basis within 0.1 mm)" if compact else "")
+    else:
+        shapes = {f"basis_{j:02d}": rest.vertices + b for j, b in enumerate(c.basis)}
+        info = write_glb(path, rest, shapes, binary=binary, fps=fps, units=units, weights=c.weights,
+                         extras={"frames": list(names), "maxErrorMetres": c.max_error * k})
+        how = (f"{len(frames)} frames as {len(shapes)} basis shapes and their weights (largest error "
+               f"{c.max_error * k * 1e3:.3f} mm, bound 0.1 mm)")
+    return (f"{how}, one animation at {fps:g} fps; " + _units_line(rest, info["units"], units) + "; "
+            + f"{Path(path).stat().st_size / 1e6:.1f} MB")
+
+
 def _sparse_line(path, info: dict, n: int) -> str:
     """'34 of 52 morph targets sparse (moves under 0.01 mm left out), 4.2 MB'."""
     from .mesh.io import SPARSE_TOLERANCE
@@ -315,7 +340,7 @@ def cmd_simulate(a):
 
 def _write_simulation(a, rig, tl, sim, frames, d, out, mask=None):
     """frame_*.obj, animation.glb, strip.png (and the wrinkle maps) into the stage `d`."""
-    from .mesh import write_glb, write_mesh
+    from .mesh import write_mesh
     from .render import contact_sheet, render_mesh, save_png, shared_frame
     skin = rig.skin
     note = ""
@@ -323,7 +348,9 @@ def _write_simulation(a, rig, tl, sim, frames, d, out, mask=None):
         frames, skin, note = _wrinkle_frames(a, rig, tl, frames, d, out, mask)
     for i, v in enumerate(frames):
         write_mesh(d / f"frame_{i:04d}.obj", skin.with_vertices(v))
-    write_glb(d / "animation.glb", skin, {f"frame_{i:04d}": v for i, v in enumerate(frames)}, fps=a.fps)
+    clip = _write_clip(d / "animation.glb", skin, [f"frame_{i:04d}" for i in range(len(frames))], np.asarray(frames),
+                       a.fps)
+    note += "; animation.glb: " + clip.split(", one animation")[0]
     title = a.action or (Path(a.timeline).name if a.timeline else a.expression)
     solver_note = ", full solver" if a.solver == "full" else ""
     if a.wrinkles:
@@ -656,8 +683,7 @@ def cmd_render(a):
 
 
 def cmd_export(a):
-    from .mesh import atomic_path, read_mesh, read_vertices, write_glb, write_mesh
-    from .mesh.io import SPARSE_TOLERANCE
+    from .mesh import atomic_path, read_mesh, read_vertices, write_mesh
     paths = _expand_frames([Path(p) for p in a.frames])
     mesh = read_mesh(paths[0])
     frames = [read_vertices(p) for p in _progress(paths, len(paths), "reading")]
@@ -671,10 +697,9 @@ def cmd_export(a):
         if base.n_vertices != mesh.n_vertices:
             raise MimicaError(f"{a.rest}: not the sequence's topology")
         with atomic_path(out) as tmp:
-            info = write_glb(tmp, base, {p.stem: f for p, f in zip(paths, frames)}, binary=suf == ".glb", fps=a.fps,
-                             units=a.units, sparse=SPARSE_TOLERANCE)
-        _say(f"{out}: {len(frames)} frames as morph targets, one animation at {a.fps:g} fps; "
-             + _units_line(base, info["units"], a.units) + "; " + _sparse_line(out, info, len(frames)))
+            line = _write_clip(tmp, base, [p.stem for p in paths], np.stack(frames), a.fps, a.units,
+                               a.compact == "auto", binary=suf == ".glb")
+        _say(f"{out}: {line}")
         return 0
     if suf:
         raise MimicaError(f"{out}: export to .glb/.gltf, or to a folder (with --format obj|ply)")
@@ -928,6 +953,9 @@ def build_parser():
     ex.add_argument("--fps", type=float, default=30.0)
     ex.add_argument("--format", default="obj", help="obj or ply, for a folder")
     ex.add_argument("--units", choices=["auto", "cm", "mm", "m"], default="auto", help=UNITS_HELP)
+    ex.add_argument("--compact", choices=["auto", "off"], default="auto",
+                    help="auto: the clip as a few basis shapes and per-frame weights when that keeps every "
+                         "vertex within 0.1 mm (far smaller files); off: one morph target per frame")
     ex.set_defaults(func=cmd_export)
 
     an = sub.add_parser("animate", help="play an ARKit take (a Live Link Face CSV) on a head's ARKit blendshapes")

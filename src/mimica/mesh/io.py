@@ -391,7 +391,7 @@ def _unit_normals(mesh: Mesh, vertices: np.ndarray) -> np.ndarray:
 
 
 def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None, units: str = "auto",
-              sparse: float | None = None) -> dict:
+              sparse: float | None = None, weights=None, extras: dict | None = None) -> dict:
     """Write a triangulated mesh, optionally with named morph targets {name: (n,3) positions}.
 
     fps: also write an animation that plays the morph targets in order, one per frame at
@@ -403,6 +403,9 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
     sparse: morph targets as sparse accessors: a vertex that moves less than this many metres
     (SPARSE_TOLERANCE: 0.01 mm) keeps zero, as does a normal that turns less than
     SPARSE_NORMAL; None writes every target dense.
+    weights: with fps, the animation's weights per frame (F, number of targets) instead of one
+    target per frame (a clip as a few basis shapes, export.compact).
+    extras: more of the mesh's extras (with targetNames).
     """
     import pygltflib as gl
     # glTF keeps one uv per vertex: a vertex on a uv seam is written once per uv it has, and the
@@ -461,11 +464,11 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
     if uv_of is not None:
         tex = np.where(uv_of[:, None] >= 0, mesh.uv[np.maximum(uv_of, 0)], 0.0) * [1, -1] + [0, 1]
         attrs.TEXCOORD_0 = add(tex.astype(np.float32), gl.ARRAY_BUFFER, gl.VEC2, gl.FLOAT)
-    extras = {UNITS_KEY: unit}
+    prim_extras = {UNITS_KEY: unit}
     if len(v_of) != mesh.n_vertices or (v_of != np.arange(len(v_of))).any():
         add(v_of.astype(np.uint32), None, gl.SCALAR, gl.UNSIGNED_INT)
         accs.pop()                                  # the map is a buffer view, not an accessor
-        extras[VERTEX_MAP] = len(views) - 1
+        prim_extras[VERTEX_MAP] = len(views) - 1
     # one primitive and material per OBJ material / group, all on the same vertices
     prims, materials = [], []
     if grouped:
@@ -477,9 +480,9 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
                                                                                       roughnessFactor=0.6)))
             prims.append(gl.Primitive(attributes=attrs, indices=add(sel, gl.ELEMENT_ARRAY_BUFFER, gl.SCALAR,
                                                                     gl.UNSIGNED_INT),
-                                      material=len(materials) - 1, extras=extras))
+                                      material=len(materials) - 1, extras=prim_extras))
     else:
-        prims.append(gl.Primitive(attributes=attrs, indices=iidx, extras=extras))
+        prims.append(gl.Primitive(attributes=attrs, indices=iidx, extras=prim_extras))
     prim = prims[0]
     names = []
     if morph_targets:
@@ -501,14 +504,16 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
             other.targets = prim.targets
     gmesh = gl.Mesh(primitives=prims)
     if names:
-        gmesh.extras = {"targetNames": names}
+        gmesh.extras = {"targetNames": names, **(extras or {})}
         gmesh.weights = [0.0] * len(names)
     animations = []
     if fps and names:
-        k = len(names)
-        times = (np.arange(k) / float(fps)).astype(np.float32)
+        w = np.eye(len(names), dtype=np.float32) if weights is None else np.asarray(weights, np.float32)
+        if w.ndim != 2 or w.shape[1] != len(names):
+            raise MimicaError(f"weights: {w.shape} for {len(names)} morph targets")
+        times = (np.arange(len(w)) / float(fps)).astype(np.float32)
         itime = add(times, None, gl.SCALAR, gl.FLOAT, True)
-        iw = add(np.eye(k, dtype=np.float32).reshape(-1), None, gl.SCALAR, gl.FLOAT)
+        iw = add(w.reshape(-1), None, gl.SCALAR, gl.FLOAT)
         animations = [gl.Animation(name="frames", samplers=[gl.AnimationSampler(input=itime, output=iw,
                                                                               interpolation="LINEAR")],
                                    channels=[gl.AnimationChannel(sampler=0, target=gl.AnimationChannelTarget(
