@@ -1,0 +1,126 @@
+"""Benchmark: the files animators take home (issue 17), against the one-target-per-frame files
+of before, measured in the same run.
+
+Run from the project root:  .venv/bin/python bench/export.py
+Data: ICT-FaceKit from the data directory ($MIMICA_DATA).  Figures:
+
+- validator_issues: errors + warnings of the Khronos glTF-Validator (tools/gltf) over every
+  GLB kind written here (mesh, blendshapes, a compact clip, a per-frame clip, an animated take)
+- clip_mb, clip_ratio, clip_err_mm: a 10 s, 60 fps simulated clip (Kim's muscles on ICT's
+  face, `mimica simulate`, whose animation.glb is compact: a few basis shapes and weights), its
+  size against the same frames as one morph target each (dense, as mimica wrote it before),
+  and the largest distance of a vertex from the clip.  Also printed: ICT's expressions blended
+  over 600 frames on its whole 26,719-vertex mesh, the same way (rank 6: exact).
+- arkit_mb: the 52 ARKit shapes on ICT's own generic mesh (`blendshapes`)
+- video_weights_err, video_fps: ARKit weights fitted from video (not made yet: n/a)
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from mimica.data import EXPRESSIONS, ICTModel  # noqa: E402
+from mimica.export import ARKIT_52  # noqa: E402
+from mimica.export.compact import compact_clip  # noqa: E402
+from mimica.mesh import write_glb  # noqa: E402
+from mimica.mesh.io import glb_units  # noqa: E402
+
+
+def clip(model, n_frames=600, seed=0):
+    names = list(EXPRESSIONS)
+    d = np.stack([model.delta(EXPRESSIONS[e]) for e in names])
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 2 * np.pi, n_frames)[:, None]
+    w = np.clip(np.sin(t * rng.uniform(0.5, 2.0, len(names)) + rng.uniform(0, 2 * np.pi, len(names))), 0, None)
+    return model.neutral + np.einsum("fk,knd->fnd", w, d)
+
+
+def cli(*args):
+    r = subprocess.run([sys.executable, "-c", "import sys; from mimica.cli import main; sys.exit(main())", *map(str, args)],
+                       capture_output=True, text=True, env={"PYTHONPATH": str(ROOT / "src"), **__import__("os").environ})
+    if r.returncode:
+        raise SystemExit(f"mimica {' '.join(map(str, args))} failed: {r.stderr}")
+    return r.stderr
+
+
+def main():
+    print(f"machine: {platform.machine()}, {platform.system()}, python {platform.python_version()}")
+    model = ICTModel()
+    mesh = model.mesh
+    tmp = Path(tempfile.mkdtemp(prefix="mimica-bench-export-"))
+    frames = clip(model)
+    names = [f"frame_{i:04d}" for i in range(len(frames))]
+    unit, k = glb_units(mesh)
+    t = time.perf_counter()
+    c = compact_clip(mesh.vertices, frames, 1e-4 / k)
+    t_fit = time.perf_counter() - t
+    t = time.perf_counter()
+    write_glb(tmp / "clip.glb", mesh, {f"basis_{j:02d}": mesh.vertices + b for j, b in enumerate(c.basis)}, fps=60,
+              weights=c.weights, sparse=1e-5, extras={"frames": names})
+    t_write = time.perf_counter() - t
+    write_glb(tmp / "clip_per_frame.glb", mesh, dict(zip(names, frames)), fps=60)     # before: dense, a target a frame
+    clip_mb = (tmp / "clip.glb").stat().st_size / 1e6
+    per_frame_mb = (tmp / "clip_per_frame.glb").stat().st_size / 1e6
+    err_mm = float(np.linalg.norm(c.frames(mesh.vertices) - frames, axis=2).max()) * k * 1e3
+    print(f"clip: {len(frames)} frames on {mesh.n_vertices} vertices ({unit}) -> {len(c.basis)} basis shapes, "
+          f"fit {t_fit:.1f}s, write {t_write:.1f}s; {clip_mb:.1f} MB against {per_frame_mb:.1f} MB one target a "
+          f"frame (x{per_frame_mb / clip_mb:.0f}); largest error {err_mm:.4f} mm")
+
+    neutral = tmp / "ict.obj"
+    from mimica.mesh import read_vertices, write_mesh
+    write_mesh(neutral, mesh)
+    # a simulated clip: Kim's muscles on ICT's face, 10 s at 60 fps (`mimica simulate` writes its
+    # animation.glb compact), against its frames as one target each
+    cli("rig", neutral, "--out", tmp / "face.rig")
+    t = time.perf_counter()
+    said = cli("simulate", tmp / "face.rig", "--expression", "happiness", "--duration", "10", "--fps", "60",
+               "--out", tmp / "sim")
+    sim_frames = sorted((tmp / "sim").glob("frame_*.obj"))
+    skin = __import__("mimica.mesh", fromlist=["read_mesh"]).read_mesh(sim_frames[0])
+    sim = np.stack([read_vertices(p) for p in sim_frames])
+    write_glb(tmp / "sim_per_frame.glb", skin, {p.stem: f for p, f in zip(sim_frames, sim)}, fps=60)
+    sim_mb = (tmp / "sim" / "animation.glb").stat().st_size / 1e6
+    sim_pf = (tmp / "sim_per_frame.glb").stat().st_size / 1e6
+    c_sim = compact_clip(skin.vertices, sim, 1e-4 / glb_units(skin)[1])
+    sim_err = 0.0 if c_sim is None else float(np.linalg.norm(c_sim.frames(skin.vertices) - sim, axis=2).max()) \
+        * glb_units(skin)[1] * 1e3
+    line = next((ln for ln in said.splitlines() if "animation.glb:" in ln), said.strip().splitlines()[-1])
+    print(f"simulated clip ({time.perf_counter() - t:.1f}s): {len(sim)} frames on {skin.n_vertices} vertices, "
+          f"{sim_mb:.1f} MB against {sim_pf:.1f} MB one target a frame (x{sim_pf / sim_mb:.0f}); largest error "
+          f"{sim_err:.4f} mm; simulate said: ...{line[line.index('animation.glb:'):] if 'animation.glb:' in line else line}")
+    t = time.perf_counter()
+    said = cli("blendshapes", neutral, "--out", tmp / "arkit.glb")
+    arkit_mb = (tmp / "arkit.glb").stat().st_size / 1e6
+    print(f"blendshapes on ICT's generic mesh ({time.perf_counter() - t:.1f}s): {arkit_mb:.1f} MB "
+          f"(before: 17.6 MB, positions only); " + said.strip().splitlines()[-2])
+    take = tmp / "take.csv"
+    rows = [",".join(["time"] + ARKIT_52)] + [",".join([f"{i / 60:.5f}"] + [f"{0.5 + 0.5 * np.sin(i / 9 + j):.4f}"
+                                                                             for j in range(52)]) for i in range(120)]
+    take.write_text("\n".join(rows))
+    cli("animate", tmp / "arkit.glb", "--arkit", take, "--out", tmp / "take.glb")
+    write_glb(tmp / "mesh.glb", mesh)
+    kinds = ["mesh.glb", "arkit.glb", "clip.glb", "clip_per_frame.glb", "take.glb", "sim/animation.glb"]
+    node = subprocess.run(["node", str(ROOT / "tools" / "gltf" / "validate.mjs"), *[str(tmp / n) for n in kinds]],
+                          capture_output=True, text=True)
+    if node.returncode:
+        raise SystemExit(f"the glTF-Validator did not run (make test installs it): {node.stderr.strip()}")
+    reports = [json.loads(line) for line in node.stdout.splitlines()]
+    issues = sum(r["errors"] + r["warnings"] for r in reports)
+    print("validator: " + ", ".join(f"{n} {r['errors']} errors {r['warnings']} warnings" for n, r in zip(kinds, reports)))
+    print(f"validator_issues={issues} clip_mb={sim_mb:.1f} clip_ratio={sim_mb / sim_pf:.3f} "
+          f"clip_err_mm={sim_err:.3f} arkit_mb={arkit_mb:.1f} video_weights_err=n/a video_fps=n/a")
+
+
+if __name__ == "__main__":
+    main()
