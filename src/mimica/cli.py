@@ -76,6 +76,26 @@ def _write_clip(path, rest, names, frames, fps, units="auto", compact=True, bina
             + f"{Path(path).stat().st_size / 1e6:.1f} MB")
 
 
+def _write_clip_usd(path, rest, names, frames, fps, units="auto", compact=True) -> str:
+    """A clip as USD (UsdSkel): basis shapes and weights as _write_clip makes them, or a blend
+    shape a frame with one weight at 1 in each."""
+    from .export.compact import compact_clip
+    from .export.usd import write_usd
+    from .mesh.io import glb_units
+    unit, k = glb_units(rest, units)
+    c = compact_clip(rest.vertices, frames, CLIP_MAX_ERROR_M / k) if compact else None
+    if c is None:
+        info = write_usd(path, rest, dict(zip(names, frames)), np.eye(len(frames)), fps, units)
+        how = f"{len(frames)} frames as blend shapes"
+    else:
+        info = write_usd(path, rest, {f"basis_{j:02d}": rest.vertices + b for j, b in enumerate(c.basis)},
+                         c.weights, fps, units)
+        how = (f"{len(frames)} frames as {info['shapes']} basis blend shapes and their weights (largest error "
+               f"{c.max_error * k * 1e3:.3f} mm, bound 0.1 mm)")
+    return (f"{how}, a SkelAnimation at {fps:g} fps; units: {unit} (metersPerUnit {k:g}, y up); "
+            f"{Path(path).stat().st_size / 1e6:.1f} MB")
+
+
 def _sparse_line(path, info: dict, n: int) -> str:
     """'34 of 52 morph targets sparse (moves under 0.01 mm left out), 4.2 MB'."""
     from .mesh.io import SPARSE_TOLERANCE
@@ -692,6 +712,13 @@ def cmd_export(a):
             raise MimicaError(f"{p}: {len(f)} vertices; {paths[0]} has {mesh.n_vertices} (one topology per sequence)")
     out = Path(a.out)
     suf = out.suffix.lower()
+    if suf in (".usd", ".usda", ".usdc"):
+        base = read_mesh(a.rest) if a.rest else mesh
+        if base.n_vertices != mesh.n_vertices:
+            raise MimicaError(f"{a.rest}: not the sequence's topology")
+        _say(f"{out}: " + _write_clip_usd(out, base, [p.stem for p in paths], np.stack(frames), a.fps, a.units,
+                                          a.compact == "auto"))
+        return 0
     if suf in (".glb", ".gltf"):
         base = read_mesh(a.rest) if a.rest else mesh
         if base.n_vertices != mesh.n_vertices:
@@ -702,7 +729,7 @@ def cmd_export(a):
         _say(f"{out}: {line}")
         return 0
     if suf:
-        raise MimicaError(f"{out}: export to .glb/.gltf, or to a folder (with --format obj|ply)")
+        raise MimicaError(f"{out}: export to .glb/.gltf, .usd/.usda/.usdc, or to a folder (with --format obj|ply)")
     if a.format not in ("obj", "ply"):
         raise MimicaError(f"--format {a.format}: obj or ply")
     from .outputs import staged_dir
@@ -736,8 +763,8 @@ def cmd_blendshapes(a):
     from .mesh import atomic_path, read_mesh, write_glb
     from .mesh.io import SPARSE_TOLERANCE
     out = Path(a.out)
-    if out.suffix.lower() not in (".glb", ".gltf"):
-        raise MimicaError(f"{out}: blendshapes are written as glTF (.glb or .gltf)")
+    if out.suffix.lower() not in (".glb", ".gltf", ".usd", ".usda", ".usdc"):
+        raise MimicaError(f"{out}: blendshapes are written as glTF (.glb or .gltf) or USD (.usd, .usda, .usdc)")
     t0 = time.perf_counter()
     head = read_mesh(a.head)
     lm = read_landmarks(a.landmarks, head) if a.landmarks else None
@@ -745,10 +772,15 @@ def cmd_blendshapes(a):
     if line := _correspondence_line(shapes.transfer).lstrip("; "):
         _say(line)
     _warn_sealed_eyes(head, shapes.landmarks, a.head)
-    with atomic_path(out) as tmp:
-        info = write_glb(tmp, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb",
-                         units=a.units, sparse=SPARSE_TOLERANCE)
-    _say(_units_line(shapes.mesh, info["units"], a.units) + "; " + _sparse_line(out, info, len(ARKIT_52)))
+    if out.suffix.lower() in (".usd", ".usda", ".usdc"):
+        from .export.usd import write_usd
+        info = write_usd(out, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, units=a.units)
+        _say(f"units: {info['units']} (metersPerUnit set, y up); {out.stat().st_size / 1e6:.1f} MB")
+    else:
+        with atomic_path(out) as tmp:
+            info = write_glb(tmp, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb",
+                             units=a.units, sparse=SPARSE_TOLERANCE)
+        _say(_units_line(shapes.mesh, info["units"], a.units) + "; " + _sparse_line(out, info, len(ARKIT_52)))
     if a.show:
         from .render import save_png
         from .render.diagnose import transfer_picture
@@ -948,7 +980,7 @@ def build_parser():
 
     ex = sub.add_parser("export", help="a sequence of meshes as one glTF animation, or as OBJ/PLY files")
     ex.add_argument("frames", nargs="+", help="mesh files or a folder, one topology")
-    ex.add_argument("--out", required=True, help="anim.glb / anim.gltf, or a folder")
+    ex.add_argument("--out", required=True, help="anim.glb / anim.gltf, anim.usd / .usda / .usdc (UsdSkel), or a folder")
     ex.add_argument("--rest", help="the rest mesh the morph targets are relative to (default: the first frame)")
     ex.add_argument("--fps", type=float, default=30.0)
     ex.add_argument("--format", default="obj", help="obj or ply, for a folder")
@@ -975,7 +1007,7 @@ def build_parser():
     bs.add_argument("--cut-mouth", choices=["auto", "off"], default="auto",
                     help="auto: sealed lips are cut apart so jawOpen opens the mouth (the cut's vertices "
                          "come after the head's own)")
-    bs.add_argument("--out", required=True, help="head_arkit.glb")
+    bs.add_argument("--out", required=True, help="head_arkit.glb (or .usd/.usda/.usdc: UsdSkel blend shapes)")
     bs.add_argument("--units", choices=["auto", "cm", "mm", "m"], default="auto", help=UNITS_HELP)
     bs.set_defaults(func=cmd_blendshapes)
 
