@@ -34,7 +34,7 @@ LAYERS = [
     {"transfer"},
     {"render", "export"},
     {"pipeline"},
-    {"cli", "viewer", "batch", "blender", "demo", ""},   # "": the package's own __init__
+    {"cli", "viewer", "batch", "blender", "blender_addon", "demo", ""},   # "": the package's own __init__
 ]
 LAYER = {stage: i for i, stages in enumerate(LAYERS) for stage in stages}
 FOUNDATIONS, USERS = LAYERS[0], LAYERS[-1]

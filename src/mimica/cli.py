@@ -763,8 +763,9 @@ def cmd_blendshapes(a):
     from .mesh import atomic_path, read_mesh, write_glb
     from .mesh.io import SPARSE_TOLERANCE
     out = Path(a.out)
-    if out.suffix.lower() not in (".glb", ".gltf", ".usd", ".usda", ".usdc"):
-        raise MimicaError(f"{out}: blendshapes are written as glTF (.glb or .gltf) or USD (.usd, .usda, .usdc)")
+    if out.suffix.lower() not in (".glb", ".gltf", ".usd", ".usda", ".usdc", ".npz"):
+        raise MimicaError(f"{out}: blendshapes are written as glTF (.glb or .gltf), USD (.usd, .usda, .usdc) "
+                          "or NumPy arrays (.npz: the positions of each shape, for the Blender add-on)")
     t0 = time.perf_counter()
     head = read_mesh(a.head)
     lm = read_landmarks(a.landmarks, head) if a.landmarks else None
@@ -772,7 +773,12 @@ def cmd_blendshapes(a):
     if line := _correspondence_line(shapes.transfer).lstrip("; "):
         _say(line)
     _warn_sealed_eyes(head, shapes.landmarks, a.head)
-    if out.suffix.lower() in (".usd", ".usda", ".usdc"):
+    if out.suffix.lower() == ".npz":
+        with atomic_path(out) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, vertices=shapes.mesh.vertices, **{n: shapes[n] for n in ARKIT_52})
+        _say(f"{out}: the rest and the 52 shapes' positions, {shapes.mesh.n_vertices} vertices in the head's order")
+    elif out.suffix.lower() in (".usd", ".usda", ".usdc"):
         from .export.usd import write_usd
         info = write_usd(out, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, units=a.units)
         _say(f"units: {info['units']} (metersPerUnit set, y up); {out.stat().st_size / 1e6:.1f} MB")

@@ -1,0 +1,241 @@
+"""mimica in Blender (issue 17, part 5): a Blender add-on.
+
+Blender's Python carries numpy < 2 (bpy 4.x and 5.0 require it) and mimica numpy >= 2, so the
+two cannot share one interpreter.  The add-on therefore runs the `mimica` command of the
+user's own installation (set in the add-on's preferences, or found on PATH) and exchanges files
+with it: the selected head goes out as an OBJ in Blender's vertex order, the shapes come back as
+the rest and the 52 positions in that order (`blendshapes --out FILE.npz`), which Blender's
+numpy reads.  Progress shows in the status bar; mimica's one-line errors become Blender
+reports.  A Live Link Face take (or any CSV of ARKit weights with a time column) is read here
+and keyed onto the shape keys at the scene's frame rate.
+
+Install: Edit > Preferences > Add-ons > Install from disk..., this file (or `mimica
+blender-addon --out DIR` to get a copy).  The panel is in the 3D view's sidebar, "mimica".
+This module imports without Blender (mimica's own tests read it); its classes exist only
+inside Blender.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+bl_info = {
+    "name": "mimica: ARKit shape keys, Live Link takes",
+    "author": "mimica",
+    "version": (0, 1, 0),
+    "blender": (4, 2, 0),
+    "location": "View3D > Sidebar > mimica",
+    "description": "ARKit shape keys for any head, Live Link Face takes as actions (runs the mimica command)",
+    "category": "Animation",
+}
+
+try:  # inside Blender
+    import bpy
+except ImportError:  # mimica's own tests read this module without Blender
+    bpy = None
+
+ARKIT = ["eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft", "eyeSquintLeft",
+         "eyeWideLeft", "eyeBlinkRight", "eyeLookDownRight", "eyeLookInRight", "eyeLookOutRight", "eyeLookUpRight",
+         "eyeSquintRight", "eyeWideRight", "jawForward", "jawLeft", "jawRight", "jawOpen", "mouthClose",
+         "mouthFunnel", "mouthPucker", "mouthLeft", "mouthRight", "mouthSmileLeft", "mouthSmileRight",
+         "mouthFrownLeft", "mouthFrownRight", "mouthDimpleLeft", "mouthDimpleRight", "mouthStretchLeft",
+         "mouthStretchRight", "mouthRollLower", "mouthRollUpper", "mouthShrugLower", "mouthShrugUpper",
+         "mouthPressLeft", "mouthPressRight", "mouthLowerDownLeft", "mouthLowerDownRight", "mouthUpperUpLeft",
+         "mouthUpperUpRight", "browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft", "browOuterUpRight",
+         "cheekPuff", "cheekSquintLeft", "cheekSquintRight", "noseSneerLeft", "noseSneerRight", "tongueOut"]
+
+
+class AddonError(Exception):
+    """What the user is told, in one line."""
+
+
+def mimica_command(configured: str = "") -> str:
+    """The mimica executable: the preference, else MIMICA_COMMAND, else `mimica` on PATH."""
+    exe = configured or os.environ.get("MIMICA_COMMAND", "") or shutil.which("mimica") or ""
+    if not exe or not (Path(exe).is_file() or shutil.which(exe)):
+        raise AddonError("the mimica command was not found: install mimica (pip install mimica) and set its "
+                         "path in the add-on's preferences")
+    return exe
+
+
+def write_obj(path, vertices, polygons) -> None:
+    """An OBJ of the mesh in Blender's vertex order (1-based faces)."""
+    with open(path, "w") as f:
+        f.writelines(f"v {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in vertices)
+        f.writelines("f " + " ".join(str(i + 1) for i in p) + "\n" for p in polygons)
+
+
+def run_mimica(args, progress=None) -> list[str]:
+    """Run mimica; its stderr lines go to progress(line); a failure raises its last line."""
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    lines = []
+    for line in proc.stderr:
+        line = line.rstrip()
+        if line:
+            lines.append(line)
+            if progress:
+                progress(line)
+    if proc.wait():
+        raise AddonError(lines[-1] if lines else f"mimica stopped (exit status {proc.returncode})")
+    return lines
+
+
+def arkit_shapes(vertices, polygons, exe: str, progress=None) -> dict:
+    """{ARKit name: (n, 3) positions} for a head given as Blender's vertices and polygons."""
+    import numpy as np
+    with tempfile.TemporaryDirectory(prefix="mimica-blender-") as d:
+        obj, out = Path(d) / "head.obj", Path(d) / "shapes.npz"
+        write_obj(obj, vertices, polygons)
+        run_mimica([exe, "blendshapes", str(obj), "--cut-mouth", "off", "--out", str(out)], progress)
+        with np.load(out) as z:
+            if z["vertices"].shape[0] != len(vertices):
+                raise AddonError(f"mimica gave {z['vertices'].shape[0]} vertices for a head of {len(vertices)}")
+            return {n: z[n] for n in ARKIT if n in z}
+
+
+def read_take(path, fps: float | None = None):
+    """(times in seconds from the start, {ARKit name: weights}) of a Live Link Face CSV (Timecode
+    HH:MM:SS:FF.fff, PascalCase names) or of a CSV with a `time` column; AddonError otherwise."""
+    with open(path, newline="", encoding="utf-8-sig") as f:
+        rows = [r for r in csv.reader(f) if any(c.strip() for c in r)]
+    if len(rows) < 2:
+        raise AddonError(f"{path}: no frames")
+    col = {h.strip()[:1].lower() + h.strip()[1:]: i for i, h in enumerate(rows[0])}
+    missing = [n for n in ARKIT if n not in col]
+    if missing:
+        raise AddonError(f"{path}: no column for {', '.join(missing[:4])}")
+    tcol = col.get("timecode", col.get("time"))
+    if tcol is None:
+        raise AddonError(f"{path}: no Timecode or time column")
+    try:
+        if "timecode" in col:
+            parts = [r[tcol].strip().split(":") for r in rows[1:]]
+            rate = fps or float(int(max(float(p[3]) for p in parts)) + 1)
+            times = [3600 * int(p[0]) + 60 * int(p[1]) + int(p[2]) + float(p[3]) / rate for p in parts]
+        else:
+            times = [float(r[tcol]) for r in rows[1:]]
+        weights = {n: [float(r[col[n]]) for r in rows[1:]] for n in ARKIT}
+    except (ValueError, IndexError) as e:
+        raise AddonError(f"{path}: a value that is not a number or a timecode ({e})") from None
+    if any(b <= a for a, b in zip(times, times[1:])):
+        raise AddonError(f"{path}: the time does not increase")
+    bad = [n for n, w in weights.items() if any(x != x or abs(x) == float("inf") for x in w)]
+    if bad:
+        raise AddonError(f"{path}: {bad[0]} is not a finite number")
+    return [t - times[0] for t in times], weights
+
+
+if bpy is not None:  # pragma: no cover - runs inside Blender (tests/test_blender.py drives it headless)
+
+    class MimicaPreferences(bpy.types.AddonPreferences):
+        bl_idname = __name__
+        command: bpy.props.StringProperty(name="mimica command", subtype="FILE_PATH",
+                                          description="the mimica executable (default: mimica on PATH)")
+
+        def draw(self, context):
+            self.layout.prop(self, "command")
+
+    def _command(context) -> str:
+        prefs = context.preferences.addons.get(__name__)
+        return mimica_command(prefs.preferences.command if prefs else "")
+
+    class MIMICA_OT_arkit_shape_keys(bpy.types.Operator):
+        """Put the 52 ARKit shapes on the active mesh as shape keys (mimica blendshapes)"""
+        bl_idname = "mimica.arkit_shape_keys"
+        bl_label = "ARKit shape keys"
+        bl_options = {"REGISTER", "UNDO"}
+
+        def execute(self, context):
+            obj = context.active_object
+            if obj is None or obj.type != "MESH":
+                self.report({"ERROR"}, "select a head mesh first")
+                return {"CANCELLED"}
+            me = obj.data
+            verts = [tuple(v.co) for v in me.vertices]
+            polys = [tuple(p.vertices) for p in me.polygons]
+            wm = context.window_manager
+            wm.progress_begin(0, 100)
+            step = [0]
+
+            def progress(line):
+                step[0] = min(step[0] + 10, 95)
+                wm.progress_update(step[0])
+                context.workspace.status_text_set(f"mimica: {line}")
+
+            try:
+                shapes = arkit_shapes(verts, polys, _command(context), progress)
+            except AddonError as e:
+                self.report({"ERROR"}, str(e))
+                return {"CANCELLED"}
+            finally:
+                wm.progress_end()
+                context.workspace.status_text_set(None)
+            if me.shape_keys is None:
+                obj.shape_key_add(name="Basis", from_mix=False)
+            for name, pos in shapes.items():
+                kb = me.shape_keys.key_blocks.get(name) or obj.shape_key_add(name=name, from_mix=False)
+                kb.data.foreach_set("co", pos.astype("float32").ravel())
+            self.report({"INFO"}, f"{len(shapes)} ARKit shape keys on {obj.name}")
+            return {"FINISHED"}
+
+    class MIMICA_OT_live_link_take(bpy.types.Operator):
+        """Key a Live Link Face take (CSV) onto the active mesh's ARKit shape keys"""
+        bl_idname = "mimica.live_link_take"
+        bl_label = "Apply Live Link take"
+        bl_options = {"REGISTER", "UNDO"}
+        filepath: bpy.props.StringProperty(subtype="FILE_PATH")
+
+        def invoke(self, context, event):
+            context.window_manager.fileselect_add(self)
+            return {"RUNNING_MODAL"}
+
+        def execute(self, context):
+            obj = context.active_object
+            keys = obj.data.shape_keys.key_blocks if obj and obj.type == "MESH" and obj.data.shape_keys else None
+            if keys is None:
+                self.report({"ERROR"}, "the active object has no shape keys: make the ARKit shape keys first")
+                return {"CANCELLED"}
+            try:
+                times, weights = read_take(self.filepath)
+            except (AddonError, OSError) as e:
+                self.report({"ERROR"}, str(e))
+                return {"CANCELLED"}
+            fps = context.scene.render.fps / context.scene.render.fps_base
+            start = context.scene.frame_start
+            n = 0
+            for name, w in weights.items():
+                kb = keys.get(name)
+                if kb is None:
+                    continue
+                n += 1
+                for t, x in zip(times, w):
+                    kb.value = x
+                    kb.keyframe_insert("value", frame=start + t * fps)
+            context.scene.frame_end = int(start + times[-1] * fps)
+            self.report({"INFO"}, f"{len(times)} frames keyed on {n} shape keys")
+            return {"FINISHED"}
+
+    class MIMICA_PT_panel(bpy.types.Panel):
+        bl_label = "mimica"
+        bl_space_type = "VIEW_3D"
+        bl_region_type = "UI"
+        bl_category = "mimica"
+
+        def draw(self, context):
+            self.layout.operator(MIMICA_OT_arkit_shape_keys.bl_idname)
+            self.layout.operator(MIMICA_OT_live_link_take.bl_idname)
+
+    _CLASSES = (MimicaPreferences, MIMICA_OT_arkit_shape_keys, MIMICA_OT_live_link_take, MIMICA_PT_panel)
+
+    def register():
+        for c in _CLASSES:
+            bpy.utils.register_class(c)
+
+    def unregister():
+        for c in reversed(_CLASSES):
+            bpy.utils.unregister_class(c)
