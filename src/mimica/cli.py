@@ -110,6 +110,16 @@ def _units_line(mesh, unit: str, asked: str) -> str:
     return f"units: {unit} ({how}), written in metres as glTF wants"
 
 
+def _head_options(p, what: str) -> None:
+    """--show, --match and --cut-mouth, the same on transfer and blendshapes."""
+    p.add_argument("--show", help=f"PNG: the {what} as the transfer sees it (parts, unmatched skin, the mouth "
+                                  "seam, the paired lid rims, the correspondence's confidence)")
+    p.add_argument("--match", choices=["nicp", "cylinder"], default="nicp", help=MATCH_HELP)
+    p.add_argument("--cut-mouth", choices=["auto", "off"], default="auto",
+                   help=f"auto: a {what} whose lips are sealed has them cut apart, so the mouth (jawOpen) can "
+                        "open (its vertices keep their order; the cut's copies come after them)")
+
+
 def _correspondence_line(xfer) -> str:
     """'; correspondence (nicp): 99.8% of the target's skin matched, 2.1% with low confidence'."""
     cor = xfer.correspondence                  # the skin's, when the heads have parts
@@ -712,17 +722,15 @@ def cmd_export(a):
             raise MimicaError(f"{p}: {len(f)} vertices; {paths[0]} has {mesh.n_vertices} (one topology per sequence)")
     out = Path(a.out)
     suf = out.suffix.lower()
-    if suf in (".usd", ".usda", ".usdc"):
+    if suf in (".usd", ".usda", ".usdc", ".glb", ".gltf"):
         base = read_mesh(a.rest) if a.rest else mesh
         if base.n_vertices != mesh.n_vertices:
             raise MimicaError(f"{a.rest}: not the sequence's topology")
+    if suf in (".usd", ".usda", ".usdc"):
         _say(f"{out}: " + _write_clip_usd(out, base, [p.stem for p in paths], np.stack(frames), a.fps, a.units,
                                           a.compact == "auto"))
         return 0
     if suf in (".glb", ".gltf"):
-        base = read_mesh(a.rest) if a.rest else mesh
-        if base.n_vertices != mesh.n_vertices:
-            raise MimicaError(f"{a.rest}: not the sequence's topology")
         with atomic_path(out) as tmp:
             line = _write_clip(tmp, base, [p.stem for p in paths], np.stack(frames), a.fps, a.units,
                                a.compact == "auto", binary=suf == ".glb")
@@ -868,12 +876,7 @@ def build_parser():
     t.add_argument("--target-landmarks", help="68-point landmark JSON of the target (built in for ICT-FaceKit)")
     t.add_argument("--method", choices=["vtc", "dt"], default="vtc",
                    help="vtc: vertex-tent coordinates (Song); dt: Sumner-Popovic deformation transfer")
-    t.add_argument("--show", help="PNG: the target as the transfer sees it (parts, unmatched skin, the mouth "
-                                   "seam, the paired lid rims, the correspondence's confidence)")
-    t.add_argument("--match", choices=["nicp", "cylinder"], default="nicp", help=MATCH_HELP)
-    t.add_argument("--cut-mouth", choices=["auto", "off"], default="auto",
-                   help="auto: a target whose lips are sealed has them cut apart, so the mouth can open "
-                        "(its vertices keep their order; the cut's copies come after them)")
+    _head_options(t, "target")
     t.add_argument("--out", required=True, help="output folder")
     t.set_defaults(func=cmd_transfer)
 
@@ -1007,12 +1010,7 @@ def build_parser():
     bs = sub.add_parser("blendshapes", help="the 52 ARKit blendshapes on any head mesh, as one GLB")
     bs.add_argument("head", help="head mesh (OBJ/PLY/glTF), any topology, neutral")
     bs.add_argument("--landmarks", help="68-point landmark JSON (found automatically otherwise)")
-    bs.add_argument("--show", help="PNG: the head as the transfer sees it (parts, unmatched skin, the mouth "
-                                    "seam, the paired lid rims, the correspondence's confidence)")
-    bs.add_argument("--match", choices=["nicp", "cylinder"], default="nicp", help=MATCH_HELP)
-    bs.add_argument("--cut-mouth", choices=["auto", "off"], default="auto",
-                    help="auto: sealed lips are cut apart so jawOpen opens the mouth (the cut's vertices "
-                         "come after the head's own)")
+    _head_options(bs, "head")
     bs.add_argument("--out", required=True, help="head_arkit.glb (or .usd/.usda/.usdc: UsdSkel blend shapes)")
     bs.add_argument("--units", choices=["auto", "cm", "mm", "m"], default="auto", help=UNITS_HELP)
     bs.set_defaults(func=cmd_blendshapes)

@@ -42,7 +42,7 @@ from ..align import face_cylinder
 from ..errors import MimicaError
 from ..mesh import Mesh
 from ..mesh.query import TriangleLocator, barycentric_2d
-from .register import median_edge, on_boundary, register, rows_of
+from .register import on_boundary, register, rows_of
 
 @dataclass
 class Correspondence:
@@ -198,7 +198,7 @@ def _registered(source: Mesh, source_lm, target: Mesh, target_lm, lookup, contou
         rows, pts = sp.vstack([rows, k * c_rows]).tocsr(), np.vstack([pts, k * c_pts])
     reg = register(source, rows, target, pts)
     tri, bary, _, dist = TriangleLocator(reg.vertices, source.triangles).closest(lookup)
-    h = median_edge(target)
+    h = reg.edge
     beyond = on_boundary(source, tri, bary) & (dist > h)
     ns = np.einsum("ij,ijk->ik", bary, source.vertex_normals(reg.vertices)[source.triangles[tri]])
     ns /= np.maximum(np.linalg.norm(ns, axis=1, keepdims=True), 1e-300)

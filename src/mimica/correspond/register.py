@@ -42,7 +42,6 @@ EXACT = 1.0                                    # without libigl: exact within th
 @dataclass
 class Registration:
     vertices: np.ndarray      # (n_source, 3) the source deformed onto the target
-    support: np.ndarray       # (n_source,) 1 where the target's surface held the vertex in the last step
     edge: float               # the target's median edge length
 
 
@@ -99,4 +98,4 @@ def register(source: Mesh, points: sp.spmatrix, target: Mesh, targets: np.ndarra
             m = (alpha * lap + sp.diags(w) + point_weight * BtB + tie).tocsc()
             solver = SPDSolver(m) if solver is None else solver.refactor(m)
             d = solver.solve(w[:, None] * (cp - v0) + point_weight * Bt_rhs)
-    return Registration(v0 + d, w, h)
+    return Registration(v0 + d, h)
