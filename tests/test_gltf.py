@@ -60,6 +60,8 @@ def written(head_model, full_model, tmp_path_factory):
     from mimica.mesh.io import SPARSE_TOLERANCE
     write_glb(d / "sparse.glb", m, {"rest": m.vertices, "blink": head_model.shape("eyeBlink_R"),
                                     "jaw": head_model.shape("jawOpen")}, sparse=SPARSE_TOLERANCE)
+    write_glb(d / "quantized.glb", m, {"rest": m.vertices, "blink": head_model.shape("eyeBlink_R"),
+                                       "jaw": head_model.shape("jawOpen")}, sparse=SPARSE_TOLERANCE, quantize=True)
     frames = d / "frames"
     frames.mkdir()
     for i, name in enumerate(("mouthSmile_L", "jawOpen", "eyeBlink_R")):
@@ -73,7 +75,7 @@ def written(head_model, full_model, tmp_path_factory):
 
 def test_every_kind_passes_the_validator(written):
     files = sorted(p for p in written.iterdir() if p.suffix in (".glb", ".gltf"))
-    assert len(files) == 8
+    assert len(files) == 9
     for r in validate(files):
         assert r["errors"] == 0 and r["warnings"] == 0, (r["path"], r["messages"])
         assert r["info"]["maxAttributes"] >= 2                       # POSITION and NORMAL
@@ -178,6 +180,42 @@ def test_sparse_targets_keep_what_moves(written, head_model):
         moving = np.linalg.norm(true, axis=1) > SPARSE_TOLERANCE
         np.testing.assert_allclose(got[moving], true[moving], atol=1e-7)
     assert kinds[0] == 1 and kinds[1] is not None and kinds[1] < len(v) / 3, kinds
+
+
+def test_quantized_targets_equal_the_float_ones_within_their_step(written, head_model):
+    """KHR_mesh_quantization: moves as 16-bit normalized metres are within half a step
+    (QUANTIZE_ERROR, 0.015 mm) of the float ones, normal changes within half an 8-bit step; the
+    extension is declared required; mimica's reader gives floats back."""
+    import pygltflib as gl
+    from mimica.mesh.io import QUANTIZATION, QUANTIZE_ERROR, SPARSE_NORMAL, SPARSE_TOLERANCE, _unit_normals
+    m = head_model.mesh
+    g = gl.GLTF2().load(str(written / "quantized.glb"))
+    assert g.extensionsRequired == [QUANTIZATION] and g.extensionsUsed == [QUANTIZATION]
+    prim = g.meshes[0].primitives[0]
+    v = _vertex_of(g)
+    n0 = _unit_normals(m, m.vertices)
+    far_counts = []
+    for t, name in zip(prim.targets[1:], ("eyeBlink_R", "jawOpen")):
+        shape = head_model.shape(name)
+        pos, nrm = g.accessors[t["POSITION"]], g.accessors[t["NORMAL"]]
+        assert (pos.componentType, pos.normalized) == (gl.SHORT, True)
+        assert (nrm.componentType, nrm.normalized) == (gl.BYTE, True)
+        n1 = _unit_normals(m, shape)[v]
+        dn = n1 - n0[v]
+        got = _accessor(g, t["NORMAL"])
+        turned = np.linalg.norm(dn, axis=1) > SPARSE_NORMAL
+        near = turned & (np.abs(dn).max(1) <= 1)               # a change normalized bytes hold
+        assert np.abs(got[near] - dn[near]).max() <= 0.5 / 127 + 1e-6
+        # a normal turned past their reach: at full weight the viewer's normal still points near n1
+        far = np.abs(dn).max(1) > 1
+        r = n0[v][far] + got[far]
+        cos = (r * n1[far]).sum(1) / np.linalg.norm(r, axis=1)
+        far_counts.append(int(far.sum()))
+        assert far.sum() < 0.01 * len(v) and (cos > np.cos(np.radians(45))).all() and np.median(cos) > 0.999
+    assert max(far_counts) > 0                                   # the blink turns some lid normals over
+    # against the same targets in floats (sparse.glb), over the bare mesh (head.glb): the targets' bytes halve
+    size = {n: (written / f"{n}.glb").stat().st_size for n in ("quantized", "sparse", "head")}
+    assert size["quantized"] - size["head"] < 0.6 * (size["sparse"] - size["head"]), size
 
 
 def test_a_clip_as_a_few_basis_shapes(head_model, tmp_path, capsys):

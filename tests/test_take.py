@@ -11,6 +11,7 @@ import pytest
 
 from mimica.cli import main
 from mimica.export import ARKIT_52
+from test_gltf import validate
 
 ROTATIONS = ["HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
              "RightEyeYaw", "RightEyePitch", "RightEyeRoll"]
@@ -56,7 +57,7 @@ def test_live_link_take_plays_on_the_head(head_glb, tmp_path, capsys):
     got = _gltf_accessor(g, s.output).reshape(frames, len(names))
     for j, n in enumerate(names):
         np.testing.assert_allclose(got[:, j], w[:, ARKIT_52.index(n)], atol=1e-6)
-    from test_gltf import validate
+
     r = validate([tmp_path / "t.glb"])[0]
     assert r["errors"] == 0 and r["warnings"] == 0, r["messages"]
 
@@ -100,3 +101,135 @@ def test_bad_takes_say_one_line_and_write_nothing(head_glb, tmp_path, capsys, da
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and said in err[0] and "take.csv" in err[0], err
     assert not out.exists()
+
+
+def _turning_take(path, frames=40):
+    """A Live Link take whose head turns: yaw up to 0.5 rad, pitch 0.3, roll 0.2."""
+    live_link_csv(path, np.full((frames, 52), 0.1))
+    lines = Path(path).read_text().splitlines()
+    col = lines[0].split(",").index("HeadYaw")
+    out = [lines[0]]
+    for f, ln in enumerate(lines[1:]):
+        c = ln.split(",")
+        c[col:col + 3] = [f"{0.5 * np.sin(f / 7):.6f}", f"{0.3 * np.sin(f / 5):.6f}", f"{0.2 * np.cos(f / 9):.6f}"]
+        out.append(",".join(c))
+    Path(path).write_text("\n".join(out) + "\n")
+    f = np.arange(frames)
+    return 0.5 * np.sin(f / 7), 0.3 * np.sin(f / 5), 0.2 * np.cos(f / 9)
+
+
+def _skinned(g, frame):
+    """The file's base positions skinned as a glTF viewer does (joint world matrix x inverse bind,
+    blended by WEIGHTS_0) with the head joint's rotation at keyframe `frame`; morphs left out."""
+    from scipy.spatial.transform import Rotation
+    from mimica.mesh.io import _gltf_accessor
+    prim = g.meshes[0].primitives[0]
+    pos = _gltf_accessor(g, prim.attributes.POSITION).astype(float)
+    joints = _gltf_accessor(g, prim.attributes.JOINTS_0).astype(int)
+    wts = _gltf_accessor(g, prim.attributes.WEIGHTS_0)
+    skin = g.skins[0]
+    neck, head = (g.nodes[j] for j in skin.joints)
+    ibm = _gltf_accessor(g, skin.inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1)   # column-major
+    rot = g.animations[0].channels[1]
+    q = _gltf_accessor(g, g.animations[0].samplers[rot.sampler].output)[frame]
+    t = np.eye(4)
+    t[:3, 3] = neck.translation
+    r = np.eye(4)
+    r[:3, :3] = Rotation.from_quat(q).as_matrix()
+    world = [t, t @ r]
+    mats = np.stack([world[j] @ ibm[j] for j in range(2)])
+    ph = np.c_[pos, np.ones(len(pos))]
+    out = sum(wts[:, k, None] * np.einsum("nij,nj->ni", mats[joints[:, k]], ph) for k in range(4))
+    return pos, out[:, :3], wts, q
+
+
+@pytest.fixture(scope="module")
+def ict_head_glb(tmp_path_factory, head_model):
+    """ICT's head with its neck and shoulders' start, as `blendshapes` writes it."""
+    from mimica.mesh import write_mesh
+    d = tmp_path_factory.mktemp("neck")
+    write_mesh(d / "ict.obj", head_model.mesh)
+    assert main(["blendshapes", str(d / "ict.obj"), "--out", str(d / "ict_arkit.glb"), "--quantize"]) == 0
+    return d / "ict_arkit.glb"
+
+
+def test_head_rotation_turns_the_head_and_bends_the_neck(ict_head_glb, tmp_path, capsys):
+    """--head-rotation: a skin of two joints at the stored pivot; its rotation keys are the take's
+    yaw, pitch, roll; at rest the skin leaves every vertex where it was; turned, the head above
+    the chin moves rigidly about the pivot, the lowest vertices stay, the neck between bends."""
+    import pygltflib as gl
+    from scipy.spatial.transform import Rotation
+    from mimica.export.take import HEAD_KEY, head_quaternions
+    yaw, pitch, roll = _turning_take(tmp_path / "take.csv")
+    capsys.readouterr()
+    out = tmp_path / "turn.glb"
+    assert main(["animate", str(ict_head_glb), "--arkit", str(tmp_path / "take.csv"), "--out", str(out),
+                 "--head-rotation"]) == 0
+    said = capsys.readouterr().err
+    assert "the head turns (up to yaw 29, pitch 17, roll 11 degrees)" in said and "bending with the neck" in said, said
+    g = gl.GLTF2().load(str(out))
+    stored = g.meshes[0].extras[HEAD_KEY]
+    assert g.nodes[g.skins[0].joints[0]].translation == pytest.approx(stored["pivot"])
+    from mimica.mesh.io import _gltf_accessor
+    keys = _gltf_accessor(g, g.animations[0].samplers[1].output)
+    want = head_quaternions(yaw, pitch, roll)
+    assert np.allclose(np.abs((keys * want).sum(1)), 1, atol=1e-6)             # the same rotations
+    assert (np.sum(keys[1:] * keys[:-1], 1) > 0).all()                          # slerp takes the short way
+    pos, moved, wts, q = _skinned(g, int(np.argmax(np.abs(yaw))))
+    assert np.allclose(wts.sum(1), 1, atol=1e-6)
+    R = Rotation.from_quat(q).as_matrix()
+    p = np.asarray(stored["pivot"])
+    chin_y = stored["chin"][1]
+    head = pos[:, 1] >= chin_y
+    assert np.allclose(moved[head], (pos[head] - p) @ R.T + p, atol=1e-6)      # rigid about the pivot
+    low = wts[:, 0] == 0
+    assert low.any() and np.allclose(moved[low], pos[low], atol=1e-9)           # the shoulders stay
+    bend = (wts[:, 0] > 0) & (wts[:, 0] < 1)
+    assert bend.sum() > 100 and (pos[bend, 1] < chin_y).all()
+    r = validate([out])[0]
+    assert r["errors"] == 0 and r["warnings"] == 0, r["messages"]
+
+
+def test_head_rotation_at_rest_moves_nothing(ict_head_glb, tmp_path):
+    """Angles of zero: the skinned head is exactly the head."""
+    import pygltflib as gl
+    live_link_csv(tmp_path / "still.csv", np.zeros((3, 52)))
+    text = (tmp_path / "still.csv").read_text().replace(",0.01", ",0.0")
+    (tmp_path / "still.csv").write_text(text)
+    out = tmp_path / "still.glb"
+    assert main(["animate", str(ict_head_glb), "--arkit", str(tmp_path / "still.csv"), "--out", str(out),
+                 "--head-rotation"]) == 0
+    pos, moved, _, _ = _skinned(gl.GLTF2().load(str(out)), 1)
+    assert np.abs(moved - pos).max() < 1e-7
+
+
+def test_head_rotation_needs_its_columns_and_a_pivot(head_glb, ict_head_glb, tmp_path, capsys):
+    """No head columns, an old GLB without a pivot, a bad --pivot: one line each, nothing written;
+    a face without a neck (the 468-vertex head) turns whole; without the flag the head stays."""
+    import pygltflib as gl
+    lines = [",".join(["time"] + ARKIT_52)] + [",".join([f"{t / 30:.4f}"] + ["0"] * 52) for t in range(4)]
+    (tmp_path / "w.csv").write_text("\n".join(lines))
+    _turning_take(tmp_path / "take.csv", 6)
+    old = tmp_path / "old.glb"
+    g = gl.GLTF2().load(str(ict_head_glb))
+    g.meshes[0].extras.pop("mimica_head")
+    g.save_binary(str(old))
+    for args, said in [(["--arkit", str(tmp_path / "w.csv"), "--head-rotation"], "no HeadYaw, HeadPitch and HeadRoll"),
+                       (["--arkit", str(tmp_path / "take.csv"), "--head-rotation"], "no head pivot stored"),
+                       (["--arkit", str(tmp_path / "take.csv"), "--head-rotation", "--pivot", "0,1"], "--pivot '0,1'")]:
+        out = tmp_path / "bad.glb"
+        capsys.readouterr()
+        assert main(["animate", str(old if "pivot stored" in said else ict_head_glb), *args, "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and said in err[0], err
+        assert not out.exists()
+    assert main(["animate", str(old), "--arkit", str(tmp_path / "take.csv"), "--head-rotation",
+                 "--pivot", "0,0.02,0", "--out", str(tmp_path / "p.glb")]) == 0
+    assert "about (0.000, 0.020, 0.000) m, whole" in capsys.readouterr().err
+    assert main(["animate", str(head_glb), "--arkit", str(tmp_path / "take.csv"), "--head-rotation",
+                 "--out", str(tmp_path / "face.glb")]) == 0
+    said = capsys.readouterr().err
+    assert "whole" in said, said
+    assert main(["animate", str(head_glb), "--arkit", str(tmp_path / "take.csv"), "--out", str(tmp_path / "s.glb")]) == 0
+    assert "the head stays still" in capsys.readouterr().err
+    assert gl.GLTF2().load(str(tmp_path / "s.glb")).skins == []

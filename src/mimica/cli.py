@@ -45,6 +45,9 @@ def _landmarks(mesh, path, flag, what):
         raise
 
 
+QUANTIZE_HELP = ("glTF: morph targets as 16-bit moves and 8-bit normal changes (KHR_mesh_quantization, "
+                 "within 0.015 mm; about half the size; the viewer must know the extension: three.js, "
+                 "Blender and Babylon.js do)")
 UNITS_HELP = ("the unit of the input's coordinates; glTF files are in metres (auto: a head up to 3 units "
               "tall is in metres, up to 100 in cm, taller in mm)")
 MATCH_HELP = ("across topologies, how target vertices find their source partners: nicp, a non-rigid "
@@ -54,7 +57,7 @@ MATCH_HELP = ("across topologies, how target vertices find their source partners
 CLIP_MAX_ERROR_M = 1e-4          # a compact clip's bound: 0.1 mm, in metres
 
 
-def _write_clip(path, rest, names, frames, fps, units="auto", compact=True, binary=True) -> str:
+def _write_clip(path, rest, names, frames, fps, units="auto", compact=True, binary=True, quantize=False) -> str:
     """A clip as one GLB: a few basis shapes and per-frame weights where that keeps every
     vertex within 0.1 mm (export.compact), else one morph target per frame.  Returns what to say."""
     from .export.compact import compact_clip
@@ -64,16 +67,16 @@ def _write_clip(path, rest, names, frames, fps, units="auto", compact=True, bina
     c = compact_clip(rest.vertices, frames, CLIP_MAX_ERROR_M / k) if compact else None
     if c is None:
         info = write_glb(path, rest, dict(zip(names, frames)), binary=binary, fps=fps, units=units,
-                         sparse=SPARSE_TOLERANCE)
+                         sparse=SPARSE_TOLERANCE, quantize=quantize)
         how = f"{len(frames)} frames as morph targets" + (" (no smaller basis within 0.1 mm)" if compact else "")
     else:
         shapes = {f"basis_{j:02d}": rest.vertices + b for j, b in enumerate(c.basis)}
         info = write_glb(path, rest, shapes, binary=binary, fps=fps, units=units, weights=c.weights,
-                         extras={"frames": list(names), "maxErrorMetres": c.max_error * k})
+                         extras={"frames": list(names), "maxErrorMetres": c.max_error * k}, quantize=quantize)
         how = (f"{len(frames)} frames as {len(shapes)} basis shapes and their weights (largest error "
                f"{c.max_error * k * 1e3:.3f} mm, bound 0.1 mm)")
     return (f"{how}, one animation at {fps:g} fps; " + _units_line(rest, info["units"], units) + "; "
-            + f"{Path(path).stat().st_size / 1e6:.1f} MB")
+            + _quantized_line(info) + f"{Path(path).stat().st_size / 1e6:.1f} MB")
 
 
 def _write_clip_usd(path, rest, names, frames, fps, units="auto", compact=True) -> str:
@@ -96,11 +99,29 @@ def _write_clip_usd(path, rest, names, frames, fps, units="auto", compact=True) 
             f"{Path(path).stat().st_size / 1e6:.1f} MB")
 
 
+def _floats(text: str, n: int, flag: str) -> list[float]:
+    """'0,1.5,-0.1' -> [0.0, 1.5, -0.1]: n finite numbers, or a MimicaError naming the flag."""
+    try:
+        vals = [float(x) for x in text.split(",")]
+    except ValueError:
+        vals = []
+    if len(vals) != n or not np.isfinite(vals).all():
+        raise MimicaError(f"{flag} {text!r}: expected {n} finite numbers separated by commas")
+    return vals
+
+
 def _sparse_line(path, info: dict, n: int) -> str:
     """'34 of 52 morph targets sparse (moves under 0.01 mm left out), 4.2 MB'."""
     from .mesh.io import SPARSE_TOLERANCE
     return (f"{info['sparse']} of {n} morph targets sparse (moves under {SPARSE_TOLERANCE * 1e3:g} mm left out), "
-            f"{Path(path).stat().st_size / 1e6:.1f} MB")
+            + _quantized_line(info) + f"{Path(path).stat().st_size / 1e6:.1f} MB")
+
+
+def _quantized_line(info: dict) -> str:
+    """'52 quantized (KHR_mesh_quantization, moves within 0.015 mm), ' or nothing."""
+    from .mesh.io import QUANTIZATION, QUANTIZE_ERROR
+    return (f"{info['quantized']} quantized ({QUANTIZATION}, moves within {QUANTIZE_ERROR * 1e3:.3f} mm), "
+            if info.get("quantized") else "")
 
 
 def _units_line(mesh, unit: str, asked: str) -> str:
@@ -733,7 +754,7 @@ def cmd_export(a):
     if suf in (".glb", ".gltf"):
         with atomic_path(out) as tmp:
             line = _write_clip(tmp, base, [p.stem for p in paths], np.stack(frames), a.fps, a.units,
-                               a.compact == "auto", binary=suf == ".glb")
+                               a.compact == "auto", binary=suf == ".glb", quantize=a.quantize)
         _say(f"{out}: {line}")
         return 0
     if suf:
@@ -758,10 +779,18 @@ def cmd_animate(a):
     if not head.is_file():
         raise MimicaError(f"{head}: no such file")
     times, weights, rate = read_take(a.arkit, fps=a.fps)
+    pivot = _floats(a.pivot, 3, "--pivot") if a.pivot else None
     with atomic_path(out) as tmp:
-        n = animate_glb(head, tmp, times, weights)
-    _say(f"{a.arkit}: {len(times)} frames over {times[-1]:.2f}s ({rate:.3g} fps) drive {n} morph targets of "
-         f"{head.name} -> {out}")
+        info = animate_glb(head, tmp, times, weights, head_rotation=a.head_rotation, pivot=pivot)
+    if info["pivot"] is not None:
+        turn = np.degrees(np.abs([weights[n] for n in ("headYaw", "headPitch", "headRoll")]).max(1))
+        head_line = (f"; the head turns (up to yaw {turn[0]:.0f}, pitch {turn[1]:.0f}, roll {turn[2]:.0f} degrees) "
+                     f"about ({', '.join(f'{x:.3f}' for x in info['pivot'])}) m, "
+                     + (f"{info['bending']} vertices bending with the neck" if info["bending"] else "whole"))
+    else:
+        head_line = "; the head stays still (--head-rotation turns it)" if "headYaw" in weights else ""
+    _say(f"{a.arkit}: {len(times)} frames over {times[-1]:.2f}s ({rate:.3g} fps) drive {info['driven']} morph "
+         f"targets of {head.name}{head_line} -> {out}")
     return 0
 
 
@@ -791,9 +820,14 @@ def cmd_blendshapes(a):
         info = write_usd(out, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, units=a.units)
         _say(f"units: {info['units']} (metersPerUnit set, y up); {out.stat().st_size / 1e6:.1f} MB")
     else:
+        from .export.take import HEAD_KEY, head_joint
+        from .mesh.io import glb_units
+        joint = head_joint(shapes.mesh, shapes.landmarks)   # where `animate --head-rotation` turns it
+        k = glb_units(shapes.mesh, a.units)[1]
+        extras = {} if joint is None else {HEAD_KEY: {n: (k * p).tolist() for n, p in joint.items()}}
         with atomic_path(out) as tmp:
             info = write_glb(tmp, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb",
-                             units=a.units, sparse=SPARSE_TOLERANCE)
+                             units=a.units, sparse=SPARSE_TOLERANCE, quantize=a.quantize, extras=extras)
         _say(_units_line(shapes.mesh, info["units"], a.units) + "; " + _sparse_line(out, info, len(ARKIT_52)))
     if a.show:
         from .render import save_png
@@ -997,6 +1031,7 @@ def build_parser():
     ex.add_argument("--compact", choices=["auto", "off"], default="auto",
                     help="auto: the clip as a few basis shapes and per-frame weights when that keeps every "
                          "vertex within 0.1 mm (far smaller files); off: one morph target per frame")
+    ex.add_argument("--quantize", action="store_true", help=QUANTIZE_HELP)
     ex.set_defaults(func=cmd_export)
 
     an = sub.add_parser("animate", help="play an ARKit take (a Live Link Face CSV) on a head's ARKit blendshapes")
@@ -1004,6 +1039,11 @@ def build_parser():
     an.add_argument("--arkit", required=True, help="the take: a Live Link Face CSV (Timecode, BlendShapeCount, the "
                                                   "52 weights ...) or a CSV of the 52 weights with a time column")
     an.add_argument("--fps", type=float, help="the frame rate of a Timecode column (default: from its frame numbers)")
+    an.add_argument("--head-rotation", action="store_true",
+                    help="also turn the head by the take's HeadYaw, HeadPitch, HeadRoll (radians)")
+    an.add_argument("--pivot", help="x,y,z in metres, in the GLB's frame: the point the head turns about "
+                                    "(default: the one `blendshapes` placed from the landmarks, with the neck "
+                                    "bending below the chin)")
     an.add_argument("--out", required=True, help="take.glb: the head with the take as an animation")
     an.set_defaults(func=cmd_animate)
 
@@ -1013,6 +1053,7 @@ def build_parser():
     _head_options(bs, "head")
     bs.add_argument("--out", required=True, help="head_arkit.glb (or .usd/.usda/.usdc: UsdSkel blend shapes)")
     bs.add_argument("--units", choices=["auto", "cm", "mm", "m"], default="auto", help=UNITS_HELP)
+    bs.add_argument("--quantize", action="store_true", help=QUANTIZE_HELP)
     bs.set_defaults(func=cmd_blendshapes)
 
     vw = sub.add_parser("view", help="a live viewer in the browser: muscles, facial actions, age, presets, "

@@ -16,7 +16,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MimicaError
+from ..mesh.io import _gltf_accessor
 from .blendshapes import ARKIT_52
+
+
+HEAD_ROTATION = ["headYaw", "headPitch", "headRoll"]     # Live Link Face: radians (ARKit's Euler angles)
+HEAD_KEY = "mimica_head"     # mesh extras: {"pivot", "chin"}, metres, where the head turns (blendshapes)
 
 
 def _timecode(text: str) -> tuple[float, float]:
@@ -30,7 +35,8 @@ def _timecode(text: str) -> tuple[float, float]:
 
 def read_take(path, fps: float | None = None) -> tuple[np.ndarray, dict, float]:
     """(times in seconds from the take's start (F,), {ARKit name: weights (F,)}, frame rate)
-    of a take CSV (the rate: the Timecode's, or the median of a time column's steps).
+    of a take CSV (the rate: the Timecode's, or the median of a time column's steps).  The
+    head's rotation, where the take has it, comes as headYaw, headPitch, headRoll (radians).
 
     fps: the frame rate of a Timecode column (default: one more than the largest frame number
     in the take, e.g. 60 for frames 0-59)."""
@@ -66,7 +72,8 @@ def read_take(path, fps: float | None = None) -> tuple[np.ndarray, dict, float]:
         else:
             times = np.array([float(r[tcol]) for r in body])
             rate = None
-        weights = {n: np.array([float(r[by_name[n]]) for r in body]) for n in ARKIT_52}
+        weights = {n: np.array([float(r[by_name[n]]) for r in body]) for n in ARKIT_52 + HEAD_ROTATION
+                   if n in by_name}
     except ValueError as e:
         raise MimicaError(f"{path}: a value that is not a number or a timecode ({e})") from None
     bad = [n for n, w in weights.items() if not np.isfinite(w).all()]
@@ -82,10 +89,58 @@ def read_take(path, fps: float | None = None) -> tuple[np.ndarray, dict, float]:
     return times - times[0], weights, rate
 
 
-def animate_glb(head_glb, out, times: np.ndarray, weights: dict) -> int:
+def head_quaternions(yaw, pitch, roll) -> np.ndarray:
+    """(F, 4) glTF quaternions (x, y, z, w) of the head's rotation: yaw about the head's up (y),
+    pitch about its left-right axis (x), roll about its forward axis (z), turned in that order
+    (R = Ry Rx Rz, right-handed, the face looking along +z as mimica's heads do)."""
+    from scipy.spatial.transform import Rotation
+    q = Rotation.from_euler("YXZ", np.stack([yaw, pitch, roll], 1)).as_quat()
+    # q and -q are one rotation: keep each next to the last, so that glTF's slerp between
+    # keyframes takes the short way
+    flip = np.r_[False, (q[1:] * q[:-1]).sum(1) < 0]
+    return (q * np.where(np.logical_xor.accumulate(flip), -1.0, 1.0)[:, None]).astype(np.float32)
+
+
+def head_joint(mesh, landmarks) -> dict | None:
+    """Where a head turns, from its 68 landmarks: {"pivot": the top of the neck (near the
+    atlanto-occipital joint): level with the jaw outline under the ears (points 1, 2, 14, 15),
+    a third of the face's width (0 to 16) behind them; "chin": point 8} -- a mimica estimate,
+    not measured on anatomy.  None where those landmarks are missing."""
+    p = landmarks.positions(mesh)
+    if np.isnan(p[[0, 1, 2, 8, 14, 15, 16, 30]]).any():
+        return None
+    ears = p[[1, 2, 14, 15]].mean(0)
+    across = p[16] - p[0]
+    width = float(np.linalg.norm(across))
+    forward = p[30] - (p[0] + p[16]) / 2
+    forward -= forward @ across / width ** 2 * across                  # square to the ears' line
+    forward /= max(np.linalg.norm(forward), 1e-12)
+    return {"pivot": ears - width / 3 * forward, "chin": p[8]}
+
+
+def neck_weights(y: np.ndarray, pivot_y: float, chin_y: float | None) -> np.ndarray:
+    """How much each vertex turns with the head (0..1) from its height y: 1 from the chin up,
+    easing (smoothstep) to 0 at the mesh's lowest point, so that a neck bends and the shoulders
+    stay; a face that ends at its chin (no neck below it) turns whole."""
+    top = pivot_y - 1.2 * (pivot_y - chin_y) if chin_y is not None else pivot_y
+    bottom = float(y.min())
+    if chin_y is None or top - bottom < 0.25 * (pivot_y - chin_y):
+        return np.ones(len(y))
+    t = np.clip((y - bottom) / (top - bottom), 0.0, 1.0)
+    return t * t * (3 - 2 * t)
+
+
+def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: bool = False,
+                pivot=None) -> dict:
     """Write `out`: the head's GLB with an animation of its morph targets' weights (one
-    keyframe per time; targets the take does not name stay at 0).  Returns how many of the
-    head's targets the take drives."""
+    keyframe per time; targets the take does not name stay at 0).
+
+    head_rotation: also turn the head by the take's headYaw/headPitch/headRoll, as a skin of two
+    joints (neck, head) at the pivot: the head turns whole, the neck below the chin bends
+    (neck_weights), the shoulders stay.  The pivot is `pivot` (metres, in the file's frame), else
+    the one `blendshapes` stored (HEAD_KEY); a GLB without one needs `pivot` (it then turns whole).
+    Returns {"driven": how many of the head's targets the take drives, "pivot": the pivot used or
+    None, "bending": how many vertices bend with the neck}."""
     import pygltflib as gl
     head_glb = Path(head_glb)
     try:
@@ -99,6 +154,8 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict) -> int:
     driven = [n for n in names if n in weights]
     if not driven:
         raise MimicaError(f"{head_glb}: none of its morph targets is an ARKit shape")
+    if head_rotation and not all(n in weights for n in HEAD_ROTATION):
+        raise MimicaError("the take has no HeadYaw, HeadPitch and HeadRoll columns to turn the head by")
     w = np.zeros((len(times), len(names)), np.float32)
     for j, n in enumerate(names):
         if n in weights:
@@ -110,23 +167,72 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict) -> int:
     if len(g.buffers) != 1 or g.buffers[0].uri is not None:
         raise MimicaError(f"{head_glb}: a .glb with one embedded buffer is needed (as `blendshapes` writes)")
 
-    def add(arr, minmax=False):
+    def add(arr, minmax=False, kind=gl.SCALAR):
         arr = np.ascontiguousarray(arr, np.float32)
         blob.extend(b"\0" * ((-len(blob)) % 4))
         g.bufferViews.append(gl.BufferView(buffer=0, byteOffset=len(blob), byteLength=arr.nbytes))
         blob.extend(arr.tobytes())
-        a = gl.Accessor(bufferView=len(g.bufferViews) - 1, componentType=gl.FLOAT, count=arr.size, type=gl.SCALAR)
+        a = gl.Accessor(bufferView=len(g.bufferViews) - 1, componentType=gl.FLOAT, count=len(arr), type=kind)
         if minmax:
             a.min, a.max = [float(arr.min())], [float(arr.max())]
         g.accessors.append(a)
         return len(g.accessors) - 1
 
+    def add_raw(arr, comp, kind, normalized=False):
+        """A vertex attribute of integers (its view 4-byte aligned, as glTF wants)."""
+        arr = np.ascontiguousarray(arr)
+        blob.extend(b"\0" * ((-len(blob)) % 4))
+        g.bufferViews.append(gl.BufferView(buffer=0, byteOffset=len(blob), byteLength=arr.nbytes,
+                                           target=gl.ARRAY_BUFFER))
+        blob.extend(arr.tobytes())
+        g.accessors.append(gl.Accessor(bufferView=len(g.bufferViews) - 1, componentType=comp, count=len(arr),
+                                       type=kind, normalized=True if normalized else None))
+        return len(g.accessors) - 1
+
     it = add(times, True)
     iw = add(w.reshape(-1))
-    g.animations = [gl.Animation(name=Path(out).stem, samplers=[gl.AnimationSampler(input=it, output=iw,
-                                                                                   interpolation="LINEAR")],
-                                 channels=[gl.AnimationChannel(sampler=0, target=gl.AnimationChannelTarget(
-                                     node=node, path="weights"))])]
+    samplers = [gl.AnimationSampler(input=it, output=iw, interpolation="LINEAR")]
+    channels = [gl.AnimationChannel(sampler=0, target=gl.AnimationChannelTarget(node=node, path="weights"))]
+    used_pivot, bending = None, 0
+    if head_rotation:
+        stored = (mesh.extras or {}).get(HEAD_KEY) or {}
+        pivot = pivot if pivot is not None else stored.get("pivot")
+        if pivot is None:
+            raise MimicaError(f"{head_glb}: no head pivot stored (made by an older mimica?): say where the head "
+                              "turns (x,y,z in metres)")
+        used_pivot = [float(x) for x in pivot]
+        nd = g.nodes[node]
+        if nd.rotation or nd.scale or nd.matrix or nd.translation or nd.skin is not None:
+            raise MimicaError(f"{head_glb}: its mesh's node is placed or skinned already; the head can only be "
+                              "turned on a mesh as `blendshapes` writes it")
+        # glTF skin (2.0 3.7.3): JOINTS_0 / WEIGHTS_0 on every vertex, joint 0 the neck (still),
+        # joint 1 the head beneath it, both at the pivot (inverse bind: minus the pivot)
+        prim0 = mesh.primitives[0]
+        y = _gltf_accessor(g, prim0.attributes.POSITION)[:, 1].astype(np.float64)
+        chin = stored.get("chin")
+        wh = neck_weights(y, used_pivot[1], None if chin is None else float(chin[1]))
+        bending = int(((wh > 0) & (wh < 1)).sum())
+        head_b = np.rint(wh * 255).astype(np.uint8)
+        zero = np.zeros_like(head_b)
+        # the head's weight first; a joint without weight is joint 0 (the validator's rule)
+        iw_ = add_raw(np.stack([head_b, 255 - head_b, zero, zero], 1), gl.UNSIGNED_BYTE, gl.VEC4, normalized=True)
+        ij_ = add_raw(np.stack([(head_b > 0).astype(np.uint8), zero, zero, zero], 1), gl.UNSIGNED_BYTE, gl.VEC4)
+        for pr in mesh.primitives:
+            pr.attributes.JOINTS_0, pr.attributes.WEIGHTS_0 = ij_, iw_
+        q = head_quaternions(weights["headYaw"], weights["headPitch"], weights["headRoll"])
+        g.nodes.append(gl.Node(name="neck", translation=used_pivot, children=[len(g.nodes) + 1]))
+        g.nodes.append(gl.Node(name="head", rotation=q[0].tolist()))
+        neck, turn = len(g.nodes) - 2, len(g.nodes) - 1
+        ibm = np.tile(np.eye(4, dtype=np.float32), (2, 1, 1))
+        ibm[:, 3, :3] = -np.asarray(used_pivot, np.float32)           # column-major: translation last
+        g.skins = [gl.Skin(name="neck", joints=[neck, turn], skeleton=neck,
+                           inverseBindMatrices=add(ibm.reshape(2, 16), kind=gl.MAT4))]
+        nd.skin = 0
+        for sc in g.scenes:
+            sc.nodes = list(sc.nodes) + [neck]
+        samplers.append(gl.AnimationSampler(input=it, output=add(q, kind=gl.VEC4), interpolation="LINEAR"))
+        channels.append(gl.AnimationChannel(sampler=1, target=gl.AnimationChannelTarget(node=turn, path="rotation")))
+    g.animations = [gl.Animation(name=Path(out).stem, samplers=samplers, channels=channels)]
     blob.extend(b"\0" * ((-len(blob)) % 4))
     for a in g.accessors:          # pygltflib reads a missing byteOffset as 0: sparse accessors have none
         if a.bufferView is None:
@@ -134,4 +240,4 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict) -> int:
     g.buffers[0].byteLength = len(blob)
     g.set_binary_blob(bytes(blob))
     g.save_binary(str(out))
-    return len(driven)
+    return {"driven": len(driven), "pivot": used_pivot, "bending": bending}

@@ -312,7 +312,7 @@ def _read_gltf(path: Path) -> Mesh:
 
 
 _COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
-_NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+_NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
 
 def _gltf_buffer(g, i) -> bytes:
@@ -321,22 +321,28 @@ def _gltf_buffer(g, i) -> bytes:
 
 
 def _gltf_accessor(g, index) -> np.ndarray:
+    """The accessor's rows; normalized integers (KHR_mesh_quantization) as the floats they stand for."""
     acc = g.accessors[index]
     if acc.sparse is not None:                    # zeros (or its buffer view), then the listed rows
         dt, nc = np.dtype(_COMPONENT[acc.componentType]), _NCOMP[acc.type]
         out = np.zeros((acc.count, nc), dt) if acc.bufferView is None else \
-            _gltf_accessor_dense(g, acc).reshape(acc.count, nc).copy()
+            _gltf_accessor_raw(g, acc).reshape(acc.count, nc).copy()
         sp_ = acc.sparse
         iv, vv = g.bufferViews[sp_.indices.bufferView], g.bufferViews[sp_.values.bufferView]
         rows = np.frombuffer(_gltf_buffer(g, iv.buffer), _COMPONENT[sp_.indices.componentType], sp_.count,
                              (iv.byteOffset or 0) + (sp_.indices.byteOffset or 0))
         out[rows.astype(np.int64)] = np.frombuffer(_gltf_buffer(g, vv.buffer), dt, sp_.count * nc,
                                                    (vv.byteOffset or 0) + (sp_.values.byteOffset or 0)).reshape(-1, nc)
-        return out.squeeze(-1) if nc == 1 else out
-    return _gltf_accessor_dense(g, acc)
+        out = out.squeeze(-1) if nc == 1 else out
+    else:
+        out = _gltf_accessor_raw(g, acc)
+    if acc.normalized and out.dtype.kind in "iu":  # glTF 2.0 3.11: c / (2^b - 1) or max(c / (2^(b-1) - 1), -1)
+        top = float(np.iinfo(out.dtype).max)
+        out = out / top if out.dtype.kind == "u" else np.maximum(out / top, -1.0)
+    return out
 
 
-def _gltf_accessor_dense(g, acc) -> np.ndarray:
+def _gltf_accessor_raw(g, acc) -> np.ndarray:
     view = g.bufferViews[acc.bufferView]
     data = _gltf_buffer(g, view.buffer)
     dt = np.dtype(_COMPONENT[acc.componentType])
@@ -353,6 +359,8 @@ VERTEX_MAP = "mimica_vertex_of"     # primitive extras: buffer view of uint32, f
 UNITS_KEY = "mimica_units"          # primitive extras: the mesh's own unit (the file is in metres)
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 SPARSE_TOLERANCE = 1e-5             # metres: 0.01 mm, below what a morph target's vertex counts as still
+QUANTIZATION = "KHR_mesh_quantization"
+QUANTIZE_ERROR = 0.5 / 32767          # metres: the largest error of a quantized move, per axis
 SPARSE_NORMAL = 1e-3                # the change of a unit normal below which it counts as unturned
 
 
@@ -390,8 +398,26 @@ def _unit_normals(mesh: Mesh, vertices: np.ndarray) -> np.ndarray:
     return n
 
 
+def _reachable_normal_change(n0: np.ndarray, n1: np.ndarray) -> np.ndarray:
+    """The change of each unit normal n0 -> n1 as 8-bit normalized integers hold it (within +-1
+    per axis, steps of 1/127).  A normal that turns far (a lid's or lip's inner shell: ICT's
+    eyeBlink_R turns 85 of its normals past the reach of n1 - n0) takes lambda n1 - n0 instead,
+    the lambda in (0, 1] whose stored change points n0 + dn nearest n1: viewers normalize
+    n0 + w dn, so at full weight it points along n1 (to within some degrees for the few turned
+    nearly 180 degrees, where no change within +-1 does)."""
+    dn = n1 - n0
+    far = np.abs(dn).max(1) > 1.0
+    if far.any():
+        lam = np.linspace(0.02, 1.0, 50)[:, None, None]
+        cand = np.rint(np.clip(lam * n1[far][None] - n0[far][None], -1.0, 1.0) * 127) / 127
+        r = n0[far][None] + cand
+        cos = (r * n1[far][None]).sum(2) / np.maximum(np.linalg.norm(r, axis=2), 1e-12)
+        dn[far] = cand[cos.argmax(0), np.arange(far.sum())]
+    return dn
+
+
 def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None, units: str = "auto",
-              sparse: float | None = None, weights=None, extras: dict | None = None) -> dict:
+              sparse: float | None = None, weights=None, extras: dict | None = None, quantize: bool = False) -> dict:
     """Write a triangulated mesh, optionally with named morph targets {name: (n,3) positions}.
 
     fps: also write an animation that plays the morph targets in order, one per frame at
@@ -406,6 +432,8 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
     weights: with fps, the animation's weights per frame (F, number of targets) instead of one
     target per frame (a clip as a few basis shapes, export.compact).
     extras: more of the mesh's extras (with targetNames).
+    quantize: morph targets in KHR_mesh_quantization's normalized integers (moves to 0.015 mm,
+    QUANTIZE_ERROR; about half the size), the extension then required of readers.
     """
     import pygltflib as gl
     # glTF keeps one uv per vertex: a vertex on a uv seam is written once per uv it has, and the
@@ -416,38 +444,62 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
     t = t.astype(np.uint32)
     blobs, views, accs = [], [], []
 
-    def add(arr, target, acc_type, comp, minmax=False):
+    def add(arr, target, acc_type, comp, minmax=False, normalized=False):
         arr = np.ascontiguousarray(arr)
+        stride = None
+        if target == gl.ARRAY_BUFFER and arr.ndim == 2 and arr.itemsize * arr.shape[1] % 4:
+            # glTF 2.0 3.6.2.4: each vertex's element starts on 4 bytes (quantized VEC3s padded)
+            width = -(-arr.itemsize * arr.shape[1] // 4) * 4 // arr.itemsize
+            stride = width * arr.itemsize
+            data = np.zeros((len(arr), width), arr.dtype)
+            data[:, :arr.shape[1]] = arr
+        else:
+            data = arr
         off = sum(len(b) for b in blobs)
-        blobs.append(arr.tobytes() + b"\0" * ((-arr.nbytes) % 4))
-        views.append(gl.BufferView(buffer=0, byteOffset=off, byteLength=arr.nbytes, target=target))
-        a = gl.Accessor(bufferView=len(views) - 1, componentType=comp, count=len(arr), type=acc_type)
+        blobs.append(data.tobytes() + b"\0" * ((-data.nbytes) % 4))
+        views.append(gl.BufferView(buffer=0, byteOffset=off, byteLength=data.nbytes, target=target, byteStride=stride))
+        a = gl.Accessor(bufferView=len(views) - 1, componentType=comp, count=len(arr), type=acc_type,
+                        normalized=True if normalized else None)
         if minmax:
             a.min, a.max = np.atleast_1d(arr.min(0)).tolist(), np.atleast_1d(arr.max(0)).tolist()
         accs.append(a)
         return len(accs) - 1
 
-    def add_sparse(arr, keep, minmax=False):
-        """A VEC3 float accessor of len(arr) rows, zero but where `keep` (a sparse accessor);
-        dense where more than a third of the rows are kept (smaller so)."""
+    def encode(arr, q):
+        """(stored array, component type, normalized): float32, or with q ("short", "byte") the
+        normalized integers of KHR_mesh_quantization (glTF 2.0 3.11: f = max(c / (2^(b-1) - 1), -1);
+        values beyond +-1 clipped)."""
+        if q is None:
+            return np.asarray(arr, np.float32), gl.FLOAT, False
+        dt, comp = (np.int16, gl.SHORT) if q == "short" else (np.int8, gl.BYTE)
+        top = np.iinfo(dt).max
+        return np.clip(np.rint(np.asarray(arr) * top), -top, top).astype(dt), comp, True
+
+    def add_sparse(arr, keep, minmax=False, q=None):
+        """A VEC3 accessor of len(arr) rows, zero but where `keep` (a sparse accessor); dense
+        where more than a third of the rows are kept (smaller so).  q: quantized (encode)."""
         if not keep.any():                          # glTF wants one row at least
             keep = np.r_[True, np.zeros(len(keep) - 1, bool)]
         if keep.mean() > 1 / 3:
-            return add(np.where(keep[:, None], arr, 0).astype(np.float32), gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT, minmax)
-        rows = np.nonzero(keep)[0].astype(np.uint32)
-        vals = np.ascontiguousarray(arr[rows], dtype=np.float32)
-        add(rows, None, gl.SCALAR, gl.UNSIGNED_INT)
+            vals, comp, norm = encode(np.where(keep[:, None], arr, 0), q)
+            return add(vals, gl.ARRAY_BUFFER, gl.VEC3, comp, minmax, norm)
+        rows = np.nonzero(keep)[0]
+        # indices as 16 bits where the vertices allow (glTF: UNSIGNED_BYTE, _SHORT or _INT)
+        rows, icomp = (rows.astype(np.uint16), gl.UNSIGNED_SHORT) if len(arr) <= 65535 else \
+            (rows.astype(np.uint32), gl.UNSIGNED_INT)
+        vals, comp, norm = encode(arr[rows], q)
+        add(rows, None, gl.SCALAR, icomp)
         accs.pop()
         i_rows = len(views) - 1
-        add(vals, None, gl.VEC3, gl.FLOAT)
+        add(vals, None, gl.VEC3, comp)
         accs.pop()
-        a = gl.Accessor(componentType=gl.FLOAT, count=len(arr), type=gl.VEC3,
+        a = gl.Accessor(componentType=comp, count=len(arr), type=gl.VEC3, normalized=True if norm else None,
                         sparse=gl.Sparse(count=len(rows),
-                                         indices=gl.AccessorSparseIndices(bufferView=i_rows, componentType=gl.UNSIGNED_INT),
+                                         indices=gl.AccessorSparseIndices(bufferView=i_rows, componentType=icomp),
                                          values=gl.AccessorSparseValues(bufferView=len(views) - 1)))
         a.byteOffset = None                         # no buffer view of its own: zeros but the rows
         if minmax:
-            full = np.zeros((1, 3), np.float32) if len(rows) == len(arr) else np.vstack([vals, np.zeros((1, 3))])
+            full = vals if len(rows) == len(arr) else np.vstack([vals, np.zeros((1, 3), vals.dtype)])
             a.min, a.max = full.min(0).tolist(), full.max(0).tolist()
         accs.append(a)
         return len(accs) - 1
@@ -490,15 +542,21 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
         for name, pos in morph_targets.items():
             pos = np.asarray(pos, dtype=np.float64)
             dp = (k * (pos - mesh.vertices)[v_of]).astype(np.float32)
-            dn = (_unit_normals(mesh, pos) - n0)[v_of].astype(np.float32)
+            n1 = _unit_normals(mesh, pos)
+            dn = ((_reachable_normal_change(n0, n1) if quantize else n1 - n0)[v_of]).astype(np.float32)
+            # quantized: moves as 16-bit normalized metres (0.03 mm steps; normalized integers
+            # reach +-1 only: a target that moves a vertex over 1 m stays float), normal changes
+            # as 8 bits (1/127 steps)
+            qp = "short" if quantize and np.abs(dp).max() < 1.0 else None
+            qn = "byte" if quantize else None
             if sparse is None:
-                prim.targets.append({"POSITION": add(dp, gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT, True),
-                                     "NORMAL": add(dn, gl.ARRAY_BUFFER, gl.VEC3, gl.FLOAT)})
+                prim.targets.append({"POSITION": add_sparse(dp, np.ones(len(dp), bool), True, qp),
+                                     "NORMAL": add_sparse(dn, np.ones(len(dn), bool), False, qn)})
             else:
                 # sparse targets: the vertices that move more than `sparse` metres, and the
                 # normals that turn by more than SPARSE_NORMAL, are stored; the rest are zero
-                prim.targets.append({"POSITION": add_sparse(dp, np.linalg.norm(dp, axis=1) > sparse, True),
-                                     "NORMAL": add_sparse(dn, np.linalg.norm(dn, axis=1) > SPARSE_NORMAL)})
+                prim.targets.append({"POSITION": add_sparse(dp, np.linalg.norm(dp, axis=1) > sparse, True, qp),
+                                     "NORMAL": add_sparse(dn, np.linalg.norm(dn, axis=1) > SPARSE_NORMAL, False, qn)})
             names.append(name)
         for other in prims[1:]:                     # the same targets on every primitive
             other.targets = prim.targets
@@ -522,6 +580,8 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
     g = gl.GLTF2(scene=0, scenes=[gl.Scene(nodes=[0])], nodes=[gl.Node(mesh=0)], meshes=[gmesh],
                  accessors=accs, bufferViews=views, buffers=[gl.Buffer(byteLength=len(blob))],
                  animations=animations, materials=materials)
+    if any(a.normalized for a in accs):             # its readers must know the integer attributes
+        g.extensionsUsed = g.extensionsRequired = [QUANTIZATION]
     g.set_binary_blob(blob)
     if binary:
         g.save_binary(str(path))
@@ -529,7 +589,8 @@ def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None,
         g.buffers[0].uri = "data:application/octet-stream;base64," + __import__("base64").b64encode(blob).decode()
         g._glb_data = None
         g.save_json(str(path))
-    return {"units": unit, "sparse": sum(accs[tg["POSITION"]].sparse is not None for tg in (prim.targets or []))}
+    return {"units": unit, "sparse": sum(accs[tg["POSITION"]].sparse is not None for tg in (prim.targets or [])),
+            "quantized": sum(bool(accs[tg["POSITION"]].normalized) for tg in (prim.targets or []))}
 
 
 # ------------------------------------------------------------------------ API
