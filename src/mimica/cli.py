@@ -770,6 +770,7 @@ def cmd_export(a):
 
 
 def cmd_animate(a):
+    from .export import ARKIT_52
     from .export.take import animate_glb, read_take
     from .mesh import atomic_path
     out = Path(a.out)
@@ -778,10 +779,22 @@ def cmd_animate(a):
     head = Path(a.head)
     if not head.is_file():
         raise MimicaError(f"{head}: no such file")
-    times, weights, rate = read_take(a.arkit, fps=a.fps)
+    if (a.arkit is None) == (a.video is None):
+        raise MimicaError("animate: give the take as --arkit take.csv or as --video take.mp4 (one of them)")
     pivot = _floats(a.pivot, 3, "--pivot") if a.pivot else None
+    csv_out = None
+    if a.video is not None:
+        times, weights, rate, csv_out = _weights_from_video(a, head, out)
+        source = a.video
+    else:
+        times, weights, rate = read_take(a.arkit, fps=a.fps)
+        source = a.arkit
     with atomic_path(out) as tmp:
         info = animate_glb(head, tmp, times, weights, head_rotation=a.head_rotation, pivot=pivot)
+    if csv_out is not None:
+        from .export.video import write_live_link_csv
+        write_live_link_csv(csv_out, times, np.stack([weights[n] for n in ARKIT_52], 1),
+                            np.stack([weights[n] for n in ("headYaw", "headPitch", "headRoll")], 1))
     if info["pivot"] is not None:
         turn = np.degrees(np.abs([weights[n] for n in ("headYaw", "headPitch", "headRoll")]).max(1))
         head_line = (f"; the head turns (up to yaw {turn[0]:.0f}, pitch {turn[1]:.0f}, roll {turn[2]:.0f} degrees) "
@@ -789,9 +802,30 @@ def cmd_animate(a):
                      + (f"{info['bending']} vertices bending with the neck" if info["bending"] else "whole"))
     else:
         head_line = "; the head stays still (--head-rotation turns it)" if "headYaw" in weights else ""
-    _say(f"{a.arkit}: {len(times)} frames over {times[-1]:.2f}s ({rate:.3g} fps) drive {info['driven']} morph "
-         f"targets of {head.name}{head_line} -> {out}")
+    _say(f"{source}: {len(times)} frames over {times[-1]:.2f}s ({rate:.3g} fps) drive {info['driven']} morph "
+         f"targets of {head.name}{head_line} -> {out}" + (f" (weights: {csv_out})" if csv_out else ""))
     return 0
+
+
+def _weights_from_video(a, head: Path, out: Path):
+    """(times, {ARKit name and head angles: per frame}, fps, where the weights CSV goes) of a
+    video fitted through the head's blendshapes (export.video)."""
+    from .export import ARKIT_52
+    from .export.video import UNSEEN, fit_weights, head_angles, landmark_basis, track_video
+    basis = landmark_basis(head)
+    t0 = time.perf_counter()
+    fps, pts = track_video(a.video, progress=_say)
+    t1 = time.perf_counter()
+    fit = fit_weights(pts, basis, rest_frame=a.rest_frame)
+    t2 = time.perf_counter()
+    ang = head_angles(fit.rotations)
+    weights = {n: fit.weights[:, j] for j, n in enumerate(ARKIT_52)}
+    weights.update(zip(("headYaw", "headPitch", "headRoll"), ang.T))
+    _say(f"{a.video}: {len(pts)} frames tracked ({len(pts) / max(t1 - t0, 1e-9):.0f} frames/s) and fitted "
+         f"({len(pts) / max(t2 - t1, 1e-9):.0f} frames/s); frame {a.rest_frame} taken as the performer's rest; "
+         f"points misfit median {np.median(fit.residual) * 100:.1f} % of the face's width; "
+         f"{len(UNSEEN)} shapes the points cannot see (gaze, tongue) stay 0")
+    return np.arange(len(pts)) / fps, weights, fps, out.with_suffix(".csv")
 
 
 def cmd_blendshapes(a):
@@ -825,6 +859,11 @@ def cmd_blendshapes(a):
         joint = head_joint(shapes.mesh, shapes.landmarks)   # where `animate --head-rotation` turns it
         k = glb_units(shapes.mesh, a.units)[1]
         extras = {} if joint is None else {HEAD_KEY: {n: (k * p).tolist() for n, p in joint.items()}}
+        lm = shapes.landmarks
+        if lm.present.all():                            # for `animate --video`: the points it fits
+            from .export.video import LANDMARKS_KEY
+            extras[LANDMARKS_KEY] = {"vertices": shapes.mesh.triangles[lm.triangle].tolist(),
+                                     "bary": np.round(lm.bary, 7).tolist()}
         with atomic_path(out) as tmp:
             info = write_glb(tmp, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb",
                              units=a.units, sparse=SPARSE_TOLERANCE, quantize=a.quantize, extras=extras)
@@ -1036,8 +1075,13 @@ def build_parser():
 
     an = sub.add_parser("animate", help="play an ARKit take (a Live Link Face CSV) on a head's ARKit blendshapes")
     an.add_argument("head", help="the head's ARKit blendshapes, a .glb (as `mimica blendshapes` writes it)")
-    an.add_argument("--arkit", required=True, help="the take: a Live Link Face CSV (Timecode, BlendShapeCount, the "
-                                                  "52 weights ...) or a CSV of the 52 weights with a time column")
+    an.add_argument("--arkit", help="the take: a Live Link Face CSV (Timecode, BlendShapeCount, the "
+                                    "52 weights ...) or a CSV of the 52 weights with a time column")
+    an.add_argument("--video", help="or the take as a video (or a folder of frames) of a face: its 68 points are "
+                                    "tracked and the 52 weights fitted through the head's blendshapes, written "
+                                    "also as a Live Link-style CSV beside --out")
+    an.add_argument("--rest-frame", type=int, default=0,
+                    help="with --video: a frame where the performer's face is at rest (default: the first)")
     an.add_argument("--fps", type=float, help="the frame rate of a Timecode column (default: from its frame numbers)")
     an.add_argument("--head-rotation", action="store_true",
                     help="also turn the head by the take's HeadYaw, HeadPitch, HeadRoll (radians)")

@@ -1,0 +1,252 @@
+"""ARKit weights from a video, without an iPhone (issue 17, part 4): the face's 68 points are
+tracked frame by frame (the photo pipeline's detector, landmarks.detect2d), and the 52 weights
+fitted to them through the head's own blendshapes.
+
+The model of a frame is a scaled orthographic camera looking at the head's landmarks moved by
+its blendshapes:  x = s P R (L + sum_k w_k B_k) + t,  with L the performer's rest landmarks,
+B_k the landmarks' motion in ARKit shape k (read from the head's GLB), P the first two rows.
+Each frame takes Gauss-Newton steps on the pose jointly with a bounded least squares on the
+weights (0 <= w <= 1; linear in them), starting from the last frame's: a ridge first, then an
+L1 pull toward few shapes (reweighted), then the chosen shapes refitted without it (a relaxed
+lasso), with a pull toward the last frame's weights.  Departure from plain least squares,
+measured on dlib's points of rendered ICT takes (other identities and light, bench/export.py's
+takes): without the L1 pull the points' noise spreads over shapes that move them alike -- mean
+error over the jaw, mouth, brow and blink weights 0.071 against 0.027 on the training take,
+0.063 and 0.061 against 0.034 and 0.018 on two others.  The price: a shape that moves the
+points little (a brow) is seen only from about 0.3 of its weight.
+
+The performer is not the head: their rest landmarks are the head's plus the offset that the
+take's first frame (or the one named) shows, lifted into the head's frame at zero depth -- the
+take must start from a rest face, as Live Link Face's calibration also asks.  The gaze shapes
+(eyeLook*) and tongueOut are not fitted (68 points do not see them): they stay 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MimicaError
+from .blendshapes import ARKIT_52
+
+LANDMARKS_KEY = "mimica_landmarks"      # mesh extras: the 68 landmarks as {"vertices", "bary"} (user's order)
+UNSEEN = tuple(n for n in ARKIT_52 if n.startswith("eyeLook") or n == "tongueOut")
+# the points a face's expressions move least: the nose bridge and its base, the eyes' corners
+RIGID = np.r_[27:31, 31:36, 36, 39, 42, 45]
+# tuned on one training take (identity seed 1007, its own expressions, dlib's points); measured
+# on others (bench/export.py).  Lengths in face widths (landmarks 0 to 16).
+REST_PULL = 1e-4           # weight of sum w^2 against the points' misfit
+SPARSE_PULL = 1e-3         # weight of sum w (an L1 pull toward few shapes)
+SMOOTH_PULL = 1e-3         # weight of the change from the last frame's weights
+RELAX_STAY = 0.02          # ... or above this when it was kept in the frame before
+RELAX_KEEP = 0.1           # a weight the L1 pull keeps above this is refitted without it
+GAUSS_NEWTON_STEPS = 3     # per frame (and one to refit), from the last frame's pose and weights
+SMOOTH_POINTS = 1.5        # frames: the points' Gaussian over time
+POINT_WEIGHTS = np.r_[np.full(17, 0.3), np.ones(51)]   # the face's outline, where detectors err most, counts less
+
+
+@dataclass
+class LandmarkBasis:
+    """The head's 68 landmarks at rest (68, 3) and their motion in each ARKit shape (52, 68, 3),
+    metres in the GLB's frame."""
+    rest: np.ndarray
+    motion: np.ndarray
+    names: list
+
+
+def landmark_basis(head_glb) -> LandmarkBasis:
+    """Read the head's landmarks and their motion in its morph targets from a GLB written by
+    `blendshapes` (which stores the landmarks, LANDMARKS_KEY)."""
+    import pygltflib as gl
+    from ..mesh.io import VERTEX_MAP, _gltf_accessor, _gltf_buffer
+    head_glb = Path(head_glb)
+    try:
+        g = gl.GLTF2().load(str(head_glb))
+        mesh = g.meshes[0]
+        prim = mesh.primitives[0]
+        extras = mesh.extras or {}
+        names = list(extras.get("targetNames") or [])
+        stored = extras.get(LANDMARKS_KEY)
+        pos = _gltf_accessor(g, prim.attributes.POSITION).astype(np.float64)
+        targets = prim.targets or []
+        v_of = None
+        if isinstance(prim.extras, dict) and VERTEX_MAP in prim.extras:
+            view = g.bufferViews[int(prim.extras[VERTEX_MAP])]
+            v_of = np.frombuffer(_gltf_buffer(g, view.buffer), np.uint32, len(pos), view.byteOffset or 0)
+    except Exception as e:
+        raise MimicaError(f"{head_glb}: not a readable glTF file ({type(e).__name__}: {e})") from None
+    if not names or not targets or not set(ARKIT_52) <= set(names):
+        raise MimicaError(f"{head_glb}: not a head with the 52 ARKit morph targets (make it with `blendshapes`)")
+    if not stored:
+        raise MimicaError(f"{head_glb}: no landmarks stored (made by an older mimica?): make it again with "
+                          "`blendshapes`")
+    tri = np.asarray(stored["vertices"], np.int64)
+    bary = np.asarray(stored["bary"], np.float64)
+    if v_of is not None:                         # the user's vertices -> the file's (its first copy)
+        first = np.full(int(v_of.max()) + 1, -1, np.int64)
+        first[v_of[::-1]] = np.arange(len(v_of))[::-1]
+        tri = first[tri]
+    if tri.shape != (68, 3) or (tri < 0).any() or (tri >= len(pos)).any():
+        raise MimicaError(f"{head_glb}: its stored landmarks do not match its vertices")
+
+    def at(p):
+        return np.einsum("ij,ijk->ik", bary, p[tri])
+    motion = np.zeros((len(ARKIT_52), 68, 3))
+    for j, n in enumerate(names):
+        if n in ARKIT_52:
+            motion[ARKIT_52.index(n)] = at(_gltf_accessor(g, targets[j]["POSITION"]).astype(np.float64))
+    return LandmarkBasis(at(pos), motion, list(ARKIT_52))
+
+
+def _pose(model: np.ndarray, image: np.ndarray, rows=RIGID):
+    """Scaled orthographic pose (s, R (3x3), t (2,)) taking 3D points to image points (y up),
+    by Procrustes on `rows`."""
+    X, x = model[rows], image[rows]
+    mx, mi = X.mean(0), x.mean(0)
+    M = np.linalg.lstsq(X - mx, x - mi, rcond=None)[0].T        # (2, 3)
+    u, sv, vt = np.linalg.svd(M, full_matrices=False)
+    r2 = u @ vt
+    R = np.vstack([r2, np.cross(r2[0], r2[1])])
+    s = float(sv.mean())
+    return s, R, mi - s * r2 @ mx
+
+
+def _cross_matrices(v: np.ndarray) -> np.ndarray:
+    """(n, 3, 3): [v]x, so that [v]x a = v x a."""
+    z = np.zeros(len(v))
+    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1),
+                     np.stack([-v[:, 1], v[:, 0], z], 1)], 1)
+
+
+@dataclass
+class VideoFit:
+    weights: np.ndarray          # (F, 52) in ARKIT_52's order
+    rotations: np.ndarray        # (F, 3, 3): the head's rotation relative to the rest frame
+    residual: np.ndarray         # (F,) RMS misfit of the 68 points, in face widths
+
+
+def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, rest_pull: float = REST_PULL,
+                smooth_pull: float = SMOOTH_PULL, smooth_points: float = SMOOTH_POINTS,
+                sparse_pull: float = SPARSE_PULL) -> VideoFit:
+    """The ARKit weights of each frame of tracked 2D points (F, 68, 2), pixels (y down).
+    smooth_points: a Gaussian over time (frames) on the points first, against the detector's jitter."""
+    from scipy.optimize import lsq_linear
+    from scipy.spatial.transform import Rotation
+    pts = np.asarray(points, np.float64)
+    if pts.ndim != 3 or pts.shape[1:] != (68, 2) or not len(pts):
+        raise MimicaError(f"tracked points: expected (frames, 68, 2), got {pts.shape}")
+    if not 0 <= rest_frame < len(pts):
+        raise MimicaError(f"rest frame {rest_frame}: the take has frames 0 to {len(pts) - 1}")
+    width = float(np.linalg.norm(basis.rest[16] - basis.rest[0]))          # lengths in face widths
+    L = basis.rest / width
+    B = basis.motion / width
+    free = np.array([n not in UNSEEN for n in basis.names])
+    Bf = B[free]                                                           # (k, 68, 3)
+    img = pts * [1.0, -1.0]                                                # y up, as the head's frame
+    if smooth_points and len(img) > 1:                                     # the detector's jitter
+        from scipy.ndimage import gaussian_filter1d
+        img = gaussian_filter1d(img, smooth_points, axis=0, mode="nearest")
+    # the performer's rest: the head's landmarks plus what the rest frame shows of their own face
+    s0, R0, t0 = _pose(L, img[rest_frame])
+    for _ in range(3):
+        off2 = (img[rest_frame] - t0) / s0 - L @ R0[:2].T                   # in the camera's plane
+        Ls = L + off2 @ R0[:2]                                             # lifted at zero depth
+        s0, R0, t0 = _pose(Ls, img[rest_frame])
+    k = int(free.sum())
+    smo = np.c_[np.zeros((k, 6)), np.sqrt(smooth_pull) * np.eye(k)]
+    out = np.zeros((len(pts), len(basis.names)))
+    rots = np.zeros((len(pts), 3, 3))
+    res = np.zeros(len(pts))
+    w = np.zeros(k)
+    kept = np.zeros(k, bool)
+    rows = np.repeat(POINT_WEIGHTS, 2)
+    lo = np.r_[np.full(6, -np.inf), np.zeros(k)]
+    hi = np.r_[np.full(6, np.inf), np.ones(k)]
+    P = np.eye(3)[:2]
+    s_, R, t = s0, R0, t0
+    for f in range(len(pts)):
+        if f == 0 or res[f - 1] > 0.05:                 # (re)start the pose from the rigid points
+            s_, R, t = _pose(Ls + np.einsum("k,knj->nj", w, Bf), img[f])
+        w_prev = w
+        for it in range(GAUSS_NEWTON_STEPS + 1):
+            # a Gauss-Newton step on the pose (a small rotation d, scale 1 + e, shift s u) joined
+            # to a bounded least squares on the weights (linear in them), from the last frame's
+            X = Ls + np.einsum("k,knj->nj", w, Bf)          # the current shape (68, 3)
+            RX = X @ R.T
+            Jd = -np.einsum("ij,njk->nik", P, _cross_matrices(RX))  # (68, 2, 3): d/dd of P (d x RX)
+            Je = (RX @ P.T)[:, :, None]                      # (68, 2, 1)
+            Ju = np.broadcast_to(np.eye(2), (68, 2, 2))
+            Jw = np.einsum("ij,knj->nik", P @ R, Bf)          # (68, 2, k)
+            A = np.concatenate([Jd, Je, Ju, Jw], 2).reshape(136, 6 + k) * rows[:, None]
+            b = ((img[f] - t) / s_ - Ls @ (P @ R).T).reshape(-1) * rows
+            top = hi
+            if it == 0:                                      # a plain ridge to start from
+                pull = np.full(k, rest_pull)
+            elif it < GAUSS_NEWTON_STEPS:
+                # sparsity: an L1 pull (sum w, w >= 0) as a reweighted ridge, lambda / (w + eps):
+                # 68 points tell apart poorly shapes that move them alike (a smile, a dimple, a
+                # stretch), and the fewest that explain them are the likeliest
+                pull = rest_pull + sparse_pull / (w + 0.05)
+            else:
+                # relaxed lasso: the L1 pull chose the shapes (with hysteresis over time); their
+                # weights are refitted without it, as it shrinks every weight it keeps
+                kept = (w > RELAX_KEEP) | (kept & (w > RELAX_STAY))
+                pull = np.full(k, rest_pull)
+                top = np.r_[hi[:6], np.where(kept, 1.0, 1e-12)]
+            M = np.vstack([A, np.c_[np.zeros((k, 6)), np.diag(np.sqrt(pull))], smo])
+            z = lsq_linear(M, np.r_[b, np.zeros(k), smo[:, 6:] @ w_prev], bounds=(lo, top), method="bvls").x
+            R = Rotation.from_rotvec(z[:3]).as_matrix() @ R
+            t = t + s_ * z[4:6]
+            s_ = s_ * (1.0 + z[3])
+            w = np.where(z[6:] > 1e-9, z[6:], 0.0)
+        out[f, free] = w
+        rots[f] = R @ R0.T
+        res[f] = float(np.sqrt(np.mean((A @ z - b) ** 2)))
+    return VideoFit(out, rots, res)
+
+
+def track_video(path, progress=None, max_frames: int | None = None):
+    """(frames per second, (F, 68, 2) points) of the face in a video or a folder of frames."""
+    from ..image.video import frame_source
+    from ..landmarks.detect2d import Tracker
+    n, fps, frames = frame_source(path)
+    tracker = Tracker(alpha=1.0, what=str(path))        # no smoothing here: the fit smooths
+    out = []
+    for i, img in enumerate(frames):
+        if max_frames is not None and i >= max_frames:
+            break
+        out.append(tracker(img))
+        if progress and (i + 1) % 30 == 0:
+            progress(f"tracked {i + 1}" + (f" of {n}" if n else "") + " frames")
+    if not out:
+        raise MimicaError(f"{path}: no frames")
+    return fps, np.stack(out)
+
+
+def head_angles(rotations: np.ndarray) -> np.ndarray:
+    """(F, 3) yaw, pitch, roll in radians (R = Ry Rx Rz, as animate's head rotation reads them)."""
+    from scipy.spatial.transform import Rotation
+    return Rotation.from_matrix(rotations).as_euler("YXZ")
+
+
+def write_live_link_csv(path, times: np.ndarray, weights: np.ndarray, angles: np.ndarray | None = None) -> Path:
+    """A Live Link Face-style CSV: Timecode (HH:MM:SS:FF.fff at 60 fps), BlendShapeCount, the 52
+    PascalCase weights, then HeadYaw, HeadPitch, HeadRoll (radians) and the eyes' (zero)."""
+    from ..mesh import atomic_path
+    rot = ["HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
+           "RightEyeYaw", "RightEyePitch", "RightEyeRoll"]
+    lines = [",".join(["Timecode", "BlendShapeCount"] + [n[0].upper() + n[1:] for n in ARKIT_52] + rot)]
+    ang = np.zeros((len(times), 3)) if angles is None else angles
+    for t, w, a in zip(times, weights, ang):
+        sec, frac = divmod(float(t), 1.0)
+        fr = frac * 60
+        h, rem = divmod(int(sec), 3600)
+        m, s = divmod(rem, 60)
+        tc = f"{h:02d}:{m:02d}:{s:02d}:{int(fr):02d}.{int(round((fr % 1) * 1000)) % 1000:03d}"
+        lines.append(",".join([tc, "61"] + [f"{x:.6f}" for x in w] + [f"{x:.6f}" for x in a] + ["0"] * 6))
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text("\n".join(lines) + "\n")
+    return path
