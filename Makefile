@@ -11,7 +11,7 @@ MIMICA_DATA ?= $(abspath $(CURDIR)/..)/shared/data
 export MIMICA_DATA
 SOURCES := $(shell find src -type f -not -name '*.pyc' -not -path '*.egg-info*') pyproject.toml README.md
 
-.PHONY: demo test test-lowest bench setup wheel clean
+.PHONY: demo test test-lowest bench setup wheel clean blender
 
 setup: $(WHEEL_STAMP)
 
@@ -43,10 +43,27 @@ $(GLTF_STAMP): tools/gltf/package.json tools/gltf/package-lock.json
 	@if command -v npm >/dev/null 2>&1; then cd tools/gltf && npm ci --no-audit --no-fund --loglevel=error && touch node_modules/.installed; \
 	else echo "note: npm not found; the glTF-Validator test will be skipped"; fi
 
+# Blender as a Python module (bpy, Python 3.11 only, about 800 MB) in a venv of its own, for the
+# add-on's test inside Blender: bpy needs numpy < 2, mimica numpy >= 2.  Made under CI; elsewhere
+# `make blender` makes it and the test then runs, else it is skipped.
+BLENDER_STAMP := .venv-blender/.installed
+$(BLENDER_STAMP):
+	$(PY) -m venv .venv-blender
+	.venv-blender/bin/pip install -q --upgrade pip
+	.venv-blender/bin/pip install -q "bpy==4.5.15"
+	touch $(BLENDER_STAMP)
+
+blender: $(BLENDER_STAMP)
+
+TEST_NEEDS := $(WHEEL_STAMP) $(GLTF_STAMP)
+ifneq ($(CI),)
+TEST_NEEDS += $(BLENDER_STAMP)
+endif
+
 demo: $(WHEEL_STAMP)
 	$(BIN)/mimica demo --out out/demo
 
-test: $(WHEEL_STAMP) $(GLTF_STAMP)
+test: $(TEST_NEEDS)
 	MIMICA_TEST_INSTALLED=1 $(BIN)/python -m pytest tests
 
 # the lowest versions pyproject.toml allows, in a venv of their own

@@ -3,11 +3,14 @@
 Blender's Python carries numpy < 2 (bpy 4.x and 5.0 require it) and mimica numpy >= 2, so the
 two cannot share one interpreter.  The add-on therefore runs the `mimica` command of the
 user's own installation (set in the add-on's preferences, or found on PATH) and exchanges files
-with it: the selected head goes out as an OBJ in Blender's vertex order, the shapes come back as
-the rest and the 52 positions in that order (`blendshapes --out FILE.npz`), which Blender's
-numpy reads.  Progress shows in the status bar; mimica's one-line errors become Blender
-reports.  A Live Link Face take (or any CSV of ARKit weights with a time column) is read here
-and keyed onto the shape keys at the scene's frame rate.
+with it: the selected head goes out as an OBJ in Blender's vertex order (turned from Blender's z
+up to mimica's y up), the shapes come back in that order (`blendshapes --out FILE.npz`, the
+OBJs of `transfer` and `simulate`), which Blender's numpy reads.  Four operators: the 52 ARKit
+shape keys on the active mesh; a Live Link Face take (or any CSV of ARKit weights with a time
+column, as `animate --video` also writes) keyed onto them at the scene's frame rate; the active
+mesh's shape keys moved onto the other selected meshes (any topology); Kim's muscles rigged on
+the active mesh and preset expressions simulated into shape keys.  Progress shows in the status
+bar; mimica's one-line errors become Blender reports.
 
 Install: Edit > Preferences > Add-ons > Install from disk..., this file (or `mimica
 blender-addon --out DIR` to get a copy).  The panel is in the 3D view's sidebar, "mimica".
@@ -25,12 +28,13 @@ import tempfile
 from pathlib import Path
 
 bl_info = {
-    "name": "mimica: ARKit shape keys, Live Link takes",
+    "name": "mimica: ARKit shape keys, Live Link takes, transfer, muscles",
     "author": "mimica",
     "version": (0, 1, 0),
     "blender": (4, 2, 0),
     "location": "View3D > Sidebar > mimica",
-    "description": "ARKit shape keys for any head, Live Link Face takes as actions (runs the mimica command)",
+    "description": "ARKit shape keys for any head, Live Link Face takes as actions, shape keys moved between "
+                   "meshes, muscle-simulated shape keys (runs the mimica command)",
     "category": "Animation",
 }
 
@@ -64,10 +68,18 @@ def mimica_command(configured: str = "") -> str:
 
 
 def write_obj(path, vertices, polygons) -> None:
-    """An OBJ of the mesh in Blender's vertex order (1-based faces)."""
+    """An OBJ of the mesh in Blender's vertex order (1-based faces), turned from Blender's z up
+    to mimica's y up (x, z, -y), as Blender's own OBJ export does."""
     with open(path, "w") as f:
-        f.writelines(f"v {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in vertices)
+        f.writelines(f"v {x:.9g} {z:.9g} {-y:.9g}\n" for x, y, z in vertices)
         f.writelines("f " + " ".join(str(i + 1) for i in p) + "\n" for p in polygons)
+
+
+def to_blender(v):
+    """(n, 3) positions from mimica's y up back to Blender's z up: (x, -z, y)."""
+    import numpy as np
+    v = np.asarray(v, dtype=float)
+    return np.stack([v[:, 0], -v[:, 2], v[:, 1]], 1)
 
 
 def run_mimica(args, progress=None) -> list[str]:
@@ -95,7 +107,61 @@ def arkit_shapes(vertices, polygons, exe: str, progress=None) -> dict:
         with np.load(out) as z:
             if z["vertices"].shape[0] != len(vertices):
                 raise AddonError(f"mimica gave {z['vertices'].shape[0]} vertices for a head of {len(vertices)}")
-            return {n: z[n] for n in ARKIT if n in z}
+            return {n: to_blender(z[n]) for n in ARKIT if n in z}
+
+
+def read_obj_vertices(path):
+    """(n, 3) vertex positions of an OBJ mimica wrote (its `v` lines, in order)."""
+    import numpy as np
+    with open(path) as f:
+        rows = [ln.split()[1:4] for ln in f if ln.startswith("v ")]
+    return np.array(rows, dtype=float)
+
+
+def transfer_shapes(source_vertices, polygons, shapes: dict, target_vertices, target_polygons, exe: str,
+                    progress=None) -> dict:
+    """{shape name: (m, 3) target positions}: the source's shapes (its rest `source_vertices`,
+    {name: (n, 3) positions}) moved onto the target by `mimica transfer` (any topology)."""
+    with tempfile.TemporaryDirectory(prefix="mimica-blender-") as d:
+        d = Path(d)
+        (d / "shapes").mkdir()
+        write_obj(d / "source.obj", source_vertices, polygons)
+        write_obj(d / "target.obj", target_vertices, target_polygons)
+        files = {}
+        for i, (name, pos) in enumerate(shapes.items()):
+            files[name] = f"s{i:04d}.obj"                      # names a file system takes
+            write_obj(d / "shapes" / files[name], pos, polygons)
+        run_mimica([exe, "transfer", str(d / "source.obj"), str(d / "shapes"), "--target", str(d / "target.obj"),
+                    "--cut-mouth", "off", "--out", str(d / "out")], progress)
+        out = {}
+        for name, fn in files.items():
+            v = read_obj_vertices(d / "out" / fn)
+            if len(v) != len(target_vertices):
+                raise AddonError(f"mimica gave {len(v)} vertices for a target of {len(target_vertices)}")
+            out[name] = to_blender(v)
+        return out
+
+
+EXPRESSIONS = ("happiness", "sadness", "surprise", "anger", "disgust", "fear")
+
+
+def simulated_shapes(vertices, polygons, expressions, exe: str, progress=None, seconds: float = 1.0) -> dict:
+    """{"muscles_<expression>": (n, 3) positions}: Kim's muscles rigged on the head (`mimica
+    rig`) and each preset expression simulated for `seconds` (`mimica simulate`), its last frame."""
+    with tempfile.TemporaryDirectory(prefix="mimica-blender-") as d:
+        d = Path(d)
+        write_obj(d / "head.obj", vertices, polygons)
+        run_mimica([exe, "rig", str(d / "head.obj"), "--out", str(d / "head.rig")], progress)
+        out = {}
+        for e in expressions:
+            run_mimica([exe, "simulate", str(d / "head.rig"), "--expression", e, "--duration", str(seconds),
+                        "--fps", "30", "--no-refine", "--out", str(d / e)], progress)
+            last = sorted((d / e).glob("frame_*.obj"))[-1]
+            v = read_obj_vertices(last)
+            if len(v) != len(vertices):
+                raise AddonError(f"mimica simulated {len(v)} vertices for a head of {len(vertices)}")
+            out[f"muscles_{e}"] = to_blender(v)
+        return out
 
 
 def read_take(path, fps: float | None = None):
@@ -144,6 +210,59 @@ if bpy is not None:  # pragma: no cover - runs inside Blender (tests/test_blende
         prefs = context.preferences.addons.get(__name__)
         return mimica_command(prefs.preferences.command if prefs else "")
 
+    def _shape_keys_from(obj, shapes: dict) -> None:
+        """Shape keys from {name: (n, 3) world positions}."""
+        me = obj.data
+        if me.shape_keys is None:
+            obj.shape_key_add(name="Basis", from_mix=False)
+        for name, pos in shapes.items():
+            kb = me.shape_keys.key_blocks.get(name) or obj.shape_key_add(name=name, from_mix=False)
+            kb.data.foreach_set("co", _local(obj, pos).astype("float32").ravel())
+
+    def _fcurves(action) -> list:
+        """An action's F-curves: Blender 4.4+ keeps them in layers, strips and channel bags."""
+        if action is None:
+            return []
+        if hasattr(action, "layers") and len(action.layers):
+            return [fc for layer in action.layers for strip in layer.strips for bag in strip.channelbags
+                    for fc in bag.fcurves]
+        return list(action.fcurves)
+
+    def _world(obj, local):
+        """(n, 3) object-space positions in the world (z up): mimica sees the head standing as it
+        stands in the scene, whether its mesh data is z up or an import turned by its object."""
+        import numpy as np
+        m = np.array(obj.matrix_world)
+        return np.asarray(local, dtype=float) @ m[:3, :3].T + m[:3, 3]
+
+    def _local(obj, world):
+        import numpy as np
+        m = np.array(obj.matrix_world)
+        return (np.asarray(world, dtype=float) - m[:3, 3]) @ np.linalg.inv(m[:3, :3]).T
+
+    def _mesh_arrays(obj):
+        """The mesh's vertices in the world and its polygons."""
+        me = obj.data
+        return _world(obj, [tuple(v.co) for v in me.vertices]), [tuple(p.vertices) for p in me.polygons]
+
+    def _with_progress(context, work):
+        """Run work(progress) with Blender's progress bar and status text; AddonError passes."""
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+        step = [0]
+
+        def progress(line):
+            step[0] = min(step[0] + 5, 95)
+            wm.progress_update(step[0])
+            if context.workspace is not None:
+                context.workspace.status_text_set(f"mimica: {line}")
+        try:
+            return work(progress)
+        finally:
+            wm.progress_end()
+            if context.workspace is not None:
+                context.workspace.status_text_set(None)
+
     class MIMICA_OT_arkit_shape_keys(bpy.types.Operator):
         """Put the 52 ARKit shapes on the active mesh as shape keys (mimica blendshapes)"""
         bl_idname = "mimica.arkit_shape_keys"
@@ -155,32 +274,75 @@ if bpy is not None:  # pragma: no cover - runs inside Blender (tests/test_blende
             if obj is None or obj.type != "MESH":
                 self.report({"ERROR"}, "select a head mesh first")
                 return {"CANCELLED"}
-            me = obj.data
-            verts = [tuple(v.co) for v in me.vertices]
-            polys = [tuple(p.vertices) for p in me.polygons]
-            wm = context.window_manager
-            wm.progress_begin(0, 100)
-            step = [0]
-
-            def progress(line):
-                step[0] = min(step[0] + 10, 95)
-                wm.progress_update(step[0])
-                context.workspace.status_text_set(f"mimica: {line}")
-
+            verts, polys = _mesh_arrays(obj)
             try:
-                shapes = arkit_shapes(verts, polys, _command(context), progress)
+                shapes = _with_progress(context, lambda pr: arkit_shapes(verts, polys, _command(context), pr))
             except AddonError as e:
                 self.report({"ERROR"}, str(e))
                 return {"CANCELLED"}
-            finally:
-                wm.progress_end()
-                context.workspace.status_text_set(None)
-            if me.shape_keys is None:
-                obj.shape_key_add(name="Basis", from_mix=False)
-            for name, pos in shapes.items():
-                kb = me.shape_keys.key_blocks.get(name) or obj.shape_key_add(name=name, from_mix=False)
-                kb.data.foreach_set("co", pos.astype("float32").ravel())
+            _shape_keys_from(obj, shapes)
             self.report({"INFO"}, f"{len(shapes)} ARKit shape keys on {obj.name}")
+            return {"FINISHED"}
+
+    class MIMICA_OT_transfer_shape_keys(bpy.types.Operator):
+        """Move the active mesh's shape keys onto the other selected meshes (mimica transfer, any topology)"""
+        bl_idname = "mimica.transfer_shape_keys"
+        bl_label = "Transfer shape keys"
+        bl_options = {"REGISTER", "UNDO"}
+
+        def execute(self, context):
+            src = context.active_object
+            keys = src.data.shape_keys.key_blocks if src and src.type == "MESH" and src.data.shape_keys else None
+            targets = [o for o in context.selected_objects if o.type == "MESH" and o != src]
+            if keys is None or len(keys) < 2 or not targets:
+                self.report({"ERROR"}, "make the source (with shape keys) active and select the target meshes too")
+                return {"CANCELLED"}
+            import numpy as np
+            basis = keys[0]
+            rest = np.zeros(len(basis.data) * 3)
+            basis.data.foreach_get("co", rest)
+            rest = _world(src, rest.reshape(-1, 3))
+            shapes = {}
+            for kb in keys[1:]:
+                a = np.zeros(len(kb.data) * 3)
+                kb.data.foreach_get("co", a)
+                shapes[kb.name] = _world(src, a.reshape(-1, 3))
+            polys = [tuple(p.vertices) for p in src.data.polygons]
+            try:
+                for tgt in targets:
+                    tv, tp = _mesh_arrays(tgt)
+                    got = _with_progress(context, lambda pr: transfer_shapes(rest, polys, shapes, tv, tp,
+                                                                             _command(context), pr))
+                    _shape_keys_from(tgt, got)
+            except AddonError as e:
+                self.report({"ERROR"}, str(e))
+                return {"CANCELLED"}
+            self.report({"INFO"}, f"{len(shapes)} shape keys on {', '.join(o.name for o in targets)}")
+            return {"FINISHED"}
+
+    class MIMICA_OT_muscle_shape_keys(bpy.types.Operator):
+        """Rig Kim's muscles on the active mesh and simulate expressions into shape keys (mimica rig, simulate)"""
+        bl_idname = "mimica.muscle_shape_keys"
+        bl_label = "Muscle shape keys"
+        bl_options = {"REGISTER", "UNDO"}
+        expressions: bpy.props.EnumProperty(name="Expressions", options={"ENUM_FLAG"},
+                                            items=[(e, e, f"simulate {e}") for e in EXPRESSIONS],
+                                            default={"happiness"})
+
+        def execute(self, context):
+            obj = context.active_object
+            if obj is None or obj.type != "MESH":
+                self.report({"ERROR"}, "select a head mesh first")
+                return {"CANCELLED"}
+            verts, polys = _mesh_arrays(obj)
+            try:
+                shapes = _with_progress(context, lambda pr: simulated_shapes(verts, polys, sorted(self.expressions),
+                                                                             _command(context), pr))
+            except AddonError as e:
+                self.report({"ERROR"}, str(e))
+                return {"CANCELLED"}
+            _shape_keys_from(obj, shapes)
+            self.report({"INFO"}, f"{len(shapes)} muscle shape keys on {obj.name}")
             return {"FINISHED"}
 
     class MIMICA_OT_live_link_take(bpy.types.Operator):
@@ -216,6 +378,12 @@ if bpy is not None:  # pragma: no cover - runs inside Blender (tests/test_blende
                 for t, x in zip(times, w):
                     kb.value = x
                     kb.keyframe_insert("value", frame=start + t * fps)
+            # linear between the take's samples (as glTF plays them), not Blender's default Bezier
+            anim = obj.data.shape_keys.animation_data
+            for fc in _fcurves(anim.action if anim else None):
+                if fc.data_path.startswith("key_blocks[") and fc.data_path.endswith(".value"):
+                    for kp in fc.keyframe_points:
+                        kp.interpolation = "LINEAR"
             context.scene.frame_end = int(start + times[-1] * fps)
             self.report({"INFO"}, f"{len(times)} frames keyed on {n} shape keys")
             return {"FINISHED"}
@@ -229,8 +397,11 @@ if bpy is not None:  # pragma: no cover - runs inside Blender (tests/test_blende
         def draw(self, context):
             self.layout.operator(MIMICA_OT_arkit_shape_keys.bl_idname)
             self.layout.operator(MIMICA_OT_live_link_take.bl_idname)
+            self.layout.operator(MIMICA_OT_transfer_shape_keys.bl_idname)
+            self.layout.operator(MIMICA_OT_muscle_shape_keys.bl_idname)
 
-    _CLASSES = (MimicaPreferences, MIMICA_OT_arkit_shape_keys, MIMICA_OT_live_link_take, MIMICA_PT_panel)
+    _CLASSES = (MimicaPreferences, MIMICA_OT_arkit_shape_keys, MIMICA_OT_live_link_take, MIMICA_OT_transfer_shape_keys,
+                MIMICA_OT_muscle_shape_keys, MIMICA_PT_panel)
 
     def register():
         for c in _CLASSES:
