@@ -48,3 +48,13 @@ def skin_patch(model, radius):
     near = np.linalg.norm(m.face_centroids()[:ICT_FACE_AREA_FACES] - c, axis=1) < radius
     sub, _ = m.submesh(np.nonzero(near)[0])
     return sub, sub.boundary_vertices()
+
+
+@pytest.fixture(scope="session")
+def head_glb(tmp_path_factory):
+    """The shared 468-vertex head's ARKit blendshapes, as `mimica blendshapes` writes them."""
+    from mimica.cli import main
+    d = tmp_path_factory.mktemp("head_arkit")
+    data = Path(os.environ["MIMICA_DATA"]) / "real-heads" / "mediapipe-canonical"
+    assert main(["blendshapes", str(data / "head.obj"), "--out", str(d / "head_arkit.glb")]) == 0
+    return d / "head_arkit.glb"

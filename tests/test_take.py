@@ -3,7 +3,6 @@ a head's blendshapes GLB at the take's frame rate; bad takes give one line and w
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -26,14 +25,6 @@ def live_link_csv(path, weights, start="13:32:48:00"):
         tc = f"{h}:{m}:{int(s) + sec:02d}:{fr:02d}.{(37 * f) % 1000:03d}"
         lines.append(",".join([tc, "61"] + [f"{x:.6f}" for x in w] + ["0.01"] * len(ROTATIONS)))
     Path(path).write_text("\n".join(lines) + "\n")
-
-
-@pytest.fixture(scope="module")
-def head_glb(tmp_path_factory):
-    d = tmp_path_factory.mktemp("take")
-    data = Path(os.environ["MIMICA_DATA"]) / "real-heads" / "mediapipe-canonical"
-    assert main(["blendshapes", str(data / "head.obj"), "--out", str(d / "head_arkit.glb")]) == 0
-    return d / "head_arkit.glb"
 
 
 def test_live_link_take_plays_on_the_head(head_glb, tmp_path, capsys):

@@ -263,6 +263,23 @@ if bpy is not None:  # pragma: no cover - runs inside Blender (tests/test_blende
             if context.workspace is not None:
                 context.workspace.status_text_set(None)
 
+    def _make_shape_keys(op, context, make, what: str):
+        """An operator's work: shape keys on the active mesh from make(vertices, polygons,
+        command, progress) -> {name: world positions}; errors as the operator's reports."""
+        obj = context.active_object
+        if obj is None or obj.type != "MESH":
+            op.report({"ERROR"}, "select a head mesh first")
+            return {"CANCELLED"}
+        verts, polys = _mesh_arrays(obj)
+        try:
+            shapes = _with_progress(context, lambda pr: make(verts, polys, _command(context), pr))
+        except AddonError as e:
+            op.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        _shape_keys_from(obj, shapes)
+        op.report({"INFO"}, f"{len(shapes)} {what} shape keys on {obj.name}")
+        return {"FINISHED"}
+
     class MIMICA_OT_arkit_shape_keys(bpy.types.Operator):
         """Put the 52 ARKit shapes on the active mesh as shape keys (mimica blendshapes)"""
         bl_idname = "mimica.arkit_shape_keys"
@@ -270,19 +287,7 @@ if bpy is not None:  # pragma: no cover - runs inside Blender (tests/test_blende
         bl_options = {"REGISTER", "UNDO"}
 
         def execute(self, context):
-            obj = context.active_object
-            if obj is None or obj.type != "MESH":
-                self.report({"ERROR"}, "select a head mesh first")
-                return {"CANCELLED"}
-            verts, polys = _mesh_arrays(obj)
-            try:
-                shapes = _with_progress(context, lambda pr: arkit_shapes(verts, polys, _command(context), pr))
-            except AddonError as e:
-                self.report({"ERROR"}, str(e))
-                return {"CANCELLED"}
-            _shape_keys_from(obj, shapes)
-            self.report({"INFO"}, f"{len(shapes)} ARKit shape keys on {obj.name}")
-            return {"FINISHED"}
+            return _make_shape_keys(self, context, arkit_shapes, "ARKit")
 
     class MIMICA_OT_transfer_shape_keys(bpy.types.Operator):
         """Move the active mesh's shape keys onto the other selected meshes (mimica transfer, any topology)"""
@@ -330,20 +335,8 @@ if bpy is not None:  # pragma: no cover - runs inside Blender (tests/test_blende
                                             default={"happiness"})
 
         def execute(self, context):
-            obj = context.active_object
-            if obj is None or obj.type != "MESH":
-                self.report({"ERROR"}, "select a head mesh first")
-                return {"CANCELLED"}
-            verts, polys = _mesh_arrays(obj)
-            try:
-                shapes = _with_progress(context, lambda pr: simulated_shapes(verts, polys, sorted(self.expressions),
-                                                                             _command(context), pr))
-            except AddonError as e:
-                self.report({"ERROR"}, str(e))
-                return {"CANCELLED"}
-            _shape_keys_from(obj, shapes)
-            self.report({"INFO"}, f"{len(shapes)} muscle shape keys on {obj.name}")
-            return {"FINISHED"}
+            return _make_shape_keys(self, context, lambda v, p, exe, pr: simulated_shapes(
+                v, p, sorted(self.expressions), exe, pr), "muscle")
 
     class MIMICA_OT_live_link_take(bpy.types.Operator):
         """Key a Live Link Face take (CSV) onto the active mesh's ARKit shape keys"""
