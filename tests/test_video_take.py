@@ -72,9 +72,12 @@ def test_video_to_animation_and_live_link_csv(head_glb, tmp_path, capsys):
     said = capsys.readouterr().err
     assert "14 frames tracked" in said and "frame 0 taken as the performer's rest" in said, said
     assert out.is_file() and out.with_suffix(".csv").is_file()
-    times, weights, rate = read_take(out.with_suffix(".csv"))
+    # a folder plays at 25 fps; the take is under a second, so its rate is given to the reader
+    times, weights, rate = read_take(out.with_suffix(".csv"), fps=25)
     assert len(times) == 14 and {"headYaw", "headPitch", "headRoll"} <= set(weights)
     g = gl.GLTF2().load(str(out))
+    np.testing.assert_allclose(_gltf_accessor(g, g.animations[0].samplers[0].input), times, atol=1e-6)
+    np.testing.assert_allclose(times, np.arange(14) / 25, atol=1e-6)
     names = g.meshes[0].extras["targetNames"]
     anim = _gltf_accessor(g, g.animations[0].samplers[0].output).reshape(14, len(names))
     for j, n in enumerate(names):
@@ -83,6 +86,19 @@ def test_video_to_animation_and_live_link_csv(head_glb, tmp_path, capsys):
     assert np.corrcoef(got, jaw)[0, 1] > 0.9 and got.max() > 0.5 and got[0] < 0.05, np.round(got, 2)
     r = validate([out])[0]
     assert r["errors"] == 0 and r["warnings"] == 0, r["messages"]
+
+
+def test_live_link_csv_keeps_the_video_rate(tmp_path):
+    """The CSV's timecode counts frames at the video's rate: a 30 fps take of 2.5 s reads back at
+    30 fps with its times (a 60 fps count would read as 59)."""
+    from mimica.export.take import read_take
+    from mimica.export.video import write_live_link_csv
+    times = np.arange(75) / 30
+    w = np.random.default_rng(3).uniform(0, 1, (75, 52))
+    write_live_link_csv(tmp_path / "t.csv", times, w, 30.0)
+    back, weights, rate = read_take(tmp_path / "t.csv")
+    assert rate == 30 and np.allclose(back, times, atol=1e-6)
+    assert np.allclose(weights["jawOpen"], w[:, ARKIT_52.index("jawOpen")], atol=1e-6)
 
 
 def test_video_requests_that_cannot_be_met_say_one_line(head_glb, tmp_path, capsys):

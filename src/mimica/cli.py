@@ -791,10 +791,10 @@ def cmd_animate(a):
         source = a.arkit
     with atomic_path(out) as tmp:
         info = animate_glb(head, tmp, times, weights, head_rotation=a.head_rotation, pivot=pivot)
-    if csv_out is not None:
-        from .export.video import write_live_link_csv
-        write_live_link_csv(csv_out, times, np.stack([weights[n] for n in ARKIT_52], 1),
-                            np.stack([weights[n] for n in ("headYaw", "headPitch", "headRoll")], 1))
+        if csv_out is not None:                 # inside: a failure leaves neither file
+            from .export.video import write_live_link_csv
+            write_live_link_csv(csv_out, times, np.stack([weights[n] for n in ARKIT_52], 1), rate,
+                                np.stack([weights[n] for n in ("headYaw", "headPitch", "headRoll")], 1))
     if info["pivot"] is not None:
         turn = np.degrees(np.abs([weights[n] for n in ("headYaw", "headPitch", "headRoll")]).max(1))
         head_line = (f"; the head turns (up to yaw {turn[0]:.0f}, pitch {turn[1]:.0f}, roll {turn[2]:.0f} degrees) "

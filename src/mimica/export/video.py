@@ -80,8 +80,8 @@ def landmark_basis(head_glb) -> LandmarkBasis:
     if not names or not targets or not set(ARKIT_52) <= set(names):
         raise MimicaError(f"{head_glb}: not a head with the 52 ARKit morph targets (make it with `blendshapes`)")
     if not stored:
-        raise MimicaError(f"{head_glb}: no landmarks stored (made by an older mimica?): make it again with "
-                          "`blendshapes`")
+        raise MimicaError(f"{head_glb}: no landmarks stored (made by an older mimica, or the head's 68 landmarks "
+                          "were not all found): make it again with `blendshapes`, giving its landmarks")
     tri = np.asarray(stored["vertices"], np.int64)
     bary = np.asarray(stored["bary"], np.float64)
     if v_of is not None:                         # the user's vertices -> the file's (its first copy)
@@ -231,21 +231,26 @@ def head_angles(rotations: np.ndarray) -> np.ndarray:
     return Rotation.from_matrix(rotations).as_euler("YXZ")
 
 
-def write_live_link_csv(path, times: np.ndarray, weights: np.ndarray, angles: np.ndarray | None = None) -> Path:
-    """A Live Link Face-style CSV: Timecode (HH:MM:SS:FF.fff at 60 fps), BlendShapeCount, the 52
-    PascalCase weights, then HeadYaw, HeadPitch, HeadRoll (radians) and the eyes' (zero)."""
+def write_live_link_csv(path, times: np.ndarray, weights: np.ndarray, fps: float,
+                        angles: np.ndarray | None = None) -> Path:
+    """A Live Link Face-style CSV: Timecode (HH:MM:SS:FF.fff, FF counting frames at `fps` within
+    each second, so that a reader finds the rate from a take of a second or more),
+    BlendShapeCount, the 52 PascalCase weights, then HeadYaw, HeadPitch, HeadRoll (radians) and
+    the eyes' (zero)."""
     from ..mesh import atomic_path
     rot = ["HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
            "RightEyeYaw", "RightEyePitch", "RightEyeRoll"]
     lines = [",".join(["Timecode", "BlendShapeCount"] + [n[0].upper() + n[1:] for n in ARKIT_52] + rot)]
     ang = np.zeros((len(times), 3)) if angles is None else angles
     for t, w, a in zip(times, weights, ang):
-        sec, frac = divmod(float(t), 1.0)
-        fr = frac * 60
-        h, rem = divmod(int(sec), 3600)
+        sec = int(np.floor(t + 1e-9))
+        ff = round((float(t) - sec) * fps, 3)
+        if ff >= fps - 0.0005:                    # rounding reached the next second
+            sec, ff = sec + 1, 0.0
+        h, rem = divmod(sec, 3600)
         m, s = divmod(rem, 60)
-        tc = f"{h:02d}:{m:02d}:{s:02d}:{int(fr):02d}.{int(round((fr % 1) * 1000)) % 1000:03d}"
-        lines.append(",".join([tc, "61"] + [f"{x:.6f}" for x in w] + [f"{x:.6f}" for x in a] + ["0"] * 6))
+        lines.append(",".join([f"{h:02d}:{m:02d}:{s:02d}:{ff:06.3f}", "61"] + [f"{x:.6f}" for x in w]
+                              + [f"{x:.6f}" for x in a] + ["0"] * 6))
     path = Path(path)
     with atomic_path(path) as tmp:
         Path(tmp).write_text("\n".join(lines) + "\n")
