@@ -1,18 +1,22 @@
 """Run inside Blender's Python (bpy), by tests/test_blender.py: the add-on's four operators on
 real meshes, headless; what they made is written as JSON for the test to check.
 
-    python-with-bpy blender_driver.py ADDON.py HEAD.obj TAKE.csv OUT.json
+    python-with-bpy blender_driver.py ADDON.py HEAD.obj TAKE.csv OUT.json [GLB ...]
+
+and each GLB given after them imported as a user would (File > Import > glTF): its vertices,
+smooth shading, uv layers, materials, shape keys, armature; the first also through FBX and back.
 """
 
 import importlib.util
 import json
 import os
 import sys
+from pathlib import Path
 
 import bpy
 import numpy as np
 
-addon_path, head_obj, take_csv, out_json = sys.argv[-4:]
+addon_path, head_obj, take_csv, out_json, *glbs = sys.argv[1:]
 bpy.ops.wm.read_factory_settings(use_empty=True)
 spec = importlib.util.spec_from_file_location("mimica_blender_addon", addon_path)
 addon = importlib.util.module_from_spec(spec)
@@ -103,12 +107,47 @@ try:
     report["cube_take"] = list(bpy.ops.mimica.live_link_take(filepath=take_csv))
 except RuntimeError as e:                 # Blender raises the operator's ERROR report
     report["cube_take_error"] = str(e)
-with open(out_json, "w") as f:
-    json.dump(report, f)
 # the shapes, in the world, for a picture (docs/figures/blender_addon.png)
 np.savez(out_json[:-5] + ".npz", faces=np.array([p.vertices[:3] for p in head.data.polygons]),
          rest=k["Basis"], jawOpen=k["jawOpen"], mouthSmileLeft=k["mouthSmileLeft"], other=km["Basis"],
          other_jawOpen=km["jawOpen"], other_happiness=km["muscles_happiness"])
+# GLBs as a user imports them
+report["glb"] = {}
+for i, glb in enumerate(glbs):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.import_scene.gltf(filepath=glb)
+    meshes = [o for o in bpy.context.scene.objects if o.type == "MESH"]
+    ob = max(meshes, key=lambda o: len(o.data.vertices))
+    me = ob.data
+    info = {"vertices": len(me.vertices), "smooth": all(p.use_smooth for p in me.polygons),
+            "uv_layers": len(me.uv_layers), "materials": len([m for m in me.materials if m]),
+            "shape_keys": len(me.shape_keys.key_blocks) if me.shape_keys else 0,
+            "armature": any(o.type == "ARMATURE" for o in bpy.context.scene.objects),
+            "height": float(np.ptp(np.array([(ob.matrix_world @ v.co)[:] for v in me.vertices])[:, 2]))}
+    if me.shape_keys and len(me.shape_keys.key_blocks) > 1:
+        kb = me.shape_keys.key_blocks
+        a, b = np.zeros(len(me.vertices) * 3), np.zeros(len(me.vertices) * 3)
+        kb[0].data.foreach_get("co", a)
+        kb[1].data.foreach_get("co", b)
+        info["first_key"] = kb[1].name
+        info["first_key_largest"] = float(np.abs(b - a).max())
+    if me.shape_keys and me.shape_keys.animation_data:
+        scene = bpy.context.scene
+        info["animated"] = {}
+        for f in (0, 12):
+            scene.frame_set(f)
+            info["animated"][str(f)] = {k.name: k.value for k in me.shape_keys.key_blocks[1:4]}
+    if i == 0:                                  # glTF -> FBX -> glTF keeps the vertices whole
+        fbx = out_json[:-5] + ".fbx"
+        bpy.ops.export_scene.fbx(filepath=fbx, use_selection=False)
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        bpy.ops.import_scene.fbx(filepath=fbx)
+        back = max((o for o in bpy.context.scene.objects if o.type == "MESH"), key=lambda o: len(o.data.vertices))
+        info["fbx_vertices"] = len(back.data.vertices)
+    report["glb"][Path(glb).name] = info
+
+with open(out_json, "w") as f:
+    json.dump(report, f)
 sys.stdout.flush()
 sys.stderr.flush()
 # bpy (4.5) as a module hangs on a futex at interpreter exit after operators ran: leave at once

@@ -62,11 +62,16 @@ def blender_python() -> str:
     return exe
 
 
-def test_the_addon_inside_blender(tmp_path):
+def test_the_addon_inside_blender(tmp_path, full_model, head_glb):
     """Headless Blender (bpy 4.5): ARKit shape keys on an imported head (z up, as Blender has
     it: the jaw opens down Blender's z), a Live Link take keyed onto them (values at sampled
     frames equal the CSV's), shape keys moved onto another mesh, muscle-simulated shape keys,
-    and an error as a Blender report."""
+    and an error as a Blender report.  And mimica's GLBs imported as a user imports them: ICT's
+    whole mesh smooth, with its uv and 12 materials, in metres, whole through FBX and back;
+    quantized morph targets as shape keys; an animated take with its head's armature, the shape
+    keys' values at sampled frames the take's."""
+    from mimica.mesh import write_glb, write_mesh
+    from mimica.mesh.io import SPARSE_TOLERANCE
     exe = blender_python()
     cmd = tmp_path / "mimica"                       # the add-on runs this mimica command
     cmd.write_text(f"#!/bin/sh\nexec {sys.executable} -m mimica.cli \"$@\"\n")
@@ -78,10 +83,17 @@ def test_the_addon_inside_blender(tmp_path):
     live_link_csv(tmp_path / "take.csv", w)
     times, written, _ = read_take(tmp_path / "take.csv")       # the CSV keeps 6 decimals
     out = tmp_path / "report.json"
+    m = full_model.mesh
+    write_mesh(tmp_path / "full.glb", m)
+    write_glb(tmp_path / "quantized.glb", m, {"jawOpen": full_model.shape("jawOpen")}, sparse=SPARSE_TOLERANCE,
+              quantize=True)
+    assert main(["animate", str(head_glb), "--arkit", str(tmp_path / "take.csv"), "--head-rotation",
+                 "--out", str(tmp_path / "take.glb")]) == 0
     env = {**os.environ, "MIMICA_COMMAND": str(cmd)}
     run = subprocess.run([exe, str(ROOT / "tests" / "blender_driver.py"), str(Path(addon.__file__)), str(HEAD),
-                          str(tmp_path / "take.csv"), str(out)], env=env, stdin=subprocess.DEVNULL,
-                         capture_output=True, text=True, timeout=900)
+                          str(tmp_path / "take.csv"), str(out), str(tmp_path / "full.glb"),
+                          str(tmp_path / "quantized.glb"), str(tmp_path / "take.glb")], env=env,
+                         stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=900)
     assert run.returncode == 0 and out.is_file(), run.stderr[-3000:] + run.stdout[-2000:]
     r = json.loads(out.read_text())
     assert r["arkit"] == ["FINISHED"] and r["arkit_keys"] == 53
@@ -96,3 +108,13 @@ def test_the_addon_inside_blender(tmp_path):
     assert 0.95 < r["transfer_ratio"] < 1.25 and r["transfer_jaw_down"] < -0.5
     assert r["muscles"] == ["FINISHED"] and r["muscle_largest"] > 0.05
     assert "no shape keys" in r.get("cube_take_error", ""), r
+    full, quant, take = (r["glb"][n] for n in ("full.glb", "quantized.glb", "take.glb"))
+    assert full["smooth"] and full["uv_layers"] == 1 and full["materials"] == 12 and full["vertices"] == 28911
+    assert full["height"] == pytest.approx(0.01 * np.ptp(m.vertices[:, 1]), rel=1e-4)      # metres
+    assert full["fbx_vertices"] == full["vertices"]             # FBX round trip keeps the vertices whole
+    jaw = 0.01 * np.abs(full_model.shape("jawOpen") - m.vertices).max()
+    assert quant["shape_keys"] == 2 and quant["first_key_largest"] == pytest.approx(jaw, abs=2e-5)
+    assert take["armature"] and take["shape_keys"] == 53
+    for f, got in take["animated"].items():          # keyed at t x 24 from frame 0 in Blender's 24 fps
+        for n, value in got.items():
+            assert value == pytest.approx(np.interp(int(f) / 24, times, written[n]), abs=1e-4), (f, n)

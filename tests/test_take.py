@@ -224,3 +224,40 @@ def test_head_rotation_needs_its_columns_and_a_pivot(head_glb, ict_head_glb, tmp
     assert main(["animate", str(head_glb), "--arkit", str(tmp_path / "take.csv"), "--out", str(tmp_path / "s.glb")]) == 0
     assert "the head stays still" in capsys.readouterr().err
     assert gl.GLTF2().load(str(tmp_path / "s.glb")).skins == []
+
+
+def test_a_json_take_and_a_usd_take(head_glb, tmp_path):
+    """A JSON take (columns, or one object a frame) plays as its CSV does; --out take.usda writes
+    the head's blend shapes and a SkelAnimation whose weights are the take's, resampled on its
+    rate; head rotation there is refused in one line."""
+    import json
+    from mimica.export.take import read_take
+    from mimica.mesh.io import read_morph_targets
+    rng = np.random.default_rng(5)
+    t = np.arange(12) / 30
+    w = rng.uniform(0, 1, (12, 52))
+    cols = {"time": t.tolist(), **{n: w[:, j].tolist() for j, n in enumerate(ARKIT_52)}}
+    (tmp_path / "cols.json").write_text(json.dumps(cols))
+    (tmp_path / "rows.json").write_text(json.dumps([{"time": float(t[i]), **{n: float(w[i, j])
+                                                     for j, n in enumerate(ARKIT_52)}} for i in range(12)]))
+    for name in ("cols.json", "rows.json"):
+        times, weights, rate = read_take(tmp_path / name)
+        assert rate == pytest.approx(30) and np.allclose(times, t)
+        assert np.allclose(weights["jawOpen"], w[:, ARKIT_52.index("jawOpen")])
+    out = tmp_path / "take.usda"
+    assert main(["animate", str(head_glb), "--arkit", str(tmp_path / "cols.json"), "--out", str(out)]) == 0
+    from pxr import Usd, UsdSkel
+    stage = Usd.Stage.Open(str(out))
+    anim = UsdSkel.Animation(stage.GetPrimAtPath("/Head/Skel/Anim"))
+    names = list(anim.GetBlendShapesAttr().Get())
+    assert len(names) == 52 and stage.GetTimeCodesPerSecond() == pytest.approx(30)
+    got = np.array(anim.GetBlendShapeWeightsAttr().Get(5))
+    np.testing.assert_allclose(got[names.index("jawOpen")], w[5, ARKIT_52.index("jawOpen")], atol=1e-6)
+    mesh, targets, unit = read_morph_targets(head_glb)
+    assert unit == "cm" and len(targets) == 52 and np.abs(targets["jawOpen"] - mesh.vertices).max() > 0.5
+    assert main(["animate", str(head_glb), "--arkit", str(tmp_path / "cols.json"), "--head-rotation",
+                 "--out", str(tmp_path / "r.usd")]) == 2
+    assert not (tmp_path / "r.usd").exists()
+    (tmp_path / "bad.json").write_text(json.dumps({"time": [0, 1], "jawOpen": [0.5]}))
+    with pytest.raises(Exception, match="not one value per time"):
+        read_take(tmp_path / "bad.json")

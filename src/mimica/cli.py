@@ -773,9 +773,13 @@ def cmd_animate(a):
     from .export import ARKIT_52
     from .export.take import animate_glb, read_take
     from .mesh import atomic_path
+    from .export.usd import USD_SUFFIXES
     out = Path(a.out)
-    if out.suffix.lower() != ".glb":
-        raise MimicaError(f"{out}: an animated take is written as .glb")
+    usd = out.suffix.lower() in USD_SUFFIXES
+    if out.suffix.lower() != ".glb" and not usd:
+        raise MimicaError(f"{out}: an animated take is written as .glb or as USD ({', '.join(USD_SUFFIXES)})")
+    if usd and a.head_rotation:
+        raise MimicaError(f"{out}: the head's rotation is written to .glb only (USD gets the blend shapes' weights)")
     head = Path(a.head)
     if not head.is_file():
         raise MimicaError(f"{head}: no such file")
@@ -789,12 +793,23 @@ def cmd_animate(a):
     else:
         times, weights, rate = read_take(a.arkit, fps=a.fps)
         source = a.arkit
-    with atomic_path(out) as tmp:
-        info = animate_glb(head, tmp, times, weights, head_rotation=a.head_rotation, pivot=pivot)
-        if csv_out is not None:                 # inside: a failure leaves neither file
+
+    def weights_csv():
+        if csv_out is not None:
             from .export.video import write_live_link_csv
             write_live_link_csv(csv_out, times, np.stack([weights[n] for n in ARKIT_52], 1), rate,
                                 np.stack([weights[n] for n in ("headYaw", "headPitch", "headRoll")], 1))
+    if usd:                                     # write_usd is atomic by itself (its suffix names its format)
+        info = _take_usd(head, out, times, weights, rate)
+        try:
+            weights_csv()
+        except BaseException:
+            out.unlink(missing_ok=True)
+            raise
+    else:
+        with atomic_path(out) as tmp:
+            info = animate_glb(head, tmp, times, weights, head_rotation=a.head_rotation, pivot=pivot)
+            weights_csv()                       # inside: a failure leaves neither file
     if info["pivot"] is not None:
         turn = np.degrees(np.abs([weights[n] for n in ("headYaw", "headPitch", "headRoll")]).max(1))
         head_line = (f"; the head turns (up to yaw {turn[0]:.0f}, pitch {turn[1]:.0f}, roll {turn[2]:.0f} degrees) "
@@ -805,6 +820,22 @@ def cmd_animate(a):
     _say(f"{source}: {len(times)} frames over {times[-1]:.2f}s ({rate:.3g} fps) drive {info['driven']} morph "
          f"targets of {head.name}{head_line} -> {out}" + (f" (weights: {csv_out})" if csv_out else ""))
     return 0
+
+
+def _take_usd(head: Path, out, times, weights: dict, rate: float) -> dict:
+    """The take as USD: the head's blend shapes (read from its GLB) and a SkelAnimation of
+    their weights, resampled on the take's own rate (USD keys whole time codes)."""
+    from .export.usd import write_usd
+    from .mesh.io import read_morph_targets
+    mesh, targets, unit = read_morph_targets(head)
+    names = [n for n in targets if n in weights]
+    if not names:
+        raise MimicaError(f"{head}: none of its morph targets is an ARKit shape")
+    rate = rate if rate and rate > 0 else 30.0
+    grid = np.arange(int(np.floor(times[-1] * rate + 1e-6)) + 1) / rate
+    w = np.stack([np.interp(grid, times, weights[n]) for n in names], 1)
+    write_usd(out, mesh, {n: targets[n] for n in names}, w, rate, unit)
+    return {"driven": len(names), "pivot": None, "bending": 0}
 
 
 def _weights_from_video(a, head: Path, out: Path):
@@ -1076,7 +1107,7 @@ def build_parser():
     an = sub.add_parser("animate", help="play an ARKit take (a Live Link Face CSV) on a head's ARKit blendshapes")
     an.add_argument("head", help="the head's ARKit blendshapes, a .glb (as `mimica blendshapes` writes it)")
     an.add_argument("--arkit", help="the take: a Live Link Face CSV (Timecode, BlendShapeCount, the "
-                                    "52 weights ...) or a CSV of the 52 weights with a time column")
+                                    "52 weights ...), or a CSV or JSON of the 52 weights with a time column")
     an.add_argument("--video", help="or the take as a video (or a folder of frames) of a face: its 68 points are "
                                     "tracked and the 52 weights fitted through the head's blendshapes, written "
                                     "also as a Live Link-style CSV beside --out")
@@ -1088,7 +1119,8 @@ def build_parser():
     an.add_argument("--pivot", help="x,y,z in metres, in the GLB's frame: the point the head turns about "
                                     "(default: the one `blendshapes` placed from the landmarks, with the neck "
                                     "bending below the chin)")
-    an.add_argument("--out", required=True, help="take.glb: the head with the take as an animation")
+    an.add_argument("--out", required=True, help="take.glb: the head with the take as an animation (or take.usd / "
+                                                 ".usda / .usdc: its blend shapes and a SkelAnimation)")
     an.set_defaults(func=cmd_animate)
 
     bs = sub.add_parser("blendshapes", help="the 52 ARKit blendshapes on any head mesh, as one GLB")

@@ -33,21 +33,45 @@ def _timecode(text: str) -> tuple[float, float]:
     return 3600.0 * h + 60.0 * m + s, float(parts[3])
 
 
+def _json_rows(path: Path) -> list[list[str]]:
+    """A JSON take as the CSV's rows: {"time": [seconds ...], "jawOpen": [...], ...} (columns) or
+    [{"time": t, "jawOpen": w, ...}, ...] (one object a frame)."""
+    from ..mesh.io import read_json
+    data = read_json(path, "take")
+    if isinstance(data, dict) and isinstance(data.get("time"), list):
+        header = list(data)
+        cols = [data[h] if isinstance(data[h], list) else [] for h in header]
+        n = len(data["time"])
+        if any(len(c) != n for c in cols):
+            bad = next(h for h, c in zip(header, cols) if len(c) != n)
+            raise MimicaError(f"{path}: {bad!r} has not one value per time ({n})")
+        return [header] + [[str(c[i]) for c in cols] for i in range(n)]
+    if isinstance(data, list) and data and all(isinstance(r, dict) for r in data):
+        header = list(data[0])
+        return [header] + [[str(r.get(h, "")) for h in header] for r in data]
+    raise MimicaError(f"{path}: a JSON take is {{\"time\": [...], \"jawOpen\": [...], ...}} or a list of "
+                      "{\"time\": t, \"jawOpen\": w, ...} frames")
+
+
 def read_take(path, fps: float | None = None) -> tuple[np.ndarray, dict, float]:
     """(times in seconds from the take's start (F,), {ARKit name: weights (F,)}, frame rate)
-    of a take CSV (the rate: the Timecode's, or the median of a time column's steps).  The
+    of a take CSV or JSON (_json_rows; the rate: the Timecode's, or the median of a time
+    column's steps).  The
     head's rotation, where the take has it, comes as headYaw, headPitch, headRoll (radians).
 
     fps: the frame rate of a Timecode column (default: one more than the largest frame number
     in the take, e.g. 60 for frames 0-59)."""
     path = Path(path)
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as f:
-            rows = list(csv.reader(f))
-    except OSError as e:
-        raise MimicaError(f"{path}: cannot read the take ({e.strerror})") from None
-    except (UnicodeDecodeError, csv.Error) as e:
-        raise MimicaError(f"{path}: not a CSV file ({e})") from None
+    if path.suffix.lower() == ".json":
+        rows = _json_rows(path)
+    else:
+        try:
+            with open(path, newline="", encoding="utf-8-sig") as f:
+                rows = list(csv.reader(f))
+        except OSError as e:
+            raise MimicaError(f"{path}: cannot read the take ({e.strerror})") from None
+        except (UnicodeDecodeError, csv.Error) as e:
+            raise MimicaError(f"{path}: not a CSV file ({e})") from None
     if len(rows) < 2:
         raise MimicaError(f"{path}: no frames (a header line and one line per frame are needed)")
     header = [h.strip() for h in rows[0]]

@@ -311,6 +311,38 @@ def _read_gltf(path: Path) -> Mesh:
     return mesh
 
 
+def read_morph_targets(path) -> tuple[Mesh, dict, str]:
+    """(the mesh, {target name: (n, 3) positions}, the mesh's unit ("m" when the file does not
+    say)) of a glTF file with named morph targets (extras.targetNames, as mimica writes them),
+    in the mesh's own vertices and unit."""
+    import pygltflib as gl
+    path = Path(path)
+    mesh = read_mesh(path)
+    try:
+        g = gl.GLTF2().load(str(path))
+        gm = g.meshes[0]
+        prim = gm.primitives[0]
+        names = list((gm.extras or {}).get("targetNames") or [])
+        extras = prim.extras if isinstance(prim.extras, dict) else {}
+        unit = extras.get(UNITS_KEY) if extras.get(UNITS_KEY) in UNITS else "m"
+        k = UNITS[unit]
+        n_file = g.accessors[prim.attributes.POSITION].count
+        v_of = np.arange(n_file)
+        if VERTEX_MAP in extras:
+            view = g.bufferViews[int(extras[VERTEX_MAP])]
+            v_of = np.frombuffer(_gltf_buffer(g, view.buffer), np.uint32, n_file, view.byteOffset or 0).astype(np.int64)
+        out = {}
+        for name, t in zip(names, prim.targets or []):
+            d = np.zeros((mesh.n_vertices, 3))
+            d[v_of[::-1]] = _gltf_accessor(g, t["POSITION"]).astype(np.float64)[::-1] / k
+            out[name] = mesh.vertices + d
+    except Exception as e:
+        raise MimicaError(f"{path}: its morph targets cannot be read ({type(e).__name__}: {e})") from None
+    if not out:
+        raise MimicaError(f"{path}: no named morph targets")
+    return mesh, out, unit
+
+
 _COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 
