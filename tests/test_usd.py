@@ -67,3 +67,19 @@ def test_blendshapes_as_usd(tmp_path, capsys):
     jaw = UsdSkel.BlendShape(stage.GetPrimAtPath("/Head/Mesh/jawOpen"))
     assert len(jaw.GetOffsetsAttr().Get()) == len(jaw.GetPointIndicesAttr().Get()) > 20
     assert not list(tmp_path.glob(".*part*"))                            # written atomically
+
+
+def test_format_usd_names_the_file(tmp_path, head_model, capsys):
+    """`export DIR --format usd --out anim` writes anim.usd (as --out anim.usd does); a suffix and
+    a --format that disagree are refused in one line."""
+    from mimica.cli import main
+    from mimica.mesh import write_mesh
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for i, name in enumerate(("jawOpen", "mouthSmile_L")):
+        write_mesh(frames / f"f{i}.obj", head_model.mesh.with_vertices(head_model.shape(name)))
+    assert main(["export", str(frames), "--format", "usd", "--out", str(tmp_path / "anim")]) == 0
+    assert (tmp_path / "anim.usd").is_file()
+    capsys.readouterr()
+    assert main(["export", str(frames), "--format", "usd", "--out", str(tmp_path / "anim.glb")]) == 2
+    assert "say the format once" in capsys.readouterr().err and not (tmp_path / "anim.glb").exists()

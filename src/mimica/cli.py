@@ -54,6 +54,7 @@ MATCH_HELP = ("across topologies, how target vertices find their source partners
               "registration of the source onto the target (default); cylinder, Song et al.'s cylinder map")
 
 
+FILE_FORMATS = ("glb", "gltf", "usd", "usda", "usdc")     # --format naming one file's kind
 CLIP_MAX_ERROR_M = 1e-4          # a compact clip's bound: 0.1 mm, in metres
 
 
@@ -743,6 +744,10 @@ def cmd_export(a):
             raise MimicaError(f"{p}: {len(f)} vertices; {paths[0]} has {mesh.n_vertices} (one topology per sequence)")
     out = Path(a.out)
     suf = out.suffix.lower()
+    if not suf and a.format in FILE_FORMATS:             # `--format usd --out anim`: anim.usd
+        out, suf = out.with_suffix("." + a.format), "." + a.format
+    elif suf and a.format in FILE_FORMATS and suf != "." + a.format:
+        raise MimicaError(f"--format {a.format} with --out {out}: say the format once (the suffix, or --format)")
     if suf in (".usd", ".usda", ".usdc", ".glb", ".gltf"):
         base = read_mesh(a.rest) if a.rest else mesh
         if base.n_vertices != mesh.n_vertices:
@@ -760,7 +765,7 @@ def cmd_export(a):
     if suf:
         raise MimicaError(f"{out}: export to .glb/.gltf, .usd/.usda/.usdc, or to a folder (with --format obj|ply)")
     if a.format not in ("obj", "ply"):
-        raise MimicaError(f"--format {a.format}: obj or ply")
+        raise MimicaError(f"--format {a.format}: obj or ply for a folder, or {', '.join(FILE_FORMATS)} for one file")
     from .outputs import staged_dir
     with staged_dir(out, {"command": "export"}) as d:
         for p, f in zip(paths, frames):
@@ -865,6 +870,10 @@ def cmd_blendshapes(a):
     from .mesh import atomic_path, read_mesh, write_glb
     from .mesh.io import SPARSE_TOLERANCE
     out = Path(a.out)
+    if a.format and not out.suffix:                       # `--format usd --out head`: head.usd
+        out = out.with_suffix("." + a.format)
+    elif a.format and out.suffix.lower() != "." + a.format:
+        raise MimicaError(f"--format {a.format} with --out {out}: say the format once (the suffix, or --format)")
     if out.suffix.lower() not in (".glb", ".gltf", ".usd", ".usda", ".usdc", ".npz"):
         raise MimicaError(f"{out}: blendshapes are written as glTF (.glb or .gltf), USD (.usd, .usda, .usdc) "
                           "or NumPy arrays (.npz: the positions of each shape, for the Blender add-on)")
@@ -1096,7 +1105,8 @@ def build_parser():
     ex.add_argument("--out", required=True, help="anim.glb / anim.gltf, anim.usd / .usda / .usdc (UsdSkel), or a folder")
     ex.add_argument("--rest", help="the rest mesh the morph targets are relative to (default: the first frame)")
     ex.add_argument("--fps", type=float, default=30.0)
-    ex.add_argument("--format", default="obj", help="obj or ply, for a folder")
+    ex.add_argument("--format", default="obj", help="obj or ply, for a folder; glb, gltf, usd, usda or usdc "
+                                                     "for one file (the same as --out's suffix)")
     ex.add_argument("--units", choices=["auto", "cm", "mm", "m"], default="auto", help=UNITS_HELP)
     ex.add_argument("--compact", choices=["auto", "off"], default="auto",
                     help="auto: the clip as a few basis shapes and per-frame weights when that keeps every "
@@ -1130,6 +1140,7 @@ def build_parser():
     bs.add_argument("--out", required=True, help="head_arkit.glb (or .usd/.usda/.usdc: UsdSkel blend shapes)")
     bs.add_argument("--units", choices=["auto", "cm", "mm", "m"], default="auto", help=UNITS_HELP)
     bs.add_argument("--quantize", action="store_true", help=QUANTIZE_HELP)
+    bs.add_argument("--format", choices=FILE_FORMATS + ("npz",), help="the file's kind, where --out has no suffix")
     bs.set_defaults(func=cmd_blendshapes)
 
     vw = sub.add_parser("view", help="a live viewer in the browser: muscles, facial actions, age, presets, "
