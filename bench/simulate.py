@@ -2,6 +2,13 @@
 
 Run from the project root: .venv/bin/python bench/simulate.py
 Skin: the ICT-FaceKit face area (9,409 vertices); Kim's 8 muscles, one system per muscle.
+
+Issue 18's figures so far: coverage_cosine_min / _median -- ICT's expression shapes (all but
+the eyeLook* gaze and PupilDilate) fitted by the whole muscle library (`fit-muscles`: bounded
+least squares over the muscles' rest fields) on three held-out identities, the cosine of the
+fitted face's displacement with the shape over its moving region; fit_frames_per_s -- a
+2,000-frame take of the 52 ARKit shapes fitted through them on the generic face (best of 3).
+warp_deviation and linear_deviation (part 3) are not measured yet: n/a.
 """
 
 from __future__ import annotations
@@ -19,6 +26,8 @@ from mimica.anim import PRESETS, Timeline  # noqa: E402
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel  # noqa: E402
 from mimica.physics import ShellEnergy, lumped_mass  # noqa: E402
 from mimica.physics.face import FaceSimulator, displacement_cosine  # noqa: E402
+from mimica.physics.fit import MuscleFit  # noqa: E402
+from mimica.store import shape_names  # noqa: E402
 from mimica.physics.fullface import FullFaceSimulator  # noqa: E402
 from mimica.mesh import plane_grid  # noqa: E402
 from mimica.physics.modal import against_full  # noqa: E402
@@ -175,8 +184,42 @@ def main():
         tiles.append(render_mesh(skin, v, size=(280, 280), frame=fr))
     save_png(out / "presets.png", contact_sheet(tiles, list(PRESETS), columns=4,
                                                 title=f"expression presets ({len(names)} muscles, Kim 2020 shells)"))
+    cov, fit_fps = coverage(face, skin, whole)
     print(f"steps_per_s={steps:.0f} precompute_s={pre:.2f} full_solver_steps_per_s={full_steps:.2f} "
-          f"modal_deviation={dev:.3f} anatomy_cosine_min={min(cos_all):.3f}")
+          f"modal_deviation={dev:.3f} anatomy_cosine_min={min(cos_all):.3f} "
+          f"coverage_cosine_min={min(cov.values()):.3f} coverage_cosine_median={np.median(list(cov.values())):.3f} "
+          f"fit_frames_per_s={fit_fps:.0f} warp_deviation=n/a linear_deviation=n/a")
+
+
+def coverage(face, skin, whole, seeds=(1001, 1002, 1003)):
+    """({(shape, seed): cosine} of ICT's expression shapes fitted by the whole library on held-out
+    identities, fit frames per second of an ARKit take on the generic face)."""
+    from mimica.export import ARKIT_52
+    from mimica.export.blendshapes import ict_sources
+    expr = [n for n in shape_names() if not n.startswith(("eyeLook", "Pupil", "identity", "generic"))]
+    cos = {}
+    for seed in seeds:
+        tv = face.identity(np.random.default_rng(seed).normal(0, 0.8, 20))
+        other = build_rig(skin.with_vertices(tv), tv[ICT_LANDMARKS_68], muscles="all", gravity=False)
+        mf = MuscleFit.of_rig(other)
+        d = np.stack([face.delta({e: 1.0}) for e in expr])
+        act, _ = mf.fit(d)
+        for e, a, de in zip(expr, act, d):
+            cos[(e, seed)] = displacement_cosine(mf.displacement(a), de)
+    per = {e: min(cos[(e, s)] for s in seeds) for e in expr}
+    print(f"coverage ({len(whole.muscles)}-muscle library, fitted, {len(seeds)} held-out identities), worst "
+          "identity per shape: " + ", ".join(f"{e} {c:.2f}" for e, c in sorted(per.items(), key=lambda x: x[1])))
+    mf = MuscleFit.of_rig(whole)
+    shapes = np.stack([face.delta({n: 1.0 for n in ict_sources(k)}) if ict_sources(k) else np.zeros_like(skin.vertices)
+                       for k in ARKIT_52])
+    w = np.random.default_rng(0).uniform(0, 1, (2000, 52)) * (np.random.default_rng(1).uniform(size=(2000, 52)) < 0.15)
+    best = 0.0
+    for _ in range(3):
+        t = time.perf_counter()
+        mf.fit_combinations(shapes, w)
+        best = max(best, len(w) / (time.perf_counter() - t))
+    print(f"fit-muscles: a 2,000-frame take of the 52 ARKit shapes through {len(mf.names)} muscles: {best:.0f} frames/s")
+    return cos, best
 
 
 if __name__ == "__main__":

@@ -323,6 +323,95 @@ def cmd_rig(a):
     return 0
 
 
+def _sequence_timeline(names, activations, labels, seconds: float = 1.0):
+    """A timeline playing fitted activations (T, m) one after another: each ramps in over 0.3 s,
+    holds, and lets go before the next (the i-th from i x seconds)."""
+    from .anim import Channel, Timeline
+    ch = {}
+    for j, n in enumerate(names):
+        keys = []
+        for i, a in enumerate(activations[:, j]):
+            t0 = i * seconds
+            keys += [[t0, 0.0], [t0 + 0.3 * seconds, a], [t0 + 0.8 * seconds, a], [t0 + 0.95 * seconds, 0.0]]
+        if np.abs(activations[:, j]).max() > 0:
+            ch[n] = Channel(np.array(keys), "linear")
+    return Timeline(ch, seconds * len(activations))
+
+
+def cmd_fit_muscles(a):
+    from .anim import Channel, Timeline
+    from .mesh import read_mesh, read_vertices
+    from .physics.fit import MuscleFit
+    from .rig import Rig
+    if bool(a.target) == bool(a.arkit):
+        raise MimicaError("fit-muscles: give --target EXPR.obj ... or --arkit (a take CSV/JSON or a head's ARKit GLB)")
+    out = Path(a.out)
+    if out.suffix.lower() != ".json":
+        raise MimicaError(f"{out}: the activations are written as a timeline .json (simulate --timeline plays it)")
+    rig = Rig.load(a.rig)
+    n = rig.skin.n_vertices
+    arkit = Path(a.arkit) if a.arkit else None
+    shapes = take = None
+    if a.target:
+        targets = [Path(t) for t in a.target]
+        shapes = []
+        for t in targets:
+            v = read_vertices(t)
+            if len(v) != n:
+                raise MimicaError(f"{t}: {len(v)} vertices; the rig's skin has {n} (a target is the rig's face, "
+                                  "deformed)")
+            shapes.append(v - rig.skin.vertices)
+        labels = [t.stem for t in targets]
+    elif arkit.suffix.lower() in (".glb", ".gltf"):
+        shapes, labels = _rig_arkit_shapes(arkit, rig)
+    else:
+        from .export.take import read_take
+        times, weights, rate = read_take(arkit, fps=a.fps)
+        take = (times, weights, rate)
+        if a.shapes:
+            shapes, labels = _rig_arkit_shapes(Path(a.shapes), rig)
+        else:
+            from .export import ARKIT_52, arkit_blendshapes
+            _say(f"the ARKit shapes of {a.rig}'s face (once; --shapes HEAD_ARKIT.glb gives them)")
+            bs = arkit_blendshapes(rig.skin, progress=_say, cut_mouth=False)
+            shapes, labels = [bs[k][:n] - rig.skin.vertices for k in ARKIT_52], list(ARKIT_52)
+    t0 = time.perf_counter()
+    mf = MuscleFit.of_rig(rig)
+    t1 = time.perf_counter()
+    if take is None:
+        act, mis = mf.fit(np.stack(shapes))
+        el = time.perf_counter() - t1
+        tl = _sequence_timeline(mf.names, act, labels)
+        what = (f"{len(labels)} target{'s' * (len(labels) > 1)} one after another, 1 s each ("
+                + ", ".join(f"{lab} {m:.0%}" for lab, m in list(zip(labels, mis))[:6])
+                + (" ..." if len(labels) > 6 else "") + " misfit)")
+    else:
+        times, weights, rate = take
+        W = np.stack([weights.get(k, np.zeros(len(times))) for k in labels], 1)
+        act, mis = mf.fit_combinations(np.stack(shapes), W)
+        el = time.perf_counter() - t1
+        tl = Timeline({nm: Channel(np.stack([times, act[:, j]], 1), "linear") for j, nm in enumerate(mf.names)
+                       if np.abs(act[:, j]).max() > 0}, float(times[-1]) if times[-1] > 0 else 1.0)
+        what = f"a take of {len(times)} frames ({rate:.3g} fps), median misfit {np.median(mis):.0%}"
+    tl.save(out)
+    _say(f"{out}: {len(mf.names)} muscles fitted to {what}; fields {t1 - t0:.1f}s, fit "
+         f"{len(act) / max(el, 1e-9):.0f} frames/s; `simulate {a.rig} --timeline {out}` plays it")
+    return 0
+
+
+def _rig_arkit_shapes(path: Path, rig):
+    """The ARKit shapes' displacements on the rig's skin, from a head's ARKit GLB of that face."""
+    from .export import ARKIT_52
+    from .mesh.io import read_morph_targets
+    mesh, targets, _ = read_morph_targets(path)
+    n = rig.skin.n_vertices
+    if mesh.n_vertices < n or np.abs(mesh.vertices[:n] - rig.skin.vertices).max() > 1e-4 * np.ptp(rig.skin.vertices):
+        raise MimicaError(f"{path}: not the ARKit shapes of this rig's face (make them with `blendshapes` of the "
+                          "face the rig was made from)")
+    labels = [k for k in ARKIT_52 if k in targets]
+    return [targets[k][:n] - rig.skin.vertices for k in labels], labels
+
+
 def cmd_simulate(a):
     from .wrinkles import mask_on
     from .anim import Timeline
@@ -1002,6 +1091,18 @@ def build_parser():
     e.add_argument("--bins", default="0.1,0.5,2", help="colour thresholds in percent (Song Fig. 11: 0.1,0.5,2)")
     e.add_argument("--out", help="PNG to write")
     e.set_defaults(func=cmd_error)
+
+    fm = sub.add_parser("fit-muscles", help="the muscle activations that best make target shapes or an ARKit "
+                                            "take, as a timeline simulate plays")
+    fm.add_argument("rig", help="rig file from `mimica rig`")
+    fm.add_argument("--target", nargs="+", help="target shapes: the rig's face deformed (same vertices)")
+    fm.add_argument("--arkit", help="a take (Live Link CSV, weights CSV/JSON): its frames fitted through the "
+                                    "face's ARKit shapes; or a head's ARKit GLB: its 52 shapes fitted one by one")
+    fm.add_argument("--shapes", help="with a take: the face's ARKit shapes (HEAD_ARKIT.glb from `blendshapes`; "
+                                     "else made once here)")
+    fm.add_argument("--fps", type=float, help="the frame rate of a take's Timecode column")
+    fm.add_argument("--out", required=True, help="activations.json: a timeline of the muscles' activations")
+    fm.set_defaults(func=cmd_fit_muscles)
 
     r = sub.add_parser("rig", help="place muscles, springs and regions of interest on a face (Kim 2020)")
     r.add_argument("face", help="face mesh (OBJ/PLY/glTF)")
