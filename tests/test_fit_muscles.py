@@ -8,17 +8,13 @@ import numpy as np
 import pytest
 
 from mimica.cli import main
-from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel
+from mimica.data import ICT_LANDMARKS_68
 from mimica.physics.face import FaceSimulator
 from mimica.physics.fit import MuscleFit, _box_ls, muscle_fields
 from mimica.rig import build_rig
+from test_simulate import face  # noqa: F401  (the ICT face area, a fixture)
 
 MUSCLES = ["zygomaticus_major_L", "zygomaticus_major_R", "depressor_anguli_oris_R"]
-
-
-@pytest.fixture(scope="module")
-def face():
-    return ICTModel(ICT_FACE_AREA_VERTICES)
 
 
 @pytest.fixture(scope="module")
