@@ -220,6 +220,30 @@ def test_compression_raises_the_bulge_with_activation_and_age(layer, head_model)
     assert _group_height(layer, smile, 40, "crows") > 2 * _group_height(layer, X0, 40, "crows")
 
 
+def test_a_wrinkle_deepens_with_the_muscles_its_mask_names(layer, head_model):
+    """Issue 18, part 4: the forehead lines name frontalis; with the same compression, frontalis
+    at 0.5 and 1 deepens them by 1 + 0.5 MUSCLE_EMPHASIS and 1 + MUSCLE_EMPHASIS, other muscles
+    (and relaxation) leave them as they were, and wrinkles naming other muscles do not change."""
+    from mimica.wrinkles.layer import MUSCLE_EMPHASIS
+    X = head_model.mesh.vertices + head_model.delta(head_model.expression("surprise"))
+    names = layer.mask.names()
+    fh = [i for i, n in enumerate(names) if n.startswith("forehead")]
+    assert all("frontalis_L" in layer.mask.wrinkles[i].muscles or "frontalis_R" in layer.mask.wrinkles[i].muscles
+               for i in fh)
+    base = _group_height(layer, X, 65, "forehead")
+    for a, want in ((0.5, 1 + 0.5 * MUSCLE_EMPHASIS), (1.0, 1 + MUSCLE_EMPHASIS)):
+        e = layer.muscle_emphasis({"frontalis_L": a, "frontalis_R": a})
+        d = layer.displacement(X, 65, emphasis=e)
+        b = layer.vertex_binding
+        w = layer.sec_wrinkle[b.kn]
+        sel = np.isin(w, fh)
+        assert np.linalg.norm(d[b.point[sel]], axis=1).max() == pytest.approx(want * base, rel=1e-9)
+        other = ~np.isin(w, [i for i, x in enumerate(e) if x != 1.0])
+        np.testing.assert_allclose(d[b.point[other]], layer.displacement(X, 65)[b.point[other]])
+    assert (layer.muscle_emphasis({"zygomaticus_major_L": 1.0})[fh] == 1.0).all()
+    assert (layer.muscle_emphasis({"frontalis_L": -1.0, "frontalis_R": -1.0}) == 1.0).all()
+
+
 def test_sections_reach_the_dilated_arc_length(layer, head_model):
     """Eqs. 10-14: at rest every section's cubic spans dil(d_init, t) within 1 %; on a moving
     face it spans the length its (line-smoothed) target asks for."""

@@ -513,11 +513,14 @@ def _wrinkle_frames(a, rig, tl, frames, d, out, mask):
     """The wrinkle layer on the frames, the maps of the most compressed one, and a note."""
     from .wrinkles import wrinkle_frames
     ages = tl.channels["age"](np.arange(len(frames)) / a.fps) if "age" in tl.channels else a.age
-    w = wrinkle_frames(rig.skin, mask, frames, ages, refine=not a.no_refine)
+    names = [m.name for m in rig.muscles]
+    # each wrinkle deepened by the muscles its mask names, at their activations frame by frame
+    acts = [dict(zip(names, tl.values(f / a.fps, names))) for f in range(len(frames))]
+    w = wrinkle_frames(rig.skin, mask, frames, ages, refine=not a.no_refine, activations=acts)
     peak = w.peak
     if a.maps:
         from .wrinkles.maps import bake, save_maps
-        h, n = bake(w.skin.layer, rig.skin, w.carried[peak], float(w.ages[peak]), a.maps)
+        h, n = bake(w.skin.layer, rig.skin, w.carried[peak], float(w.ages[peak]), a.maps, w.emphasis[peak])
         save_maps(d / f"wrinkles_frame_{peak:04d}", h, n)
     most = np.argsort(w.compression[peak])[:3]
     names = w.skin.layer.mask.names()

@@ -60,6 +60,7 @@ class WrinkledFrames:
     ages: np.ndarray              # (F,)
     build_s: float                # seconds to refine and build the layer
     frame_s: float                # seconds a frame
+    emphasis: list = None         # per frame, each wrinkle's muscle emphasis (None: not driven)
 
     @property
     def peak(self) -> int:
@@ -67,19 +68,22 @@ class WrinkledFrames:
         return int(np.argmin(np.minimum(self.compression, 1.0).mean(1)))
 
 
-def wrinkle_frames(skin, mask: WrinkleMask, frames, ages, refine: bool = True) -> WrinkledFrames:
+def wrinkle_frames(skin, mask: WrinkleMask, frames, ages, refine: bool = True, activations=None) -> WrinkledFrames:
     """The wrinkle layer on simulated frames (V&Y §5.3): the skin refined along the mask, each
-    frame carried onto it and bulged at its age (ages: one a frame)."""
+    frame carried onto it and bulged at its age (ages: one a frame).  activations: per frame a
+    {muscle: activation} (the simulation's), each wrinkle then deepened by the muscles its mask
+    names (WrinkleLayer.muscle_emphasis)."""
     t0 = time.perf_counter()
     ws = WrinkledSkin.build(skin, mask, refine=refine)
     build_s = time.perf_counter() - t0
     ages = np.broadcast_to(np.asarray(ages, float), (len(frames),))
     t0 = time.perf_counter()
     carried = [ws.carry(v) for v in frames]
-    fine = np.stack([ws.layer.apply(X, float(g)) for X, g in zip(carried, ages)])
+    emph = [None] * len(frames) if activations is None else [ws.layer.muscle_emphasis(a) for a in activations]
+    fine = np.stack([ws.layer.apply(X, float(g), emphasis=e) for X, g, e in zip(carried, ages, emph)])
     per = (time.perf_counter() - t0) / max(len(frames), 1)
     comp = np.stack([ws.layer.compression(X) for X in carried])
-    return WrinkledFrames(ws, fine, carried, comp, np.array(ages), build_s, per)
+    return WrinkledFrames(ws, fine, carried, comp, np.array(ages), build_s, per, emph)
 
 
 __all__ = ["ArcLengthTable", "arc_length", "dilation", "CylinderFit", "fit_cylinder", "flatten",

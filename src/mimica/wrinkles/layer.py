@@ -134,6 +134,11 @@ def profile(t, rho, alpha, skew, iterations=4):
     return 3.0 * u * v * (v * s0 + u * s1)
 
 
+# a wrinkle's depth at its muscle's full contraction, against at rest (issue 18, part 4): a
+# mimica choice, not measured (Viaud & Yahia drive the bulge by compression and age alone)
+MUSCLE_EMPHASIS = 0.5
+
+
 @dataclass
 class Binding:
     """Points tied to the wrinkle sections: which point, which two sections, where across."""
@@ -333,8 +338,18 @@ class WrinkleLayer:
             a[m] = np.interp(q[m], qq, rr) * d[m]
         return d, a, alpha
 
-    def heights(self, binding: Binding, state) -> np.ndarray:
-        """Signed height (along the normal) of every bound point, (len(binding.point),)."""
+    def muscle_emphasis(self, activations: dict) -> np.ndarray:
+        """(n_wrinkles,) each wrinkle's emphasis from the muscles its mask names: 1 at rest,
+        1 + MUSCLE_EMPHASIS x the most active of them (a departure from Viaud & Yahia, whose
+        bulge follows the skin's compression and age alone: issue 18 asks the folding muscle's
+        pull for it too; contractions only, relaxations leave it at 1)."""
+        return np.array([1.0 + MUSCLE_EMPHASIS * max([0.0] + [max(float(activations.get(m, 0.0)), 0.0)
+                                                              for m in w.muscles])
+                         for w in self.mask.wrinkles])
+
+    def heights(self, binding: Binding, state, emphasis: np.ndarray | None = None) -> np.ndarray:
+        """Signed height (along the normal) of every bound point, (len(binding.point),);
+        emphasis: a factor per wrinkle (muscle_emphasis)."""
         d, q, _ = state
         b = binding
         qv = _between(q, b.k0, b.k1, b.f)
@@ -344,29 +359,32 @@ class WrinkleLayer:
         y -= b.rest
         y *= _between(d, b.k0, b.k1, b.f)
         y *= b.gain
+        if emphasis is not None:
+            y *= np.asarray(emphasis, float)[self.sec_wrinkle[b.kn]]
         return y
 
-    def _offsets(self, X, age, b):
+    def _offsets(self, X, age, b, emphasis=None):
         st = self.state(X, age)
         out = np.take(st[2], b.kn, axis=0)
-        out *= self.heights(b, st)[:, None]
+        out *= self.heights(b, st, emphasis)[:, None]
         return out
 
-    def displacement(self, X, age: float, binding: Binding | None = None) -> np.ndarray:
+    def displacement(self, X, age: float, binding: Binding | None = None, emphasis=None) -> np.ndarray:
         """(n, 3) displacement of the bound points at positions X (the mesh's vertices)."""
         b = self.vertex_binding if binding is None else binding
         out = np.zeros((b.n_points, 3))
-        out[b.point] = self._offsets(X, age, b)
+        out[b.point] = self._offsets(X, age, b, emphasis)
         return out
 
-    def apply(self, X, age: float, inplace: bool = False) -> np.ndarray:
-        """Positions X with the wrinkles' bulges added (into X itself when inplace)."""
+    def apply(self, X, age: float, inplace: bool = False, emphasis=None) -> np.ndarray:
+        """Positions X with the wrinkles' bulges added (into X itself when inplace); emphasis:
+        a factor per wrinkle (muscle_emphasis)."""
         b = self.vertex_binding
         Y = X if inplace else X.copy()
         if b.span is not None:
-            Y[b.span] += self._offsets(X, age, b)
+            Y[b.span] += self._offsets(X, age, b, emphasis)
         else:
-            Y[b.point] += self._offsets(X, age, b)
+            Y[b.point] += self._offsets(X, age, b, emphasis)
         return Y
 
     def compression(self, X) -> np.ndarray:

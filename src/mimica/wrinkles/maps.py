@@ -42,14 +42,15 @@ def world_per_uv(mesh: Mesh) -> float:
     return float(np.sqrt(a3 / max(a2, 1e-30)))
 
 
-def bake(layer, mesh: Mesh, X, age: float, size: int = 1024):
+def bake(layer, mesh: Mesh, X, age: float, size: int = 1024, emphasis=None):
     """Height image (size, size) in skin units and the tangent-space normal image (size, size, 3)
     of the wrinkles at positions X of the layer's mesh; `mesh` (with uv) lies on the same rest
-    surface (the coarse mesh the layer's was refined from, or the same one)."""
+    surface (the coarse mesh the layer's was refined from, or the same one); emphasis: a factor
+    per wrinkle (its muscles', WrinkleLayer.muscle_emphasis)."""
     rows, cols, pts = texel_points(mesh, size)
     b = layer.bind(pts)
     h = np.zeros((size, size))
-    h[rows[b.point], cols[b.point]] = layer.heights(b, layer.state(X, age))
+    h[rows[b.point], cols[b.point]] = layer.heights(b, layer.state(X, age), emphasis)
     texel = world_per_uv(mesh) / size
     gy, gx = np.gradient(h, texel)               # rows run down, v runs up
     n = np.stack([-gx, gy, np.ones_like(h)], -1)
