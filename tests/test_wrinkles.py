@@ -299,6 +299,43 @@ def test_maps_carry_the_frame_s_wrinkles(head_model, tmp_path):
     assert json.loads(paths[2].read_text())["displacement_scale"] == pytest.approx(np.abs(h).max())
 
 
+def test_engine_maps_blend_back_to_the_clip(head_model, tmp_path):
+    """The engine-style set on a clip that raises the brows and lets them go: one region a side
+    (forehead, crows_feet_R ...; at 70 the lines show at rest too), weights in [0, 1] reaching 1 at
+    each region's peak frame
+    and following its depth; at that frame its map is the frame's own bake of that region; its
+    mask covers the texels its wrinkles bind and no others."""
+    from PIL import Image
+
+    from mimica.wrinkles.maps import bake, engine_maps, wrinkle_regions
+    ws = WrinkledSkin.build(head_model.mesh, reference_mask())
+    up = head_model.delta(head_model.expression("surprise"))
+    s = np.array([0.0, 0.4, 1.0, 0.6, 0.0])
+    carried = [ws.refined.carry(head_model.mesh.vertices + k * up) for k in s]
+    ages = np.full(len(s), 70.0)
+    emph = [ws.layer.muscle_emphasis({"frontalis_L": k, "frontalis_R": k}) for k in s]
+    info = engine_maps(ws.layer, head_model.mesh, carried, ages, emph, 128, tmp_path / "maps")
+    regions = wrinkle_regions(ws.layer.mask.names())
+    assert "forehead" in regions and "crows_feet_R" in regions and len(regions) == len(info) == 15
+    rows = [ln.split(",") for ln in (tmp_path / "maps" / "weights.csv").read_text().split()]
+    assert rows[0] == ["frame"] + list(regions)
+    w = np.array([[float(x) for x in r[1:]] for r in rows[1:]])
+    assert w.shape == (5, 15) and w.min() >= 0 and w.max() <= 1 + 1e-9
+    fh = list(regions).index("forehead")
+    assert info["forehead"][0] == 2 and w[2, fh] == pytest.approx(1.0)
+    assert 0 < w[0, fh] < w[1, fh] < w[3, fh] < 1 and w[4, fh] == pytest.approx(w[0, fh])  # deeper as they rise
+    only = np.zeros(len(ws.layer.mask.wrinkles))
+    only[regions["forehead"]] = emph[2][regions["forehead"]]
+    h, _ = bake(ws.layer, head_model.mesh, carried[2], 70.0, 128, only)
+    meta = json.loads((tmp_path / "maps" / "forehead_maps.json").read_text())
+    disp = np.asarray(Image.open(tmp_path / "maps" / "forehead_displacement.png"), float)
+    np.testing.assert_allclose((disp - 32767.5) / 32767.0 * meta["displacement_scale"], h,
+                               atol=2 * meta["displacement_scale"] / 32767)
+    mask = np.asarray(Image.open(tmp_path / "maps" / "forehead_mask.png"))
+    assert (mask[h != 0] == 255).all() and 0 < (mask == 255).mean() < 0.5
+    assert json.loads((tmp_path / "maps" / "maps.json").read_text())["regions"][0]["region"] == list(regions)[0]
+
+
 # ---------------------------------------------------------------- command line
 def test_cli_wrinkle_mask_simulate_and_age(tmp_path, capsys):
     from mimica import write_mesh
@@ -316,6 +353,11 @@ def test_cli_wrinkle_mask_simulate_and_age(tmp_path, capsys):
     said = capsys.readouterr().err
     assert "wrinkles: 21" in said and "forehead" in said
     assert len(list(out.glob("frame_*.obj"))) == 19 and list(out.glob("wrinkles_frame_*_normal.png"))
+    assert main(["simulate", str(rig), "--expression", "surprise", "--duration", "0.1", "--wrinkles", str(mask),
+                 "--maps", "64", "--maps-set", "engine", "--out", str(tmp_path / "eng")]) == 0
+    assert "engine maps of 15 regions" in capsys.readouterr().err
+    assert (tmp_path / "eng" / "wrinkle_maps" / "weights.csv").is_file()
+    assert len(list((tmp_path / "eng" / "wrinkle_maps").glob("*_normal.png"))) == 15
     sheet = tmp_path / "age.png"
     assert main(["age", str(obj), "--rig", str(rig), "--ages", "30,80", "--expression", "surprise",
                  "--size", "96", "--out", str(sheet)]) == 0 and sheet.is_file()

@@ -518,16 +518,24 @@ def _wrinkle_frames(a, rig, tl, frames, d, out, mask):
     acts = [dict(zip(names, tl.values(f / a.fps, names))) for f in range(len(frames))]
     w = wrinkle_frames(rig.skin, mask, frames, ages, refine=not a.no_refine, activations=acts)
     peak = w.peak
-    if a.maps:
+    maps_line = ""
+    if a.maps and a.maps_set == "engine":
+        from .wrinkles.maps import engine_maps
+        regions = engine_maps(w.skin.layer, rig.skin, w.carried, w.ages, w.emphasis, a.maps, d / "wrinkle_maps")
+        maps_line = (f"; engine maps of {len(regions)} regions (normal, displacement, mask, per-frame weights) -> "
+                     f"{out}/wrinkle_maps/")
+    elif a.maps:
         from .wrinkles.maps import bake, save_maps
-        h, n = bake(w.skin.layer, rig.skin, w.carried[peak], float(w.ages[peak]), a.maps, w.emphasis[peak])
-        save_maps(d / f"wrinkles_frame_{peak:04d}", h, n)
+        for f in range(len(frames)) if a.maps_set == "frames" else [peak]:
+            h, n = bake(w.skin.layer, rig.skin, w.carried[f], float(w.ages[f]), a.maps, w.emphasis[f])
+            save_maps(d / f"wrinkles_frame_{f:04d}", h, n)
+        maps_line = (f"; maps of every frame -> {out}/wrinkles_frame_*" if a.maps_set == "frames" else
+                     f"; maps of that frame -> {out}/wrinkles_frame_{peak:04d}_*")
     most = np.argsort(w.compression[peak])[:3]
-    names = w.skin.layer.mask.names()
-    note = (f"; wrinkles: {len(names)} on {w.skin.mesh.n_vertices} nodes (built in {w.build_s:.1f}s), "
+    wn = w.skin.layer.mask.names()
+    note = (f"; wrinkles: {len(wn)} on {w.skin.mesh.n_vertices} nodes (built in {w.build_s:.1f}s), "
             f"{1000 * w.frame_s:.2f} ms/frame; most compressed at t={peak / a.fps:.2f}s: "
-            + ", ".join(f"{names[i]} {w.compression[peak, i]:.2f}" for i in most)
-            + (f"; maps of that frame -> {out}/wrinkles_frame_{peak:04d}_*" if a.maps else ""))
+            + ", ".join(f"{wn[i]} {w.compression[peak, i]:.2f}" for i in most) + maps_line)
     return w.frames, w.skin.mesh, note
 
 
@@ -1144,7 +1152,11 @@ def build_parser():
     s.add_argument("--no-refine", action="store_true", help="keep the rig's mesh (no refinement along wrinkles)")
     s.add_argument("--maps", type=int, nargs="?", const=1024, metavar="SIZE",
                    help="also write displacement and normal maps (SIZE px, default 1024) of the most "
-                        "compressed frame")
+                        "compressed frame (or as --maps-set says)")
+    s.add_argument("--maps-set", choices=["peak", "frames", "engine"], default="peak",
+                   help="peak: the most compressed frame's maps; frames: every frame's; engine: per wrinkle "
+                        "region a normal and displacement map, a mask and per-frame weights (weights.csv), as "
+                        "game engines blend wrinkle maps")
     s.add_argument("--out", required=True, help="output folder")
     s.set_defaults(func=cmd_simulate)
 

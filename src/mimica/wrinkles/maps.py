@@ -75,3 +75,63 @@ def save_maps(prefix, h, n) -> list[Path]:
                                    "displacement_scale": scale, "displacement_midlevel": 0.5,
                                    "normal_space": "tangent, OpenGL (+Y up)"}, indent=1) + "\n")
     return out
+
+
+def wrinkle_regions(names) -> dict:
+    """{region: [wrinkle indices]}: a wrinkle's name without its number (crows_feet_2_R ->
+    crows_feet_R, forehead_3 -> forehead), one region a side."""
+    import re
+    out: dict = {}
+    for i, n in enumerate(names):
+        out.setdefault(re.sub(r"_\d+(?=_|$)", "", n), []).append(i)
+    return out
+
+
+def engine_maps(layer, mesh: Mesh, carried, ages, emphasis, size: int, folder) -> dict:
+    """The engine-style set of a clip's wrinkles (as game engines blend them): per region
+    (wrinkle_regions) a displacement and a normal map at the frame where that region is
+    deepest, a mask of the texels it covers, and per frame a weight in [0, 1] (the region's
+    deepest point then, over its deepest in the clip), in `folder`:
+    <region>_displacement.png / _normal.png / _mask.png, weights.csv (time, one column a
+    region), maps.json.  An engine shades frame f with each region's normal map blended in by
+    weight x mask.  Returns {region: (peak frame, peak height)}."""
+    folder = Path(folder)
+    regions = wrinkle_regions(layer.mask.names())
+    b = layer.vertex_binding
+    w_of = layer.sec_wrinkle[b.kn]
+    n_w = len(layer.mask.wrinkles)
+    depth = np.zeros((len(carried), len(regions)))                  # each region's deepest point a frame
+    for f, (X, g) in enumerate(zip(carried, ages)):
+        h = np.abs(layer.heights(b, layer.state(X, float(g)), None if emphasis is None else emphasis[f]))
+        per = np.zeros(n_w)
+        np.maximum.at(per, w_of, h)
+        depth[f] = [per[idx].max() for idx in regions.values()]
+    peak = depth.argmax(0)
+    rows, cols, pts = texel_points(mesh, size)
+    tb = layer.bind(pts)
+    tw = layer.sec_wrinkle[tb.kn]
+    info, entries = {}, []
+    for r, (name, idx) in enumerate(regions.items()):
+        f = int(peak[r])
+        only = np.zeros(n_w)
+        only[idx] = 1.0 if emphasis is None else np.asarray(emphasis[f])[idx]
+        h, nrm = bake(layer, mesh, carried[f], float(ages[f]), size, only)
+        m = np.zeros((size, size), np.uint8)
+        m[rows[tb.point[np.isin(tw, idx)]], cols[tb.point[np.isin(tw, idx)]]] = 255
+        files = save_maps(folder / name, h, nrm)
+        with atomic_path(folder / f"{name}_mask.png") as tmp:
+            Image.fromarray(m).save(tmp, format="PNG")
+        info[name] = (f, float(depth[f, r]))
+        entries.append({"region": name, "wrinkles": [layer.mask.wrinkles[i].name for i in idx], "peak_frame": f,
+                        "displacement": files[0].name, "normal": files[1].name, "mask": f"{name}_mask.png",
+                        "maps": files[2].name})
+    weights = depth / np.maximum(depth.max(0), 1e-30)
+    with atomic_path(folder / "weights.csv") as tmp:
+        tmp.write_text("\n".join([",".join(["frame"] + list(regions))]
+                                 + [",".join([str(f)] + [f"{x:.5f}" for x in row]) for f, row in enumerate(weights)])
+                       + "\n")
+    with atomic_path(folder / "maps.json") as tmp:
+        tmp.write_text(json.dumps({"regions": entries, "weights": "weights.csv",
+                                   "blend": "normal = mix(base, region normal, weight[frame] * mask)"}, indent=1)
+                       + "\n")
+    return info
