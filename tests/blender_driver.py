@@ -144,6 +144,7 @@ for i, glb in enumerate(glbs):
         bpy.ops.import_scene.fbx(filepath=fbx)
         back = max((o for o in bpy.context.scene.objects if o.type == "MESH"), key=lambda o: len(o.data.vertices))
         info["fbx_vertices"] = len(back.data.vertices)
+        bpy.ops.export_scene.gltf(filepath=out_json[:-5] + "_roundtrip.glb")      # and on to glTF again
     report["glb"][Path(glb).name] = info
 
 with open(out_json, "w") as f:

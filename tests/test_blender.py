@@ -112,6 +112,10 @@ def test_the_addon_inside_blender(tmp_path, full_model, head_glb):
     assert full["smooth"] and full["uv_layers"] == 1 and full["materials"] == 12 and full["vertices"] == 28911
     assert full["height"] == pytest.approx(0.01 * np.ptp(m.vertices[:, 1]), rel=1e-4)      # metres
     assert full["fbx_vertices"] == full["vertices"]             # FBX round trip keeps the vertices whole
+    import pygltflib as gl
+    g = gl.GLTF2().load(str(tmp_path / "report_roundtrip.glb"))  # glTF -> FBX -> glTF: the same vertices
+    positions = {p.attributes.POSITION for mesh in g.meshes for p in mesh.primitives}
+    assert sum(g.accessors[i].count for i in positions) == full["vertices"]
     jaw = 0.01 * np.abs(full_model.shape("jawOpen") - m.vertices).max()
     assert quant["shape_keys"] == 2 and quant["first_key_largest"] == pytest.approx(jaw, abs=2e-5)
     assert take["armature"] and take["shape_keys"] == 53
