@@ -626,16 +626,19 @@ def _parse_pull(spec):
     return center, radius, force
 
 
-def _image_points(img, path, what):
-    """2D feature points: `--landmarks`-style sibling file PHOTO.landmarks.json if present, else dlib."""
+def _image_points(img, path, what, face: int = 0):
+    """2D feature points: `--landmarks`-style sibling file PHOTO.landmarks.json if present, else
+    dlib (the photo's face number `face`, by size)."""
     from .landmarks import detect2d
     side = Path(path).with_suffix(".landmarks.json")
     if side.is_file():
         return detect2d.read_points(side, (img.shape[1], img.shape[0]))
     try:
-        return detect2d.detect(img, str(path))
+        return detect2d.detect(img, str(path), face)
     except MimicaError as e:
-        raise MimicaError(f"{e}, named {side.name} beside it (`mimica landmarks` writes one to edit)") from None
+        if "no face found" in str(e):
+            raise MimicaError(f"{e}, named {side.name} beside it (`mimica landmarks` writes one to edit)") from None
+        raise MimicaError(f"{e}; `mimica landmarks {Path(path).name} --list` shows them") from None
 
 
 def cmd_transfer_image(a):
@@ -650,8 +653,8 @@ def cmd_transfer_image(a):
     t0 = time.perf_counter()
     src = read_image(a.source_neutral)
     tgt = read_image(a.target)
-    sp = _image_points(src, a.source_neutral, "source neutral")
-    tp = _image_points(tgt, a.target, "target")
+    sp = _image_points(src, a.source_neutral, "source neutral", a.source_face)
+    tp = _image_points(tgt, a.target, "target", a.face)
     an = ImageAnalogy(tgt, tp, mouth=not a.no_mouth)
     from .image.io import luminance
     src_y = luminance(src)                             # the same source for every expression / frame
@@ -661,7 +664,7 @@ def cmd_transfer_image(a):
         if out.suffix.lower() != ".mp4":
             raise MimicaError(f"{out}: with --driving the output is a video; name it .mp4")
         n, fps, frames = frame_source(a.driving)
-        track = Tracker(what=str(a.driving))
+        track = Tracker(what=str(a.driving), face=a.source_face)
         t1 = time.perf_counter()
         with VideoWriter(out, fps) as vw:
             for f in _progress(frames, n, "frames"):
@@ -674,7 +677,7 @@ def cmd_transfer_image(a):
     if len(set(stems)) != len(stems):
         raise MimicaError("two source expressions share a file name; outputs would overwrite each other")
     exprs = [(p, read_image(p)) for p in paths]
-    pts = [_image_points(img, p, str(p)) for p, img in exprs]
+    pts = [_image_points(img, p, str(p), a.source_face) for p, img in exprs]
     t1 = time.perf_counter()
     results = [an.transfer(src_y, sp, img, xp, method=a.method, strength=a.strength) for (_, img), xp in zip(exprs, pts)]
     t2 = time.perf_counter()
@@ -708,6 +711,8 @@ def cmd_landmarks(a):
     from .mesh import MESH_SUFFIXES
     path = Path(a.face)
     if path.suffix.lower() in MESH_SUFFIXES:
+        if a.list or a.out is None:
+            raise MimicaError(f"{path}: a mesh has one face; write its landmarks with --out LANDMARKS.json")
         from .landmarks.detect3d import detect_mesh
         from .landmarks import write_landmarks
         from .mesh import read_mesh
@@ -723,7 +728,17 @@ def cmd_landmarks(a):
         _say(f"68 landmarks found from the view yaw {view[0]}, pitch {view[1]} -> {a.out}")
         return 0
     img = read_image(path)
-    pts = detect2d.detect(img, str(path))
+    if a.list:
+        boxes = detect2d.detect_faces(img)
+        _say(f"{path}: {len(boxes)} face(s), by size" + "".join(
+            f"; {i}: {r - l}x{b - t} px at ({(l + r) // 2}, {(t + b) // 2})" for i, (l, t, r, b) in enumerate(boxes)))
+        return 0
+    if a.out is None:
+        raise MimicaError("landmarks: --out LANDMARKS.json is needed (or --list)")
+    try:
+        pts = detect2d.detect(img, str(path), a.face_number)
+    except MimicaError as e:
+        raise MimicaError(f"{e}; --list shows them" if "no face found" not in str(e) else str(e)) from None
     if a.show:
         write_image(Path(a.show), _draw_points(to_uint8(img), pts))
     detect2d.write_points(a.out, pts, image=path.name, size=(img.shape[1], img.shape[0]))
@@ -1195,12 +1210,18 @@ def build_parser():
                     help="how much of the expression: 0 none, 1 the source's (default), up to 2 exaggerated")
     ti.add_argument("--no-mouth", action="store_true", help="keep the target's own mouth when the source opens "
                     "its mouth (default: the source's teeth and mouth interior, Song's teeth template)")
+    ti.add_argument("--face", type=int, default=0, help="the target photo's face (0: the largest; "
+                                                        "`mimica landmarks PHOTO --list` numbers them)")
+    ti.add_argument("--source-face", type=int, default=0, help="the source photos' (or video's) face, as --face")
     ti.add_argument("--out", required=True, help="output folder (photos), or an .mp4 with --driving")
     ti.set_defaults(func=cmd_transfer_image)
 
     lm = sub.add_parser("landmarks", help="find the 68 feature points on a photo or a mesh")
     lm.add_argument("face", help="photo (JPEG/PNG/GIF...) or mesh (OBJ/PLY/glTF)")
-    lm.add_argument("--out", required=True, help="landmark JSON to write (pixels for photos, 3D for meshes)")
+    lm.add_argument("--out", help="landmark JSON to write (pixels for photos, 3D for meshes)")
+    lm.add_argument("--list", action="store_true", help="photos: list the faces found (numbered by size)")
+    lm.add_argument("--face", type=int, default=0, dest="face_number",
+                    help="photos: which face (0: the largest; --list numbers them)")
     lm.add_argument("--show", metavar="PNG", help="also draw the points")
     lm.set_defaults(func=cmd_landmarks)
 

@@ -75,13 +75,16 @@ def fit_points(img, box) -> np.ndarray:
     return np.array([(s.part(i).x, s.part(i).y) for i in range(N)], float)
 
 
-def detect(img, what="image") -> np.ndarray:
-    """68 points of the largest face; a clear error when no face is found."""
+def detect(img, what="image", face: int = 0) -> np.ndarray:
+    """68 points of the photo's face number `face` (0: the largest, faces by size, as
+    detect_faces lists them); a clear error when there is no such face."""
     boxes = detect_faces(img)
     if not boxes:
         raise MimicaError(f"{what}: no face found; give its 68 points by hand in a landmark file "
                           f"(JSON: {{\"scheme\": \"{SCHEME}\", \"points\": [[x, y], ...]}})")
-    return fit_points(img, boxes[0])
+    if not 0 <= face < len(boxes):
+        raise MimicaError(f"{what}: no face {face}: {len(boxes)} found (numbered from 0, the largest, by size)")
+    return fit_points(img, boxes[face])
 
 
 def box_of(points, grow=0.1) -> tuple:
@@ -97,18 +100,20 @@ class Tracker:
     re-detecting when the fit drifts; exponential smoothing damps jitter (alpha = weight of
     the new frame)."""
 
-    def __init__(self, alpha=0.6, what="video"):
-        self.alpha, self.what, self.prev, self.raw = alpha, what, None, None
+    def __init__(self, alpha=0.6, what="video", face: int = 0):
+        self.alpha, self.what, self.prev, self.raw, self.face = alpha, what, None, None, face
 
     def __call__(self, img) -> np.ndarray:
         if self.raw is None:
-            pts = detect(img, self.what)
+            pts = detect(img, self.what, self.face)
         else:
             pts = fit_points(img, box_of(self.raw))
             if np.abs(pts - self.raw).max() > 0.25 * np.ptp(self.raw[:, 0]):    # lost: detect again
                 boxes = detect_faces(img)
-                if boxes:
-                    pts = fit_points(img, boxes[0])
+                if boxes:                               # the face nearest where it was
+                    c = self.raw.mean(0)
+                    pts = fit_points(img, min(boxes, key=lambda b: np.hypot((b[0] + b[2]) / 2 - c[0],
+                                                                           (b[1] + b[3]) / 2 - c[1])))
         self.raw = pts
         self.prev = pts if self.prev is None else self.alpha * pts + (1 - self.alpha) * self.prev
         return self.prev
@@ -139,8 +144,8 @@ def write_points(path, points, image=None, size=None) -> Path:
     return path
 
 
-def points_for(img, path=None, what="image") -> np.ndarray:
-    """Points from a file when given, else detected."""
+def points_for(img, path=None, what="image", face: int = 0) -> np.ndarray:
+    """Points from a file when given, else detected (the photo's face number `face`)."""
     if path is not None:
         return read_points(path, (img.shape[1], img.shape[0]))
-    return detect(img, what)
+    return detect(img, what, face)
