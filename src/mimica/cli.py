@@ -641,6 +641,28 @@ def _image_points(img, path, what, face: int = 0):
         raise MimicaError(f"{e}; `mimica landmarks {Path(path).name} --list` shows them") from None
 
 
+def _strength(text: str):
+    """--strength: a number, or regions: '0.5', 'brows=0.5,mouth=1.2', '0,mouth=1'."""
+    out, parts = {}, [t.strip() for t in str(text).split(",") if t.strip()]
+    try:
+        for t in parts:
+            if "=" in t:
+                k, v = t.split("=", 1)
+                out[k.strip()] = float(v)
+            else:
+                out["all"] = float(t)
+    except ValueError:
+        raise MimicaError(f"--strength {text!r}: a number from 0 to 2, or regions as brows=0.5,mouth=1.2") from None
+    if not parts:
+        raise MimicaError(f"--strength {text!r}: a number from 0 to 2, or regions as brows=0.5,mouth=1.2")
+    from .image.analogy import point_strengths
+    try:
+        point_strengths(out)                              # checked before the work
+    except MimicaError as e:
+        raise MimicaError(f"--{e}") from None
+    return out["all"] if list(out) == ["all"] else out
+
+
 def cmd_transfer_image(a):
     from .image import ImageAnalogy, read_image, write_image
     from .landmarks.detect2d import Tracker
@@ -650,6 +672,7 @@ def cmd_transfer_image(a):
         raise MimicaError("give either source expression photos or --driving VIDEO, not both")
     if not a.driving and not a.source_expr:
         raise MimicaError("give source expression photos, or --driving VIDEO")
+    a.strength = _strength(a.strength)
     t0 = time.perf_counter()
     src = read_image(a.source_neutral)
     tgt = read_image(a.target)
@@ -1206,8 +1229,10 @@ def build_parser():
     ti.add_argument("--method", choices=["vtc", "eri", "warp"], default="vtc",
                     help="vtc: vertex-tent luminance transfer (Song); eri: expression ratio images (Liu 2001); "
                          "warp: feature-point warp only")
-    ti.add_argument("--strength", type=float, default=1.0, metavar="A",
-                    help="how much of the expression: 0 none, 1 the source's (default), up to 2 exaggerated")
+    ti.add_argument("--strength", default="1", metavar="A",
+                    help="how much of the expression: 0 none, 1 the source's (default), up to 2 exaggerated; "
+                         "or per region, e.g. brows=0.5,mouth=1.2 (regions: brows, eyes, nose, mouth, jaw; "
+                         "a leading number sets the others: 0,mouth=1)")
     ti.add_argument("--no-mouth", action="store_true", help="keep the target's own mouth when the source opens "
                     "its mouth (default: the source's teeth and mouth interior, Song's teeth template)")
     ti.add_argument("--face", type=int, default=0, help="the target photo's face (0: the largest; "
@@ -1335,7 +1360,6 @@ LIMITS = {
     ("render", "fps"): (0.1, 240.0, False),
     ("export", "fps"): (0.1, 1000.0, False),
     ("age", "size"): (16, 4096, True),
-    ("transfer-image", "strength"): (0.0, 2.0, False),
 }
 
 

@@ -145,8 +145,26 @@ class ImageAnalogy:
         off = np.array(self.box[:2], float)
         p_s = np.concatenate([s_pts, forehead_points(s_pts), a.inverse()(self.border + off)])
         p_x = b.inverse()(p_s + d)
-        p_tw = self.ctrl_t + a.linear(strength * d)                      # step 3: T warped
+        k = self._control_strengths(strength)[:, None]
+        p_tw = self.ctrl_t + a.linear(k * d)                             # step 3: T warped
         return p_s, p_x, p_tw
+
+    def _control_strengths(self, strength) -> np.ndarray:
+        """Strength per control point: a number, or (68,) per feature point (the forehead's
+        points take their brow's; the border does not move)."""
+        s = np.broadcast_to(np.asarray(strength, float), (68,))
+        return np.concatenate([s, s[FOREHEAD_BROW], np.zeros(len(self.border))])
+
+    def _strength_map(self, strength):
+        """Strength per pixel of the target's grid: the control points' interpolated over the
+        triangulation (a number where every point has the same)."""
+        s = np.asarray(strength, float)
+        if s.ndim == 0 or np.all(s == s.flat[0]):
+            return float(s.flat[0])
+        c = self._control_strengths(s)
+        c[len(c) - len(self.border):] = 0.0
+        m, _ = self.grid.map(np.stack([c, c], 1))
+        return np.clip(m.reshape(self.h, self.w), 0, 2).astype(np.float32)
 
     def _neutral_mask(self) -> np.ndarray:
         """Face weight on the target's own grid: 0 outside the face triangles, rising to 1 over
@@ -186,7 +204,8 @@ class ImageAnalogy:
         the rest held: one back-substitution of the per-target factor).  With strength a != 1
         each tent's transformation is (1 - a) I + a Q."""
         k = np.float32(self.height)
-        mask = self.mask_t if strength == 1 else self.mask_t * np.float32(strength)
+        strength = self._strength_map(strength)
+        mask = self.mask_t if np.isscalar(strength) and strength == 1 else self.mask_t * np.float32(strength)
         t, dt, known = self._target_terms
         s, x = s_l * k, x_l * k
         # neighbour differences right/left/down/up (edge-replicated: zero across the border)
@@ -232,8 +251,31 @@ class ImageAnalogy:
         div[:-1, :] -= ev
         # known neighbours (outside the face) are on the right-hand side
         sol = t.copy()
-        sol[self.inside] = self._solver.solve(div[self.inside] + known)
+        if np.isscalar(strength):
+            sol[self.inside] = self._solver.solve(div[self.inside] + known)
+            return sol / k
+        # regions at strength 0 are held as the target's own, like the outside (their own
+        # factor, once per such pattern): the solve's change then cannot reach into them
+        free = self.inside & (strength > 0)
+        solver = self._held_solver(free)
+        held = np.where(free, 0, t)
+        rhs = np.zeros_like(t)
+        rhs[:, 1:] += held[:, :-1]
+        rhs[:, :-1] += held[:, 1:]
+        rhs[1:, :] += held[:-1, :]
+        rhs[:-1, :] += held[1:, :]
+        sol[free] = solver.solve(div[free] + rhs[free])
         return sol / k
+
+    def _held_solver(self, free: np.ndarray):
+        key = free.tobytes()
+        cache = self.__dict__.setdefault("_held_solvers", {})
+        if key not in cache:
+            from ..solver import SPDSolver
+            if len(cache) > 8:
+                cache.clear()
+            cache[key] = SPDSolver(_face_laplacian(free))
+        return cache[key]
 
     def eri_ratio(self, s_l, x_l, mask, small=None, large=None, strength=1.0) -> np.ndarray:
         """Liu, Shan & Zhang 2001: R = A'/A on the aligned sources, filtered by an adaptive
@@ -248,8 +290,9 @@ class ImageAnalogy:
         detail = gaussian_filter(np.abs(r_s - r_l), large)
         wgt = np.clip(detail / 0.03, 0, 1)
         rr = wgt * r_s + (1 - wgt) * r_l
-        if strength != 1:
-            rr = rr ** np.float32(strength)
+        strength = self._strength_map(strength)
+        if not (np.isscalar(strength) and strength == 1):
+            rr = rr ** np.asarray(strength, np.float32)
         return (mask * rr + (1 - mask)).astype(np.float32)
 
     def transfer(self, source, s_pts, expressive, x_pts, method="vtc", strength=1.0) -> Result:
@@ -261,7 +304,8 @@ class ImageAnalogy:
         ERI the ratio to the power a)."""
         if method not in ("vtc", "eri", "warp"):
             raise MimicaError(f"unknown method {method!r}; use vtc, eri or warp")
-        strength = check_strength(strength)
+        per = point_strengths(strength)                       # a number, or {region: a}
+        strength = float(per[0]) if np.all(per == per[0]) else per
         s_r, x_r, look, pts = self.prepare(source, s_pts, expressive, x_pts, strength)
         yuv = self.crop_yuv
         if method == "vtc":
@@ -272,7 +316,8 @@ class ImageAnalogy:
         x0, y0, x1, y1 = self.box
         out = self.target.copy()
         out[y0:y1, x0:x1] = np.clip(yuv_to_rgb(look(yuv).reshape(self.h, self.w, 3)), 0, 1)
-        if self.mouth and self._mouth_closed and mouth_open(pts) and mouth_open(x_pts):
+        mouth_a = float(strength) if np.ndim(strength) == 0 else float(np.max(strength[REGIONS["mouth"]]))
+        if self.mouth and mouth_a > 0 and self._mouth_closed and mouth_open(pts) and mouth_open(x_pts):
             gain = self._target_lightness / max(_lightness(source, s_pts), 1e-3)
             fill_mouth(out, pts, expressive, x_pts, gain)
         return Result(out, pts, self, look)
@@ -285,6 +330,26 @@ class ImageAnalogy:
     @cached_property
     def _target_lightness(self) -> float:
         return _lightness(self.target, self.points)
+
+
+# the face's regions by their feature points, for per-region strengths (issue 20, part 2)
+REGIONS = {"brows": np.arange(17, 27), "eyes": np.arange(36, 48), "nose": np.arange(27, 36),
+           "mouth": np.arange(48, 68), "jaw": np.arange(0, 17)}
+
+
+def point_strengths(strength) -> np.ndarray:
+    """(68,) strength per feature point from a number (every region alike) or {region: a}
+    (regions not named: 1; "all" sets the default), each from 0 to 2."""
+    if not isinstance(strength, dict):
+        return np.full(68, check_strength(strength))
+    bad = sorted(set(strength) - set(REGIONS) - {"all"})
+    if bad:
+        raise MimicaError(f"strength: unknown region {bad[0]!r} (regions: {', '.join(REGIONS)}, or all)")
+    out = np.full(68, check_strength(strength.get("all", 1.0)))
+    for name, idx in REGIONS.items():
+        if name in strength:
+            out[idx] = check_strength(strength[name])
+    return out
 
 
 def check_strength(strength) -> float:

@@ -1,0 +1,54 @@
+"""Per-region strength (issue 20, part 2): a region at strength 0 keeps the target's own pixels
+(warp and appearance alike), the others take the expression; bad regions: one line."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mimica import MimicaError
+from mimica.image import ImageAnalogy, read_image
+from mimica.image.analogy import REGIONS
+from mimica.image.io import luminance
+from mimica.landmarks.detect2d import detect
+
+YALE = Path(os.environ["MIMICA_DATA"]) / "yalefaces"
+
+
+@pytest.fixture(scope="module")
+def pair():
+    s, x, t = (read_image(YALE / f) for f in ("subject01.normal.gif", "subject01.surprised.gif",
+                                               "subject03.normal.gif"))
+    return s, detect(s), x, detect(x), t, detect(t)
+
+
+def _box(pts, idx, pad=4):
+    p = pts[idx]
+    return (int(p[:, 0].min()) - pad, int(p[:, 1].min()) - pad, int(p[:, 0].max()) + pad, int(p[:, 1].max()) + pad)
+
+
+@pytest.mark.parametrize("method", ["vtc", "warp", "eri"])
+def test_a_region_at_zero_keeps_its_pixels(pair, method):
+    s, sp, x, xp, t, tp = pair
+    an = ImageAnalogy(t, tp)
+    full = an.transfer(luminance(s), sp, luminance(x), xp, method=method).image
+    only_mouth = an.transfer(luminance(s), sp, luminance(x), xp, method=method,
+                             strength={"all": 0.0, "mouth": 1.0}).image
+    x0, y0, x1, y1 = _box(tp, np.r_[REGIONS["brows"], REGIONS["eyes"]])
+    region = slice(max(y0, 0), y1), slice(max(x0, 0), x1)
+    assert np.abs(full[region] - t[region]).max() * 255 > 5                 # the brows rise when all move
+    assert np.abs(only_mouth[region] - t[region]).max() * 255 <= 1.0         # held at 0: the target's own
+    mx0, my0, mx1, my1 = _box(tp, REGIONS["mouth"])
+    mouth = slice(my0, my1), slice(mx0, mx1)
+    assert np.abs(only_mouth[mouth] - t[mouth]).max() * 255 > 5              # the mouth still moves
+
+
+def test_unknown_regions_and_strengths_are_refused(pair):
+    s, sp, x, xp, t, tp = pair
+    an = ImageAnalogy(t, tp)
+    for bad, said in (({"ears": 1.0}, "unknown region 'ears'"), ({"mouth": 3.0}, "strength 3")):
+        with pytest.raises(MimicaError, match=said):
+            an.transfer(luminance(s), sp, luminance(x), xp, strength=bad)
