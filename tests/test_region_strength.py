@@ -52,3 +52,24 @@ def test_unknown_regions_and_strengths_are_refused(pair):
     for bad, said in (({"ears": 1.0}, "unknown region 'ears'"), ({"mouth": 3.0}, "strength 3")):
         with pytest.raises(MimicaError, match=said):
             an.transfer(luminance(s), sp, luminance(x), xp, strength=bad)
+
+
+def test_the_head_stays_or_follows_the_source(pair):
+    """The source's expressive photo is its neutral moved 12 px right and 6 down: with head
+    "still" the target stays as it is; with "follow" it moves by that motion taken into its own
+    frame (a's scale), the points with it."""
+    from mimica.image.warp import Similarity2D
+    s, sp, _, _, t, tp = pair
+    dx, dy = 12, 6
+    moved = np.roll(np.roll(s, dy, axis=0), dx, axis=1)
+    an = ImageAnalogy(t, tp)
+    still = an.transfer(luminance(s), sp, luminance(moved), sp + [dx, dy], method="warp")
+    assert np.abs(still.image - t)[40:-40, 40:-40].max() * 255 <= 1.0
+    follow = an.transfer(luminance(s), sp, luminance(moved), sp + [dx, dy], method="warp", head="follow")
+    step = Similarity2D.fit(sp, tp).linear(np.array([dx, dy], float))
+    np.testing.assert_allclose(follow.points - still.points, np.broadcast_to(step, (68, 2)), atol=1e-6)
+    sx, sy = int(round(step[0])), int(round(step[1]))
+    shifted = np.roll(np.roll(t, sy, axis=0), sx, axis=1)
+    assert np.median(np.abs(follow.image - shifted)[40:-40, 40:-40]) * 255 < 2.0
+    with pytest.raises(MimicaError, match="head 'nod'"):
+        an.transfer(luminance(s), sp, luminance(moved), sp, head="nod")

@@ -691,7 +691,7 @@ def cmd_transfer_image(a):
         t1 = time.perf_counter()
         with VideoWriter(out, fps) as vw:
             for f in _progress(frames, n, "frames"):
-                vw.write(an.transfer(src_y, sp, f, track(f), method=a.method, strength=a.strength).image)
+                vw.write(an.transfer(src_y, sp, f, track(f), method=a.method, strength=a.strength, head=a.head).image)
         dt = time.perf_counter() - t1
         _say(f"{vw.n} frames -> {out} ({vw.n / max(dt, 1e-9):.1f} frames/s, landmarks tracked)")
         return 0
@@ -702,7 +702,8 @@ def cmd_transfer_image(a):
     exprs = [(p, read_image(p)) for p in paths]
     pts = [_image_points(img, p, str(p), a.source_face) for p, img in exprs]
     t1 = time.perf_counter()
-    results = [an.transfer(src_y, sp, img, xp, method=a.method, strength=a.strength) for (_, img), xp in zip(exprs, pts)]
+    results = [an.transfer(src_y, sp, img, xp, method=a.method, strength=a.strength, head=a.head)
+               for (_, img), xp in zip(exprs, pts)]
     t2 = time.perf_counter()
     cells = [[_tile(src, tgt), _tile(img, tgt), _tile(tgt, tgt), _tile(r.image, tgt)]
              for (_, img), r in zip(exprs, results)]
@@ -1235,6 +1236,9 @@ def build_parser():
                          "a leading number sets the others: 0,mouth=1)")
     ti.add_argument("--no-mouth", action="store_true", help="keep the target's own mouth when the source opens "
                     "its mouth (default: the source's teeth and mouth interior, Song's teeth template)")
+    ti.add_argument("--head", choices=["still", "follow"], default="still",
+                    help="still: the target's head stays where it is; follow: it moves as the source's head "
+                         "moves between its neutral and each expression (or frame of --driving)")
     ti.add_argument("--face", type=int, default=0, help="the target photo's face (0: the largest; "
                                                         "`mimica landmarks PHOTO --list` numbers them)")
     ti.add_argument("--source-face", type=int, default=0, help="the source photos' (or video's) face, as --face")

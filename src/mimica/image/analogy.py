@@ -295,7 +295,7 @@ class ImageAnalogy:
             rr = rr ** np.asarray(strength, np.float32)
         return (mask * rr + (1 - mask)).astype(np.float32)
 
-    def transfer(self, source, s_pts, expressive, x_pts, method="vtc", strength=1.0) -> Result:
+    def transfer(self, source, s_pts, expressive, x_pts, method="vtc", strength=1.0, head="still") -> Result:
         """The target with the expression of (source -> expressive).  Images in [0, 1]: RGB, or
         for the sources their luminance (only Y is read from them; a video's fixed source neutral
         can be converted once).  `strength` scales the expression: 0 gives the target back,
@@ -304,6 +304,8 @@ class ImageAnalogy:
         ERI the ratio to the power a)."""
         if method not in ("vtc", "eri", "warp"):
             raise MimicaError(f"unknown method {method!r}; use vtc, eri or warp")
+        if head not in ("still", "follow"):
+            raise MimicaError(f"head {head!r}: still (the target's head stays) or follow (it moves as the source's)")
         per = point_strengths(strength)                       # a number, or {region: a}
         strength = float(per[0]) if np.all(per == per[0]) else per
         s_r, x_r, look, pts = self.prepare(source, s_pts, expressive, x_pts, strength)
@@ -320,6 +322,16 @@ class ImageAnalogy:
         if self.mouth and mouth_a > 0 and self._mouth_closed and mouth_open(pts) and mouth_open(x_pts):
             gain = self._target_lightness / max(_lightness(source, s_pts), 1e-3)
             fill_mouth(out, pts, expressive, x_pts, gain)
+        if head == "follow":
+            # the source's head motion (S -> S', on its stable points), carried into the target's
+            # frame: M = a b^-1 a^-1, the whole picture resampled by it
+            a = Similarity2D.fit(np.asarray(s_pts, float), self.points)
+            m = _compose(_compose(a, head_motion(x_pts, s_pts).inverse()), a.inverse())
+            h, w = out.shape[:2]
+            yy, xx = np.mgrid[0:h, 0:w]
+            q = m.inverse()(np.stack([xx.ravel(), yy.ravel()], 1))
+            out = sample(out, q[:, 0].reshape(h, w), q[:, 1].reshape(h, w)).astype(np.float32)
+            pts = m(pts)
         return Result(out, pts, self, look)
 
     @cached_property
@@ -350,6 +362,11 @@ def point_strengths(strength) -> np.ndarray:
         if name in strength:
             out[idx] = check_strength(strength[name])
     return out
+
+
+def _compose(f: Similarity2D, g: Similarity2D) -> Similarity2D:
+    """f after g: x -> f(g(x))."""
+    return Similarity2D(f.s * g.s, f.r @ g.r, f.s * f.r @ g.t + f.t)
 
 
 def check_strength(strength) -> float:
