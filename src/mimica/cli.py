@@ -340,7 +340,7 @@ def _sequence_timeline(names, activations, labels, seconds: float = 1.0):
 
 def cmd_fit_muscles(a):
     from .anim import Channel, Timeline
-    from .mesh import read_mesh, read_vertices
+    from .mesh import read_vertices
     from .physics.fit import MuscleFit
     from .rig import Rig
     if bool(a.target) == bool(a.arkit):
