@@ -27,6 +27,8 @@ HEAD = Path(os.environ["MIMICA_DATA"]) / "real-heads" / "mediapipe-canonical" / 
 
 def test_the_addon_reads_takes_as_mimica_does(tmp_path):
     assert addon.ARKIT == ARKIT_52                     # its own copy: Blender's Python cannot import mimica
+    from mimica.anim import PRESETS
+    assert list(addon.EXPRESSIONS) == [e for e in PRESETS if e != "neutral"]    # and of simulate's presets
     w = np.random.default_rng(1).uniform(0, 1, (30, 52))
     live_link_csv(tmp_path / "take.csv", w)
     t0, w0, _ = read_take(tmp_path / "take.csv")

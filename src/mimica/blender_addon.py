@@ -303,15 +303,13 @@ if bpy is not None:  # pragma: no cover - runs inside Blender (tests/test_blende
                 self.report({"ERROR"}, "make the source (with shape keys) active and select the target meshes too")
                 return {"CANCELLED"}
             import numpy as np
-            basis = keys[0]
-            rest = np.zeros(len(basis.data) * 3)
-            basis.data.foreach_get("co", rest)
-            rest = _world(src, rest.reshape(-1, 3))
-            shapes = {}
-            for kb in keys[1:]:
+
+            def world(kb):                                # a shape key's positions in the world
                 a = np.zeros(len(kb.data) * 3)
                 kb.data.foreach_get("co", a)
-                shapes[kb.name] = _world(src, a.reshape(-1, 3))
+                return _world(src, a.reshape(-1, 3))
+            rest = world(keys[0])
+            shapes = {kb.name: world(kb) for kb in keys[1:]}
             polys = [tuple(p.vertices) for p in src.data.polygons]
             try:
                 for tgt in targets:

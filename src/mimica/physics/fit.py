@@ -75,7 +75,8 @@ class MuscleFit:
     def __post_init__(self):
         U = self.fields.reshape(len(self.names), -1)                 # (m, 3n)
         w3 = np.repeat(self.weights, 3)
-        G = (U * w3) @ U.T
+        self._UW = U * w3                                             # U^T W, once
+        G = self._UW @ U.T
         self._G = G.copy()                                            # without the ridge: the misfit's
         G += RIDGE * max(float(np.mean(np.diag(G))), 1e-300) * np.eye(len(G))
         self._U, self._w3 = U, w3
@@ -104,7 +105,7 @@ class MuscleFit:
         d = d.reshape(1 if one else len(d), -1)
         if d.shape[1] != self._U.shape[1]:
             raise MimicaError(f"targets of {d.shape[1] // 3} vertices for a rig of {self._U.shape[1] // 3}")
-        h = (self._U * self._w3) @ d.T                               # (m, F): U^T W d
+        h = self._UW @ d.T                                            # (m, F): U^T W d
         y = solve_triangular(self._L, h, lower=True)                  # L^-1 U^T W d
         Lt = self._L.T
         act = np.empty((len(d), len(self.names)))
@@ -125,14 +126,15 @@ class MuscleFit:
         if S.shape[1] != self._U.shape[1]:
             raise MimicaError(f"shapes of {S.shape[1] // 3} vertices for a rig of {self._U.shape[1] // 3}")
         w = np.asarray(weights, float)
-        H = (self._U * self._w3) @ S.T                               # (m, K): U^T W s_k
+        H = self._UW @ S.T                                            # (m, K): U^T W s_k
         D = (S * self._w3) @ S.T                                     # (K, K): s_j^T W s_k
-        y = solve_triangular(self._L, H @ w.T, lower=True)            # (m, F)
+        h = H @ w.T                                                   # (m, F): U^T W d_f
+        y = solve_triangular(self._L, h, lower=True)                  # (m, F)
         Lt = self._L.T
         act = np.array([_box_ls(Lt, y[:, f], upper) for f in range(len(w))]).reshape(len(w), -1)
         G = self._G
         dd = np.einsum("fj,jk,fk->f", w, D, w)
-        err = np.einsum("fi,ij,fj->f", act, G, act) - 2 * np.einsum("fi,if->f", act, H @ w.T) + dd
+        err = np.einsum("fi,ij,fj->f", act, G, act) - 2 * np.einsum("fi,if->f", act, h) + dd
         return act, np.sqrt(np.maximum(err, 0.0) / np.maximum(dd, 1e-300))
 
     def displacement(self, activations: np.ndarray) -> np.ndarray:
