@@ -127,6 +127,15 @@ def main():
               f"relative error {np.mean(rem[method]):.4f}; per expression: "
               + ", ".join(f"{e} {v:.3f}" for e, v in zip(EXPRESSIONS, rem[method])))
     print(f"correspondence for the remeshed target: {tc:.3f}s")
+    # across topologies VTC carries a small per-triangle term (transfer.core.DT_STABILIZER):
+    # Song's energy alone, and the sequence's speed with and without the term
+    for stabilize in (True, False):
+        tp, xr = best_of(lambda: ExpressionTransfer(S, T, ls, lt, "vtc", static, stabilize=stabilize), a.repeat)
+        ta, _ = best_of(lambda: xr.apply(frames), a.repeat)
+        err = np.mean([relative_error(o, rs.carry(tv[FACE] + b[FACE] - S.vertices[FACE]), T.vertices)
+                       for o, b in zip(xr.apply(basic), basic)])
+        print(f"[vtc{'' if stabilize else ', no per-triangle term'}] remeshed target: relative error {err:.4f}, "
+              f"precompute {tp:.3f}s, {a.frames / ta:.0f} frames/s")
 
     # every installed sparse solver on the same system (scikit-sparse's CHOLMOD, cholespy's, SuperLU)
     T = S.with_vertices(held_out_identity(model, 0))

@@ -44,3 +44,29 @@ def test_max_distance_keeps_near_points_exact(head_model):
     inside = exact < 0.5
     np.testing.assert_allclose(capped[inside], exact[inside], atol=1e-12)
     assert (capped >= exact - 1e-12).all()
+
+
+@pytest.mark.parametrize("fold", [30.0, 90.0, 140.0])
+def test_concave_angles_of_a_fold(fold):
+    """Two strips of triangles meeting along the x axis, folded by `fold` degrees: the fold is a
+    valley seen from the side the faces look to (upward normals, the wings raised), a ridge
+    turned over; only the fold's own edges carry the angle, flat and boundary edges 0."""
+    from mimica.mesh import Mesh
+    from mimica.mesh.query import concave_angles
+    a = np.radians(fold) / 2
+    xs = np.arange(4.0)
+    v = np.array([[x, 0, 0] for x in xs] + [[x, np.cos(a), np.sin(a)] for x in xs]
+                 + [[x, -np.cos(a), np.sin(a)] for x in xs])
+    tris = []
+    for i in range(3):
+        m, l, r = i, 4 + i, 8 + i
+        tris += [[m, m + 1, l + 1], [m, l + 1, l], [m, r, r + 1], [m, r + 1, m + 1]]
+    mesh = Mesh.from_faces(v, np.array(tris))
+    assert (mesh.face_normals()[:, 2] > 0).all()
+    e = mesh.edges
+    on_fold = (e < 4).all(1)
+    ang = np.degrees(concave_angles(mesh, e))
+    np.testing.assert_allclose(ang[on_fold], fold, atol=1e-9)
+    assert np.abs(ang[~on_fold]).max() < 1e-6
+    turned = Mesh.from_faces(v, np.array(tris)[:, ::-1])               # the same fold, a ridge now
+    assert np.abs(concave_angles(turned, e)).max() < 1e-6

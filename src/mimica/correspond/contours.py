@@ -3,7 +3,8 @@
 Each contour runs through iBUG 68 landmarks (an eye's rim, the outer and the inner lip line,
 all closed).  On a mesh it is traced landmark to landmark as the shortest path over the mesh's
 edges, boundary edges counting half their length so that the path keeps to a rim where the
-mesh has one (an open eye, an open or cut mouth) and crosses the surface where it is sealed.
+mesh has one (an open eye, an open or cut mouth), and valley edges less (as the mouth's seam,
+correspond.mouth) so that it keeps to the crease where closed lids or lips meet.
 Between two landmarks the path is sampled at equal shares of its arc length; sample j of a
 segment on one face and sample j of the same segment on the other are a pair of points the
 registration holds together (correspond.register), so the lids and lips meet landmark to
@@ -18,6 +19,8 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from ..mesh import Mesh
+from ..mesh.query import concave_angles
+from .mouth import CREASE
 
 CONTOURS = {"eye.right": [36, 37, 38, 39, 40, 41, 36], "eye.left": [42, 43, 44, 45, 46, 47, 42],
             "lips.outer": list(range(48, 60)) + [48], "lips.inner": list(range(60, 68)) + [60]}
@@ -29,6 +32,7 @@ def _graph(mesh: Mesh) -> sp.csr_matrix:
     w = np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1)
     b = mesh.boundary_vertices()
     w = np.where(b[e[:, 0]] & b[e[:, 1]], 0.5 * w, w)            # keep to rims where there are
+    w = w * np.exp(-CREASE * concave_angles(mesh, e))             # and to the creases of sealed ones
     n = mesh.n_vertices
     return sp.coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
 

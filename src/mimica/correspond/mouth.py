@@ -19,8 +19,12 @@ from scipy.spatial import cKDTree
 
 from ..align import face_cylinder
 from ..mesh import Mesh
+from ..mesh.query import concave_angles
 
 WAYPOINTS = [(60,), (61, 67), (62, 66), (63, 65), (64,)]
+CREASE = 1.5              # a valley edge costs exp(-CREASE x its concave angle) of its length
+VALLEY = np.radians(30)   # a waypoint between the lips moves to a valley vertex this deep ...
+SNAP = 0.15               # ... within this share of the mouth's width of its landmarks
 
 
 @dataclass
@@ -64,28 +68,50 @@ def sealed_eyes(mesh: Mesh, landmarks) -> list[str]:
     return out
 
 
-def _seam(mesh: Mesh, lm) -> np.ndarray:
-    """The path of vertices between the lips, corner to corner (Dijkstra over edge lengths)."""
-    tree = cKDTree(mesh.vertices)
-    stops = [int(tree.query(lm[list(w)].mean(0))[1]) for w in WAYPOINTS]
+def _seam(mesh: Mesh, lm, crease: float = CREASE) -> np.ndarray:
+    """The path of vertices between the lips, corner to corner: from the vertex nearest one
+    inner corner (iBUG 60) over the deepest valley vertex near each meeting point of the inner
+    lips to the other corner (64), by Dijkstra over edge lengths, an edge in a valley costing
+    exp(-crease x its concave angle) of its length: sealed lips meet in a crease, which the
+    landmarks (detected ones above all) only come near."""
     e = mesh.edges
-    w = np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1)
+    v = mesh.vertices
+    ang = concave_angles(mesh, e) if crease > 0 else np.zeros(len(e))
+    w = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1) * np.exp(-crease * ang)
+    depth = np.zeros(mesh.n_vertices)                 # a vertex's deepest valley edge
+    np.maximum.at(depth, e[:, 0], ang)
+    np.maximum.at(depth, e[:, 1], ang)
+    tree = cKDTree(v)
+    reach = SNAP * float(np.linalg.norm(lm[64] - lm[60]))
+    stops = []
+    for k, wp in enumerate(WAYPOINTS):
+        p = lm[list(wp)].mean(0)
+        near = np.array(tree.query_ball_point(p, reach), np.int64)
+        near = near[depth[near] > VALLEY] if len(near) else near
+        if k in (0, len(WAYPOINTS) - 1) or not len(near):
+            stops.append(int(tree.query(p)[1]))           # the corners where the landmarks say
+        else:
+            # between the lips: the deepest valley vertex, the nearer of equally deep ones
+            d = np.linalg.norm(v[near] - p, axis=1)
+            stops.append(int(near[np.argmax(depth[near] - 1e-3 * d / reach)]))
     g = sp.coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
                       shape=(mesh.n_vertices,) * 2).tocsr()
     path = [stops[0]]
     for a, b in zip(stops[:-1], stops[1:]):
+        if a == b:
+            continue
         _, pred = dijkstra(g, indices=a, return_predecessors=True)
-        seg, v = [], b
-        while v != a and v >= 0:
-            seg.append(v)
-            v = pred[v]
-        if v < 0:
+        seg, x = [], b
+        while x != a and x >= 0:
+            seg.append(x)
+            x = pred[x]
+        if x < 0:
             return np.zeros(0, np.int64)
         path += seg[::-1]
     out = [path[0]]
-    for v in path[1:]:                       # no vertex twice (waypoints can coincide)
-        if v != out[-1]:
-            out.append(v)
+    for x in path[1:]:                       # no vertex twice (waypoints can coincide)
+        if x != out[-1]:
+            out.append(x)
     return np.array(out, np.int64)
 
 

@@ -194,3 +194,37 @@ class SurfaceMap:
         """3D surface points under 2D points, and whether each was inside the surface."""
         t, b, found = self.locate(q)
         return np.einsum("ij,ijk->ik", b, self.v[self.tri[t]]), found
+
+
+def concave_angles(mesh, edges=None) -> np.ndarray:
+    """Per edge (default `mesh.edges`), the angle in radians by which the surface folds inward
+    across it: the angle between the normals of its two triangles where it is a valley (the
+    other triangle's far corner on the front of the first), 0 on ridges, flat ground, boundary
+    and non-manifold edges.  Sealed lips and closed lids meet in such a valley."""
+    edges = mesh.edges if edges is None else np.asarray(edges)
+    n = mesh.n_vertices
+    t = mesh.triangles
+    out = np.zeros(len(edges))
+    if not len(t) or not len(edges):
+        return out
+    a = t.reshape(-1)
+    b = np.roll(t, -1, axis=1).reshape(-1)
+    opp = np.roll(t, -2, axis=1).reshape(-1)
+    face = np.repeat(np.arange(len(t)), 3)
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    key, a, opp, face = key[order], a[order], opp[order], face[order]
+    uniq, start, count = np.unique(key, return_index=True, return_counts=True)
+    two = count == 2
+    i, j = start[two], start[two] + 1
+    nrm = mesh.face_normals()
+    v = mesh.vertices
+    ang = np.arccos(np.clip(np.einsum("ij,ij->i", nrm[face[i]], nrm[face[j]]), -1.0, 1.0))
+    valley = np.einsum("ij,ij->i", v[opp[j]] - v[a[i]], nrm[face[i]]) > 0
+    val = np.where(valley, ang, 0.0)
+    ek = np.minimum(edges[:, 0], edges[:, 1]) * n + np.maximum(edges[:, 0], edges[:, 1])
+    pos = np.searchsorted(uniq[two], ek)
+    pos = np.minimum(pos, max(two.sum() - 1, 0))
+    hit = (uniq[two][pos] == ek) if two.any() else np.zeros(len(edges), bool)
+    out[hit] = val[pos[hit]]
+    return out

@@ -22,7 +22,7 @@ from ..correspond import Correspondence, correspond
 from ..errors import MimicaError
 from ..landmarks import Landmarks
 from ..mesh import Mesh
-from .core import METHODS, TransferSolver, static_vertices
+from .core import DT_STABILIZER, METHODS, TransferSolver, static_vertices
 from .metrics import relative_error, song_vertex_error
 
 __all__ = ["ExpressionTransfer", "TransferSolver", "static_vertices", "relative_error",
@@ -36,7 +36,7 @@ class ExpressionTransfer:
                  target_landmarks: Landmarks | None = None, method: str = "vtc",
                  static: np.ndarray | None = None, solver_kind: str | None = None, parts: bool = True,
                  cut_mouth: bool = True, inward: np.ndarray | None = None, weld: bool = True,
-                 lids: bool = True, match: str = "nicp", fill: bool = True):
+                 lids: bool = True, match: str = "nicp", fill: bool = True, stabilize: bool = True):
         """Across topologies (target landmarks given):
 
         - a target whose seams are saved as copies of a vertex (uv splits) is solved welded;
@@ -50,6 +50,8 @@ class ExpressionTransfer:
         - lids: the target's open eyes close as far as the source's do (transfer.contacts).
         - fill: skin whose correspondence has low confidence takes its motion from the skin
           around it (transfer.fill).
+        - stabilize: VTC's energy gets a small per-triangle (DT) term (core.DT_STABILIZER),
+          which keeps vertices in sliver one-rings from drifting; off gives Song's energy alone.
         - match: how target vertices find their source partners (correspond.METHODS): "nicp",
           a non-rigid registration of the source onto the target, or "cylinder", Song et
           al.'s cylinder map.
@@ -84,7 +86,8 @@ class ExpressionTransfer:
             ls_pos, lt_pos = source_landmarks.positions(source), target_landmarks.positions(target)
             ps, pt = split_parts(source, ls_pos), split_parts(target, lt_pos)
             if not (ps.only_skin and pt.only_skin):
-                self._init_parts(ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward, lids, match, fill)
+                self._init_parts(ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward, lids, match, fill,
+                                 stabilize)
                 return
         if source_landmarks is not None and target_landmarks is not None:
             ls = source_landmarks.positions(source)
@@ -113,8 +116,10 @@ class ExpressionTransfer:
             matched = self.correspondence.matched
             moving = vmap @ (~static).astype(float)
             fixed = matched & (np.asarray(moving).ravel() == 0)
+        # across topologies VTC is steadied by a small per-triangle term (core.DT_STABILIZER)
         self.solver = TransferSolver(source, aligned, method, vertex_map=vmap, matched=matched,
-                                     fixed=fixed, solver_kind=solver_kind)
+                                     fixed=fixed, solver_kind=solver_kind,
+                                     dt_weight=DT_STABILIZER if stabilize and not same else 0.0)
         self._back = self.similarity.inverse()
         if fill and self.correspondence is not None and self.correspondence.confidence is not None:
             from .fill import LowConfidenceFill
@@ -127,7 +132,7 @@ class ExpressionTransfer:
                 self._lids, self._source_landmarks = lc, source_landmarks
 
     def _init_parts(self, ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward=None, lids=True,
-                    match="nicp", fill=True):
+                    match="nicp", fill=True, stabilize=True):
         """The skin-to-skin transfer and the motion of the other parts (transfer.parts)."""
         from .parts import PartMotion
         s_skin, s_idx = self.source.submesh(ps.skin_faces)
@@ -137,7 +142,7 @@ class ExpressionTransfer:
         st = None if static is None else np.asarray(static, bool)[s_idx]
         self._skin = ExpressionTransfer(s_skin, t_skin, Landmarks.snap(s_skin, ls_pos), Landmarks.snap(t_skin, lt_pos),
                                         method, st, solver_kind, parts=False, cut_mouth=False, weld=False, lids=lids,
-                                        match=match, fill=fill,
+                                        match=match, fill=fill, stabilize=stabilize,
                                         inward=None if inward is None else np.asarray(inward)[t_idx])
         self._source_skin, self._target_skin = s_idx, t_idx
         self.similarity = self._skin.similarity
