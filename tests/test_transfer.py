@@ -102,3 +102,66 @@ def test_target_pose_does_not_matter(head_model, basic):
     sim = Similarity(1.7, np.array([[c, 0, s_], [0, 1, 0], [-s_, 0, c]]), np.array([3.0, -1.0, 2.0]))
     _, out = _transfer(head_model, sim.apply(tv), basic[:2])
     np.testing.assert_allclose(out, sim.apply(ref), atol=1e-6)
+
+
+def _sequence(model, n, seed=0):
+    """n frames blending the six basic expressions with smooth random weights (rank 6)."""
+    names = list(EXPRESSIONS)
+    d = np.stack([model.delta(EXPRESSIONS[e]) for e in names])
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 2 * np.pi, n)[:, None]
+    w = np.clip(np.sin(t * rng.uniform(0.5, 2.0, len(names)) + rng.uniform(0, 2 * np.pi, len(names))), 0, None)
+    return model.neutral + np.einsum("fk,knd->fnd", w, d)
+
+
+@pytest.mark.parametrize("kind", ["vtc", "dt"])
+def test_tips_from_their_operators(head_model, kind):
+    """The basis path's tips (base + g(a x, b x)) are the elements' own tips, on moved frames."""
+    from mimica.transfer.elements import dt_elements, vtc_elements
+    el = (vtc_elements if kind == "vtc" else dt_elements)(head_model.mesh)
+    v = np.stack([head_model.shape("jawOpen"), head_model.shape("mouthSmile_L")], axis=1)   # (n, F, 3)
+    base, a, b = el.tip_operators
+    parts = [(m @ v.reshape(len(v), -1)).reshape(-1, 2, 3) for m in (base, a, b)]
+    np.testing.assert_allclose(el.tip_of(*parts), el.tips(v), atol=1e-12 * np.ptp(v))
+    g = el.tip_bend(tuple(parts[1][..., c].T for c in range(3)), tuple(parts[2][..., c].T for c in range(3)))
+    np.testing.assert_allclose(np.stack(g, -1).transpose(1, 0, 2) + parts[0], el.tips(v), atol=1e-12 * np.ptp(v))
+
+
+def test_long_sequences_go_through_their_basis(head_model):
+    """A 120-frame performance of six expressions goes through its basis (one back-substitution
+    per basis shape) within 1e-3 of its motion from frame by frame (measured 2.7e-4 on
+    bench/batch.py's 300 frames); a motion of no few shapes goes frame by frame, unchanged."""
+    frames = _sequence(head_model, 120)
+    tv = held_out_identity(head_model, 131)
+    x, fast = _transfer(head_model, tv, frames)
+    exact = x.apply(frames, basis=False)
+    x.apply(frames)
+    assert x.basis_report["used"] and x.basis_report["deviation"] <= 1e-3, x.basis_report
+    motion = np.linalg.norm(exact - tv, axis=2).max()
+    assert np.linalg.norm(fast - exact, axis=2).max() <= 1e-3 * motion
+    noise = frames + np.random.default_rng(1).normal(0, 1e-3, frames.shape)   # every frame its own shape
+    again = x.apply(noise)
+    assert not x.basis_report["used"] and "few shapes" in x.basis_report["why"]
+    np.testing.assert_array_equal(again, x.apply(noise, basis=False))
+
+
+def test_basis_across_topologies(head_model):
+    """Onto a remeshed head (its own topology; VTC with the per-triangle term, lids, fill), the
+    basis path, asked for, stays within 1e-3 of the motion of frame by frame (it is not taken
+    by itself there: two element sets' tips make it slower than frame by frame)."""
+    from mimica.correspond.remesh import resample_face
+    from mimica.data import ICT_FACE_AREA_FACES, ICT_LANDMARKS_68
+    from mimica.landmarks import Landmarks
+    tv = held_out_identity(head_model, 132)
+    face, _ = head_model.mesh.with_vertices(tv).submesh(np.arange(ICT_FACE_AREA_FACES))
+    rs = resample_face(face, tv[ICT_LANDMARKS_68], n_vertices=6000, seed=4)
+    S = head_model.mesh
+    frames = _sequence(head_model, 96, seed=3)
+    x = ExpressionTransfer(S, rs.mesh, ict_landmarks(S), Landmarks.snap(rs.mesh, tv[ICT_LANDMARKS_68]),
+                           static=static_vertices(S.vertices, frames))
+    exact = x.apply(frames)
+    assert not x.basis_report["used"]
+    fast = x.apply(frames, basis=True)
+    assert x.basis_report["used"], x.basis_report
+    motion = np.linalg.norm(exact - rs.mesh.vertices, axis=2).max()
+    assert np.linalg.norm(fast - exact, axis=2).max() <= 1e-3 * motion

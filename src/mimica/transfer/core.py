@@ -20,6 +20,8 @@ at its corners (Sumner & Popović's per-triangle term, weight DT_STABILIZER; see
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -38,6 +40,51 @@ EPS_ANCHOR = 1e-6
 # of four tuning identities (seeds 201-204) 0.1145 -> 0.1105 / 0.1097 / 0.1096 / 0.1101 at
 # weights 0.1 / 0.3 / 1 / 3; the held-out figure of bench/transfer.py 0.0896 -> 0.087.
 DT_STABILIZER = 0.5
+BASIS_TOL = 1e-5          # a sequence's basis keeps all but this share of its motion (RMS)
+BASIS_TOL_TIPS = 1e-4     # ... and of the motion in its tips' nonlinear part
+BASIS_MAX = 0.4           # ... and is used only when it has at most this share of the frames' count
+
+
+def _orthonormal(a: np.ndarray) -> np.ndarray:
+    """Orthonormal columns spanning a tall (n, p) matrix up to its numerical rank: from the
+    eigenvectors of its Gram matrix, twice (as Cholesky QR twice, Fukaya et al. 2014: two GEMMs
+    and a p x p eigenproblem, several times faster here than Householder QR); directions under
+    1e-10 of the largest are dropped."""
+    q = np.asarray(a, np.float64)
+    for _ in range(2):
+        w, v = np.linalg.eigh(q.T @ q)
+        keep = w > 1e-10 * max(float(w.max()), 1e-300)
+        q = q @ (v[:, keep] / np.sqrt(w[keep]))
+    return np.ascontiguousarray(q, dtype=a.dtype)
+
+
+def _basis(samples: np.ndarray, tol: float, scale: float | None = None, start: int = 24) -> np.ndarray | None:
+    """An orthonormal basis Q (dim, k) of the rows of `samples` (m, dim), the rows' residual
+    outside it within tol of `scale` (default: the rows' own norm), by a randomized range finder
+    (Halko, Martinsson & Tropp 2011) with the sketch grown until it holds; None when k would
+    exceed BASIS_MAX of the rows (not a low-rank motion)."""
+    m = samples.shape[0]
+    flat = samples.reshape(-1)
+    total = float(flat @ flat)
+    ref = total if scale is None else scale * scale
+    if total <= (tol * tol) * max(ref, 1e-300):
+        return np.zeros((samples.shape[1], 0))
+    limit = max(1, int(BASIS_MAX * m))
+    rng = np.random.default_rng(0)
+    p = min(limit + 8, start, m)
+    while True:
+        sketch = samples.T @ rng.standard_normal((m, p))
+        q = _orthonormal(sketch)
+        b = q.T @ samples.T                                                   # (p, m)
+        u, sv, _ = np.linalg.svd(b, full_matrices=False)
+        tail = total - np.cumsum(sv * sv)                                     # energy outside the first k
+        ok = np.nonzero(tail <= (tol * tol) * ref)[0]
+        if len(ok):
+            k = int(ok[0]) + 1
+            return None if k > limit else q @ u[:, :k]
+        if p >= min(m, limit + 8):
+            return None
+        p = min(2 * p, m, limit + 8)
 
 
 def static_vertices(source_neutral: np.ndarray, frames: np.ndarray, rtol=1e-7) -> np.ndarray:
@@ -160,6 +207,85 @@ class TransferSolver:
         # the fixed vertices' map, built here and not on first use: `apply` runs on threads
         self._vm_fixed = Vm_c.tocsr()
         self._fixed_base = T[fixed_v] - self._vm_fixed @ S
+
+    def apply_basis(self, frames: np.ndarray, tol: float = BASIS_TOL, similarity=None):
+        """Frames (F, n_s, 3) through a basis of their motion (issue 19, part 6): None where the
+        motion does not lie in few enough shapes, else the target frames (F, n_t, 3).
+
+        The system is linear in [S'; tips(S')], coordinate by coordinate.  The source's
+        displacements (each frame's x, y and z columns) are reduced to an orthonormal basis Q
+        (randomized range finder, truncated at `tol` of their energy); the tips' linear parts
+        follow from Q by a few sparse products, and their nonlinear parts (the normalized normal
+        of each tent, Song §IV; DT's scaled normal) are computed for every frame from those
+        products and reduced the same way.  The back-substitution then runs once per basis
+        vector, not once per frame; frames are combinations of the basis solutions (GEMMs).
+        Exact but for the two truncations."""
+        frames = np.asarray(frames, dtype=np.float64)
+        nf, ns = len(frames), self.source.n_vertices
+        S = self.source.vertices
+        samples = (frames - S).transpose(0, 2, 1).reshape(3 * nf, ns)        # row 3f + c: frame f's c
+        qd = _basis(samples, tol)
+        if qd is None:
+            return None
+        cd = qd.T @ samples.T                                                 # (kd, 3F)
+        blocks, rhs_cols = [], []
+        rb = self._r_blocks
+        first = rb[0] @ qd                                                    # R_v Q
+        motion = np.sqrt(np.einsum("ij,ij->", samples, samples))
+        cdt = cd.T                                                            # (3F, kd)
+        for (el, _), r_t in zip(self.terms_s, rb[1:]):
+            base, a, b = el.tip_operators
+            e = el.n_elements
+            a0, b0 = a @ S, b @ S
+            # each frame's two vectors per element, component by component, (F, E) each (double
+            # precision: single measured 1.0e-3 off on bench/batch.py's sequence, and no faster)
+            A = (cdt @ (a @ qd).T).reshape(nf, 3, e)
+            B = (cdt @ (b @ qd).T).reshape(nf, 3, e)
+            A += a0.T[None]
+            B += b0.T[None]
+            g = el.tip_bend((A[:, 0], A[:, 1], A[:, 2]), (B[:, 0], B[:, 1], B[:, 2]))
+            g0 = el.tip_bend(tuple(a0.T[c][None] for c in range(3)), tuple(b0.T[c][None] for c in range(3)))
+            gs = np.empty((nf, 3, e))
+            for c in range(3):
+                np.subtract(g[c], g0[c], out=gs[:, c])
+            gs = gs.reshape(3 * nf, e)
+            qg = _basis(gs, BASIS_TOL_TIPS, scale=motion, start=4 * max(qd.shape[1], 6) + 16)
+            if qg is None:
+                return None
+            first = first + r_t @ (base @ qd)                                 # the tips' linear part
+            blocks.append(r_t @ qg)
+            rhs_cols.append(qg.T @ gs.T)                                      # (kg, 3F)
+        P = np.hstack([first] + blocks)
+        k = P.shape[1]
+        Z = np.zeros((self.n_target, k))                                      # every vertex's basis solutions
+        Z[self.free] = self.solver.solve(P)
+        if len(self.fixed):                                                   # held vertices follow their partners
+            Z[self.fixed, :qd.shape[1]] = self._vm_fixed @ qd
+        coef = np.vstack([cd] + rhs_cols).reshape(k, nf, 3)                   # (k, F, 3)
+        x0 = self._rest_solution
+        if similarity is not None:                                            # back to the target's frame, on
+            m = similarity.scale * similarity.rotation.T                      # the coefficients and the rest
+            coef = coef @ m
+            x0 = x0 @ m + similarity.translation
+        out = (Z @ coef.reshape(k, -1)).reshape(self.n_target, nf, 3)         # (n_t, F, 3)
+        out += x0[:, None, :]
+        return np.ascontiguousarray(out.transpose(1, 0, 2))
+
+    @cached_property
+    def _r_blocks(self):
+        """R's columns for the source vertices, then for each term's tips (CSR each)."""
+        c = self.R.tocsc()
+        ns = self.source.n_vertices
+        out, at = [c[:, :ns].tocsr()], ns
+        for el, _ in self.terms_s:
+            out.append(c[:, at:at + el.n_elements].tocsr())
+            at += el.n_elements
+        return out
+
+    @cached_property
+    def _rest_solution(self) -> np.ndarray:
+        """The target's result for the source at rest, (n_t, 3) (its own rest, up to the solve)."""
+        return self.apply(self.source.vertices[None])[0]
 
     @staticmethod
     def _element_areas(el: Elements, mesh: Mesh) -> np.ndarray:
