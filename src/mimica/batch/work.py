@@ -1,0 +1,202 @@
+"""One job of a batch, run in a worker process (a local pool's or a Ray actor's).
+
+A worker keeps what its jobs share in memory for its whole life (issue 19, part 1): a head's
+landmarks (detected once, also kept in the batch's cache folder), the meshes and frames it has
+read, and every ExpressionTransfer it has built -- the correspondence and the factorization of
+a (source neutral, head) pair -- so that all the performances of one source onto one head pay
+for it once.  The scheduler sends all the jobs of a head to the same worker.  Kinds that gain
+nothing from a warm worker but the interpreter and its imports (animate, simulate, age, render,
+export, blendshapes) run the `mimica` command's own code in this process, so a batch's outputs
+are the commands' outputs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MimicaError
+from .manifest import FileHashes, Job, environment, frame_files
+
+_hashes = FileHashes(None)
+_meshes: dict = {}
+_frames: dict = {}
+_transfers: dict = {}
+_source_landmarks: dict = {}
+CACHE_TRANSFERS = 8                 # ExpressionTransfers a worker keeps (oldest dropped first)
+
+
+def marker_path(root: Path, job_id: str) -> Path:
+    return root / ".batch" / "done" / (job_id.replace("/", "__") + ".json")
+
+
+def run_job(job: dict, root: str) -> dict:
+    """Run one job (Job.to_dict() and its upstream outputs under "inputs"); its outputs are
+    written atomically, then its marker.  Returns its record: status done or failed, the one
+    line of a failure, seconds, where it ran, what it said."""
+    root = Path(root)
+    t = time.perf_counter()
+    said: list[str] = []
+    rec = {"id": job["id"], "key": job["key"], **environment()}
+    try:
+        j = Job.from_dict(job)
+        out = j.outputs(root)
+        _RUN[j.kind](j, root, out, [Path(p) for p in job.get("inputs", [])], said)
+        rec.update(status="done", seconds=round(time.perf_counter() - t, 3), said=said[-20:])
+        from ..outputs import atomic_path
+        with atomic_path(marker_path(root, j.id)) as tmp:
+            tmp.write_text(json.dumps({**rec, "output": str(out), "finished": time.time()}, indent=1))
+        return rec
+    except MimicaError as e:
+        rec.update(status="failed", error=" ".join(str(e).split()))
+    except Exception as e:                      # a bug, not the user's input: said as such
+        rec.update(status="failed", error=f"internal error: {type(e).__name__}: {' '.join(str(e).split())}")
+    rec.update(seconds=round(time.perf_counter() - t, 3), said=said[-20:])
+    return rec
+
+
+def _cli(args: list[str], said: list[str]) -> None:
+    """The `mimica` command's code in this process; its one-line error becomes ours."""
+    from ..cli import main
+    buf = io.StringIO()
+    with contextlib.redirect_stderr(buf), contextlib.redirect_stdout(io.StringIO()):
+        rc = main([str(a) for a in args])
+    lines = [ln for ln in buf.getvalue().splitlines() if ln.strip()]
+    said += lines
+    if rc != 0:
+        err = [ln for ln in lines if ln.startswith("mimica: error:")]
+        raise MimicaError(err[-1][len("mimica: error:"):].strip() if err else f"mimica {args[0]} exited {rc}")
+
+
+def _head_mesh(job: Job):
+    k = _hashes.of(job.head.mesh)
+    if k not in _meshes:
+        from ..mesh import read_mesh
+        _meshes.clear() if len(_meshes) > 16 else None
+        _meshes[k] = read_mesh(job.head.mesh)
+    return _meshes[k], k
+
+
+def _landmark_file(job: Job, root: Path) -> Path | None:
+    """The head's landmark file: the manifest's, else the one detected once for this head in the
+    batch's cache (None for ICT-FaceKit's topology: built in)."""
+    if job.head.landmarks is not None:
+        return job.head.landmarks
+    mesh, k = _head_mesh(job)
+    from ..data import is_ict_topology
+    from ..landmarks import landmarks_for, write_landmarks
+    if is_ict_topology(mesh):
+        return None
+    p = root / ".batch" / "cache" / f"{k[:24]}.landmarks.json"
+    if not p.is_file():
+        lm = landmarks_for(mesh, None, f"head {job.head.name} ({job.head.mesh})")
+        write_landmarks(p, lm.positions(mesh))
+    return p
+
+
+def _with_landmarks(args, lm):
+    return args + (["--landmarks", lm] if lm is not None else [])
+
+
+def _blendshapes(job, root, out, inputs, said):
+    o = job.options
+    args = ["blendshapes", job.head.mesh, "--out", out, "--cut-mouth", o["cut_mouth"], "--match", o["match"]]
+    _cli(_with_landmarks(args, _landmark_file(job, root)) + (["--quantize"] if o["quantize"] else []), said)
+
+
+def _transfer(job, root, out, inputs, said):
+    """Song et al.'s transfer of a performance's frames onto the head; the (neutral, head) pair's
+    ExpressionTransfer built once per worker and reused by every performance it fits."""
+    from ..landmarks import landmarks_for
+    from ..mesh import read_mesh, read_vertices, write_mesh
+    from ..outputs import staged_dir
+    from ..transfer import ExpressionTransfer, static_vertices
+    o = job.options
+    perf = job.performance
+    nk = _hashes.of(perf.files["neutral"])
+    if nk not in _meshes:
+        _meshes[nk] = read_mesh(perf.files["neutral"])
+    source = _meshes[nk]
+    files = frame_files(perf)
+    fk = hashlib.sha256("".join(_hashes.of(f) for f in files).encode()).hexdigest()
+    if fk not in _frames:
+        if len(_frames) > 4:
+            _frames.pop(next(iter(_frames)))
+        frames = np.empty((len(files), source.n_vertices, 3))
+        for i, f in enumerate(files):
+            v = read_vertices(f)
+            if len(v) != source.n_vertices:
+                raise MimicaError(f"{f}: has {len(v)} vertices but the performance's neutral has "
+                                  f"{source.n_vertices}; an expression must share the neutral's topology")
+            frames[i] = v
+        _frames[fk] = frames
+    frames = _frames[fk]
+    target, hk = _head_mesh(job)
+    static = static_vertices(source.vertices, frames)
+    key = (nk, hk, str(job.head.landmarks), o["method"], o["cut_mouth"], o["match"],
+           hashlib.sha1(np.packbits(static).tobytes()).hexdigest())
+    xfer = _transfers.get(key)
+    if xfer is None:
+        same = source.same_topology(target)
+        ls = lt = None
+        if not same or job.head.landmarks is not None:
+            if nk not in _source_landmarks:
+                _source_landmarks[nk] = landmarks_for(source, None, f"performance {perf.name}'s neutral "
+                                                                    f"({perf.files['neutral']})")
+            ls = _source_landmarks[nk]
+            lf = _landmark_file(job, root)
+            lt = landmarks_for(target, lf, f"head {job.head.name} ({job.head.mesh})")
+        xfer = ExpressionTransfer(source, target, ls, lt, method=o["method"], static=static,
+                                  cut_mouth=o["cut_mouth"] == "auto", match=o["match"])
+        if len(_transfers) >= CACHE_TRANSFERS:
+            _transfers.pop(next(iter(_transfers)))
+        _transfers[key] = xfer
+        said.append(f"{job.head.name}: correspondence and factorization made")
+    else:
+        said.append(f"{job.head.name}: correspondence and factorization reused")
+    result = xfer.apply(frames)
+    mesh = xfer.output_mesh
+    with staged_dir(out, {"command": "batch transfer", "job": job.id}) as d:
+        for f, v in zip(files, result):
+            write_mesh(d / f.name, mesh.with_vertices(v))
+    said.append(f"{len(files)} frames -> {out}")
+
+
+def _animate(job, root, out, inputs, said):
+    args = ["animate", inputs[0], "--arkit", job.performance.files["arkit"], "--out", out]
+    _cli(args + (["--head-rotation"] if job.options["head_rotation"] else []), said)
+
+
+def _simulate(job, root, out, inputs, said):
+    o = job.options
+    _, hk = _head_mesh(job)
+    rig = root / ".batch" / "cache" / f"{hk[:24]}-{o['muscles']}.rig"
+    if not rig.is_file():                         # one rig per head and muscle set
+        _cli(_with_landmarks(["rig", job.head.mesh, "--muscles", o["muscles"], "--out", rig],
+                             _landmark_file(job, root)), said)
+    _cli(["simulate", rig, "--timeline", job.performance.files["timeline"], "--fps", o["fps"], "--out", out], said)
+
+
+def _age(job, root, out, inputs, said):
+    o = job.options
+    ages = ",".join(f"{a:g}" for a in o["ages"])
+    _cli(_with_landmarks(["age", job.head.mesh, "--ages", ages, "--expression", o["expression"],
+                          "--size", o["size"], "--out", out], _landmark_file(job, root)), said)
+
+
+def _render(job, root, out, inputs, said):
+    _cli(["render", inputs[0], "--out", out, "--view", job.options["view"], "--size", job.options["size"]], said)
+
+
+def _export(job, root, out, inputs, said):
+    _cli(["export", inputs[0], "--out", out, "--fps", job.options["fps"]], said)
+
+
+_RUN = {"blendshapes": _blendshapes, "transfer": _transfer, "animate": _animate, "simulate": _simulate,
+        "age": _age, "render": _render, "export": _export}
