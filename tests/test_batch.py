@@ -212,10 +212,11 @@ def test_a_killed_batch_resumes(studio, tmp_path):
     out = tmp_path / "out"
     p = _batch_process([str(manifest(studio, HEADS)), "--workers", "1", "--out", str(out)])
     assert _wait_for(lambda: len(list((out / ".batch" / "done").glob("*.json"))) >= 2)
-    p.send_signal(signal.SIGKILL)
+    workers = _workers(p.pid)
+    assert workers
+    p.send_signal(signal.SIGKILL)                      # no chance to stop its workers ...
     p.wait()
-    for w in _workers(p.pid):
-        os.kill(w, signal.SIGKILL)
+    assert _wait_for(lambda: not any(Path(f"/proc/{w}").exists() for w in workers), 10)   # ... they leave
     finished = {f.stem for f in (out / ".batch" / "done").glob("*.json")}
     assert 2 <= len(finished) < 6
     rep = run_batch(manifest(studio, HEADS), out, workers=2)

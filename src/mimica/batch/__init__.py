@@ -30,7 +30,7 @@ from pathlib import Path
 
 from ..errors import MimicaError
 from .manifest import FileHashes, Job, key_jobs, plan
-from .work import marker_path, run_job
+from .work import marker_path, run_job, watch_parent
 
 __all__ = ["run_batch", "batch_status", "plan"]
 
@@ -79,7 +79,8 @@ class LocalEngine:
     def _pool(self, w):
         from concurrent.futures import ProcessPoolExecutor
         if self.pools[w] is None:
-            self.pools[w] = ProcessPoolExecutor(1, mp_context=self.ctx)
+            self.pools[w] = ProcessPoolExecutor(1, mp_context=self.ctx, initializer=watch_parent,
+                                                initargs=(os.getpid(),))
         return self.pools[w]
 
     def submit(self, w, job: dict, root: str):

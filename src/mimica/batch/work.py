@@ -5,16 +5,13 @@ landmarks (detected once, also kept in the batch's cache folder), the meshes and
 read, and every ExpressionTransfer it has built -- the correspondence and the factorization of
 a (source neutral, head) pair -- so that all the performances of one source onto one head pay
 for it once.  The scheduler sends all the jobs of a head to the same worker.  Kinds that gain
-nothing from a warm worker but the interpreter and its imports (animate, simulate, age, render,
-export, blendshapes) run the `mimica` command's own code in this process, so a batch's outputs
-are the commands' outputs.
+nothing from a warm worker (animate, simulate, age, render, export, blendshapes) run the `mimica`
+command itself in a child process, so a batch's outputs are the commands' outputs.
 """
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
-import io
 import json
 import time
 from pathlib import Path
@@ -29,7 +26,23 @@ _meshes: dict = {}
 _frames: dict = {}
 _transfers: dict = {}
 _source_landmarks: dict = {}
+_children: set = set()              # the `mimica` commands this worker is running
 CACHE_TRANSFERS = 8                 # ExpressionTransfers a worker keeps (oldest dropped first)
+
+
+def watch_parent(pid: int) -> None:
+    """In a local pool's worker: leave as soon as the batch that started it is gone (killed
+    with SIGKILL it cannot stop its workers, which would wait for jobs forever)."""
+    import os
+    import threading
+
+    def watch():
+        while os.getppid() == pid:
+            time.sleep(0.5)
+        for p in list(_children):                  # the commands it runs go with it
+            p.kill()
+        os._exit(1)
+    threading.Thread(target=watch, daemon=True, name="mimica-batch-parent").start()
 
 
 def marker_path(root: Path, job_id: str) -> Path:
@@ -62,16 +75,26 @@ def run_job(job: dict, root: str) -> dict:
 
 
 def _cli(args: list[str], said: list[str]) -> None:
-    """The `mimica` command's code in this process; its one-line error becomes ours."""
-    from ..cli import main
-    buf = io.StringIO()
-    with contextlib.redirect_stderr(buf), contextlib.redirect_stdout(io.StringIO()):
-        rc = main([str(a) for a in args])
-    lines = [ln for ln in buf.getvalue().splitlines() if ln.strip()]
+    """The `mimica` command itself, in a child process (killed with this worker: watch_parent);
+    its one-line error becomes ours.  (A subprocess, not the command's code imported: the
+    command line imports this package, and the library's users do not import each other in a
+    circle.)"""
+    import os
+    import subprocess
+    import sys
+    p = subprocess.Popen([sys.executable, "-m", "mimica.cli", *map(str, args)], stdout=subprocess.DEVNULL,
+                         stderr=subprocess.PIPE, text=True, env=os.environ)
+    _children.add(p)
+    try:
+        _, err = p.communicate()
+    finally:
+        _children.discard(p)
+    lines = [ln for ln in err.splitlines() if ln.strip()]
     said += lines
-    if rc != 0:
-        err = [ln for ln in lines if ln.startswith("mimica: error:")]
-        raise MimicaError(err[-1][len("mimica: error:"):].strip() if err else f"mimica {args[0]} exited {rc}")
+    if p.returncode != 0:
+        bad = [ln for ln in lines if ln.startswith("mimica: error:")]
+        raise MimicaError(bad[-1][len("mimica: error:"):].strip() if bad else
+                          f"mimica {args[0]} exited {p.returncode}: {(lines or ['no message'])[-1]}")
 
 
 def _head_mesh(job: Job):
