@@ -24,7 +24,8 @@ from mimica.mesh import read_mesh, write_mesh
 
 REPO = Path(__file__).resolve().parents[1]
 INSTALLED = os.environ.get("MIMICA_TEST_INSTALLED") == "1"
-PACKAGE_DATA = ["ict_manifest.json", "landmarks/detect3d_offsets.json", "wrinkles/reference.wrinkles",
+PACKAGE_DATA = ["ict_manifest.json", "landmarks/detect3d_offsets.json", "landmarks/mediapipe68.json",
+                "wrinkles/reference.wrinkles",
                 "viewer/static/index.html", "viewer/static/app.js", "viewer/static/style.css"]
 
 

