@@ -140,6 +140,7 @@ def test_a_corrupt_head_fails_its_own_jobs(studio, tmp_path, capsys):
     ('[heads]\na = "heads/id0.obj"\n[people]\n[jobs.x]\nrun = "blendshapes"\n', "unknown section 'people'"),
     ('[heads]\na = "heads/id0.obj"\n[jobs.x]\nrun = "transfer"\n', "no performance"),
     ('[heads\n', "not valid TOML"),
+    ('[heads]\na = "heads/id0.obj"\n[jobs.x]\nrun = "age"\nages = ["old"]\n', "a list of numbers"),
 ])
 def test_a_bad_manifest_runs_nothing(studio, tmp_path, capsys, case, says):
     p = studio / f"bad-{abs(hash(case)) % 10**8}.toml"

@@ -139,6 +139,9 @@ def test_long_sequences_go_through_their_basis(head_model):
     assert x.basis_report["used"] and x.basis_report["deviation"] <= 1e-3, x.basis_report
     motion = np.linalg.norm(exact - tv, axis=2).max()
     assert np.linalg.norm(fast - exact, axis=2).max() <= 1e-3 * motion
+    still = np.repeat(head_model.neutral[None], 70, axis=0)                    # rest stays at rest
+    np.testing.assert_allclose(x.apply(still), np.broadcast_to(tv, still.shape), atol=1e-9 * np.ptp(tv))
+    assert x.basis_report["used"]
     noise = frames + np.random.default_rng(1).normal(0, 1e-3, frames.shape)   # every frame its own shape
     again = x.apply(noise)
     assert not x.basis_report["used"] and "few shapes" in x.basis_report["why"]

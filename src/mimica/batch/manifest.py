@@ -156,6 +156,9 @@ def plan(path) -> list[Job]:
                                   f"(its options: {', '.join(defaults) or 'none'})")
             if type(v) is not type(defaults[k]) and not (isinstance(defaults[k], float) and isinstance(v, int)):
                 raise MimicaError(f"{where}: jobs.{name}.{k} = {v!r}: expected {type(defaults[k]).__name__}")
+            if isinstance(v, list) and not (v and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                      for x in v)):
+                raise MimicaError(f"{where}: jobs.{name}.{k} = {v!r}: expected a list of numbers")
             options[k] = v
         chosen_heads = _pick(spec.get("heads"), heads, f"{where}: jobs.{name}.heads", "head")
         made[name] = []

@@ -258,7 +258,8 @@ class TransferSolver:
         P = np.hstack([first] + blocks)
         k = P.shape[1]
         Z = np.zeros((self.n_target, k))                                      # every vertex's basis solutions
-        Z[self.free] = self.solver.solve(P)
+        if k:                                                                 # (none: the frames are at rest)
+            Z[self.free] = self.solver.solve(P)
         if len(self.fixed):                                                   # held vertices follow their partners
             Z[self.fixed, :qd.shape[1]] = self._vm_fixed @ qd
         coef = np.vstack([cd] + rhs_cols).reshape(k, nf, 3)                   # (k, F, 3)
@@ -267,7 +268,7 @@ class TransferSolver:
             m = similarity.scale * similarity.rotation.T                      # the coefficients and the rest
             coef = coef @ m
             x0 = x0 @ m + similarity.translation
-        out = (Z @ coef.reshape(k, -1)).reshape(self.n_target, nf, 3)         # (n_t, F, 3)
+        out = (Z @ coef.reshape(k, 3 * nf)).reshape(self.n_target, nf, 3)     # (n_t, F, 3)
         out += x0[:, None, :]
         return np.ascontiguousarray(out.transpose(1, 0, 2))
 
