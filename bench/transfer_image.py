@@ -6,13 +6,18 @@ images (Liu et al. 2001, in-project) in the same run; video end to end; 3D landm
   expressions, face region, median); the same on the Yale photos is printed beside it.
 - psnr_gain_vs_eri: rendered ICT pairs, different target identity and different lighting,
   truth = the target identity rendered with the expression under the target's light;
-  mean over pairs of PSNR(ours) - PSNR(ERI).
+  mean over pairs of PSNR(ours) - PSNR(ERI); psnr_gain_vs_warp the same against the warp alone.
 - Yale A->B: A's expression onto B compared with B's own photo (aligned on stable points),
-  medians per expression for ours, ERI, the warp alone and the untouched neutral.
+  medians per expression for ours, ERI, the warp alone and the untouched neutral;
+  yale_gain_vs_neutral: the median over the happy and surprised pairs of PSNR(ours) -
+  PSNR(B's untouched neutral).
 - video_fps: a 640x480 MP4 of a rendered ICT face moving, decoded, landmarks tracked,
   transferred onto the astronaut portrait, encoded to MP4.
 - landmarks3d_err: automatic 3D landmarks on the odd ICT identities (held out from the
   calibration), median distance over the 68 as a fraction of the face width (jaw 0-16).
+- landmarks2d_err: the photos' default detector on renders of the odd ICT identities, the median
+  over the 68 of the distance to the projected truth over the eyes' distance, median photo
+  (bench/landmarks2d.py compares dlib and MediaPipe).
 
 Run from the project root: .venv/bin/python bench/transfer_image.py [--quick]
 Pictures: docs/figures/transfer_image_ict.png, transfer_image_astronaut.png; the Yale picture goes to
@@ -39,7 +44,7 @@ from mimica.data import ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel, data_dir 
 from mimica.image import ImageAnalogy, psnr, read_image  # noqa: E402
 from mimica.image.io import luminance  # noqa: E402
 from mimica.image.ictphotos import LIGHT_LEFT, LIGHT_RIGHT, ICTPhotos  # noqa: E402
-from mimica.landmarks.detect2d import Tracker, detect  # noqa: E402
+from mimica.landmarks.detect2d import DEFAULT_DETECTOR, Tracker, detect  # noqa: E402
 from mimica.landmarks.detect3d import detect_mesh  # noqa: E402
 from mimica.image.video import VideoWriter, frame_source  # noqa: E402
 from mimica.image.warp import Similarity2D, align_to, head_motion, polygon_mask  # noqa: E402
@@ -150,7 +155,7 @@ def ict_pairs(quick):
         [to_uint8(c) for row in rows for c in row], columns=6,
         labels=["source", "source expr.", "target (other light)", "ERI", "ours (VTC)", "truth"] * len(rows),
         title="ICT-FaceKit renders: expression onto another identity under another light"))
-    return float(np.mean(gains))
+    return float(np.mean(gains)), float(np.mean(res["vtc"]) - np.mean(res["warp"]))
 
 
 def motion_agreement(yale, subs, e):
@@ -172,6 +177,7 @@ def yale_pairs(yale, quick):
     weak = {a: [] for a in (0.25, 0.5)}          # ours with less of A's expression (--strength)
     rows = []
     analogies = {}                               # one per target photo: its factorization, reused
+    by_expr = {}
     for e in YALE_EXPR if not quick else YALE_EXPR[:2]:
         res = {k: [] for k in tot}
         # a subject whose "expression" file is a byte copy of its neutral (subject04.sad) has no
@@ -199,6 +205,7 @@ def yale_pairs(yale, quick):
                 rows.append([s, x, t, r["eri"], r["vtc"], truth])
         for k in tot:
             tot[k] += res[k]
+        by_expr[e] = res
         agree = motion_agreement(yale, sorted(set(subs) - same), e)
         print(f"  Yale A->B {e:9s} ({len(res['vtc'])} pairs) median PSNR: "
               + ", ".join(f"{k} {np.median(v):.2f}" for k, v in res.items())
@@ -207,12 +214,31 @@ def yale_pairs(yale, quick):
     print("Yale A->B all, ours with part of A's expression: "
           + ", ".join(f"strength {k} {np.median(v):.2f} dB" for k, v in weak.items())
           + f", strength 1 {np.median(tot['vtc']):.2f} dB (neutral = strength 0: {np.median(tot['neutral']):.2f} dB)")
+    strong = [v - n for e in ("happy", "surprised") for v, n in zip(by_expr[e]["vtc"], by_expr[e]["neutral"])
+              if e in by_expr]
     if rows:
         LOCAL_FIG.mkdir(parents=True, exist_ok=True)
         save_png(LOCAL_FIG / "transfer_image_yale.png", contact_sheet(
             [to_uint8(c) for row in rows for c in row], columns=6,
             labels=["A neutral", "A expression", "B neutral", "ERI", "ours (VTC)", "B's own photo"] * len(rows),
             title="Yale faces: A's expression onto B"))
+    return float(np.median(strong))
+
+
+def landmarks2d(quick):
+    """The default detector's 2D error on rendered faces of held-out (odd) identities: the median
+    over the 68 points of the distance to the truth over the eyes' distance, median photo
+    (bench/landmarks2d.py compares the detectors)."""
+    ph = ICTPhotos(size=(480, 640))
+    errs = []
+    for i in range(1, 20, 2) if not quick else range(1, 6, 2):
+        for k, e in enumerate((None, "happiness", "surprise")):
+            img, xy = ph.photo(f"identity{i:03d}", e, light=LIGHT_LEFT if k % 2 else LIGHT_RIGHT)
+            p = detect(img, "render")
+            errs.append(np.median(np.linalg.norm(p - xy, axis=1)) / np.linalg.norm(xy[36] - xy[45]))
+    print(f"2D landmarks ({DEFAULT_DETECTOR}) on {len(errs)} renders of held-out ICT identities: median error "
+          f"{100 * np.median(errs):.2f}% of the eyes' distance")
+    return float(np.median(errs))
 
 
 def video(quick):
@@ -282,12 +308,14 @@ def main():
     yale = Yale()
     image_s, eri_s = timing(quick)
     p_self = self_transfer(yale, quick)
-    gain = ict_pairs(quick)
-    yale_pairs(yale, quick)
+    gain, gain_warp = ict_pairs(quick)
+    yale_gain = yale_pairs(yale, quick)
     vfps = video(quick)
     lm3 = landmarks3d(quick)
+    lm2 = landmarks2d(quick)
     print(f"image_s={image_s:.4f} eri_image_s={eri_s:.4f} video_fps={vfps:.1f} psnr_self={p_self:.2f} "
-          f"psnr_gain_vs_eri={gain:.2f} landmarks3d_err={lm3:.4f}")
+          f"psnr_gain_vs_eri={gain:.2f} psnr_gain_vs_warp={gain_warp:.2f} yale_gain_vs_neutral={yale_gain:.2f} "
+          f"landmarks3d_err={lm3:.4f} landmarks2d_err={lm2:.4f}")
 
 
 if __name__ == "__main__":

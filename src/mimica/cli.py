@@ -54,8 +54,8 @@ MATCH_HELP = ("across topologies, how target vertices find their source partners
               "registration of the source onto the target (default); cylinder, Song et al.'s cylinder map")
 
 
-DETECTOR_HELP = ("photos: the 68 points' detector: dlib (default) or mediapipe (MediaPipe's face mesh at 68 of "
-                 "its points; pip install 'mimica[mediapipe]'; compared in docs/benchmarks.md)")
+DETECTOR_HELP = ("photos: the 68 points' detector: mediapipe (default: MediaPipe's face mesh at 68 of its points) "
+                 "or dlib (its 68-point predictor); compared in docs/benchmarks.md")
 FILE_FORMATS = ("glb", "gltf", "usd", "usda", "usdc")     # --format naming one file's kind
 CLIP_MAX_ERROR_M = 1e-4          # a compact clip's bound: 0.1 mm, in metres
 
@@ -639,7 +639,7 @@ def _parse_pull(spec):
     return center, radius, force
 
 
-def _image_points(img, path, what, face: int = 0, detector: str = "dlib"):
+def _image_points(img, path, what, face: int = 0, detector: str = "mediapipe"):
     """2D feature points: `--landmarks`-style sibling file PHOTO.landmarks.json if present, else
     detected (the photo's face number `face`, by size)."""
     from .landmarks import detect2d
@@ -1298,7 +1298,7 @@ def build_parser():
     ti.add_argument("--face", type=int, default=0, help="the target photo's face (0: the largest; "
                                                         "`mimica landmarks PHOTO --list` numbers them)")
     ti.add_argument("--source-face", type=int, default=0, help="the source photos' (or video's) face, as --face")
-    ti.add_argument("--detector", choices=["dlib", "mediapipe"], default="dlib", help=DETECTOR_HELP)
+    ti.add_argument("--detector", choices=["dlib", "mediapipe"], default="mediapipe", help=DETECTOR_HELP)
     ti.add_argument("--out", required=True, help="output folder (photos), or an .mp4 with --driving")
     ti.set_defaults(func=cmd_transfer_image)
 
@@ -1309,7 +1309,7 @@ def build_parser():
     lm.add_argument("--face", type=int, default=0, dest="face_number",
                     help="photos: which face (0: the largest; --list numbers them)")
     lm.add_argument("--show", metavar="PNG", help="also draw the points")
-    lm.add_argument("--detector", choices=["dlib", "mediapipe"], default="dlib", help=DETECTOR_HELP)
+    lm.add_argument("--detector", choices=["dlib", "mediapipe"], default="mediapipe", help=DETECTOR_HELP)
     lm.set_defaults(func=cmd_landmarks)
 
     rd = sub.add_parser("render", help="pictures and videos of a face or a sequence (no GPU needed)")

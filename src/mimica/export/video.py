@@ -212,7 +212,8 @@ def track_video(path, progress=None, max_frames: int | None = None):
     from ..image.video import frame_source
     from ..landmarks.detect2d import Tracker
     n, fps, frames = frame_source(path)
-    tracker = Tracker(alpha=1.0, what=str(path))        # no smoothing here: the fit smooths
+    # dlib's tracker: the fit's figures (bench/export.py) were measured with it
+    tracker = Tracker(alpha=1.0, what=str(path), detector="dlib")   # no smoothing here: the fit smooths
     out = []
     for i, img in enumerate(frames):
         if max_frames is not None and i >= max_frames:
