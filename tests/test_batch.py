@@ -235,7 +235,7 @@ def test_a_killed_batch_resumes(studio, tmp_path):
 
 
 def test_ray_gives_the_local_pools_outputs(studio, tmp_path):
-    """A local Ray cluster (2 CPUs) runs the same plan with the same outputs."""
+    """A local Ray cluster (2 CPUs) runs the same plan with the same outputs (to rounding)."""
     if os.environ.get("CI") is None:
         pytest.importorskip("ray")
     import ray
@@ -248,11 +248,16 @@ def test_ray_gives_the_local_pools_outputs(studio, tmp_path):
     assert rem["engine"].startswith("Ray") and rem["counts"] == local["counts"] == {"done": 6, "skipped": 0, "failed": 0}
     a, b = outputs(tmp_path / "local"), outputs(tmp_path / "ray")
     assert a.keys() == b.keys() and len(a) == 3 * len(FRAMES) + 3
-    for k in a:
-        if k.endswith(".obj"):
-            np.testing.assert_array_equal(a[k], b[k])
-        else:
-            assert a[k] == b[k], k
+    from mimica.mesh.io import read_morph_targets
+    for k in a:                          # the same numbers but for rounding: Ray's workers run BLAS
+        if k.endswith(".obj"):           # on one thread, the local pool's on all cores
+            np.testing.assert_allclose(a[k], b[k], atol=1e-9 * np.ptp(b[k]))
+        else:                            # the clips: the same frames
+            ma, ta, _ = read_morph_targets(tmp_path / "local" / k)
+            mb, tb, _ = read_morph_targets(tmp_path / "ray" / k)
+            assert ta.keys() == tb.keys()
+            for n in ta:
+                np.testing.assert_allclose(ta[n], tb[n], atol=1e-6 * np.ptp(ma.vertices))
 
 
 def test_every_kind_of_job(studio, tmp_path):

@@ -1097,6 +1097,9 @@ def cmd_batch(a):
     def progress(ev):
         if bar is not None:
             bar.total = ev["total"]
+            if ev["status"] == "started":
+                bar.refresh()
+                return
             bar.set_postfix_str(ev["job"][-40:])
             bar.update(1)
     try:

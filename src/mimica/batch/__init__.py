@@ -162,8 +162,8 @@ def run_batch(manifest, out, workers: int | None = None, ray: str | None = None,
               progress=None) -> dict:
     """Run the manifest's jobs into `out`; returns the report also written to out/batch.json.
 
-    progress(event) is called with {"done": k, "total": n, "job": id, "status": ...} as jobs
-    finish (the command line draws a bar from it)."""
+    progress(event) is called with {"done": k, "total": n, "job": id, "status": ...} once at the
+    start (status "started", done 0) and as jobs finish (the command line draws a bar from it)."""
     out = Path(out)
     if workers is not None and not 1 <= workers <= 256:
         raise MimicaError(f"--workers {workers}: expected 1 to 256")
@@ -207,6 +207,8 @@ def run_batch(manifest, out, workers: int | None = None, ray: str | None = None,
         engine = RayEngine(n, ray) if ray else LocalEngine(n)
     total = len(todo)
     finished = 0
+    if progress:
+        progress({"done": 0, "total": total, "job": "", "status": "started"})
 
     def record(job: Job, rec: dict):
         nonlocal finished

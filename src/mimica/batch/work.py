@@ -101,7 +101,8 @@ def _head_mesh(job: Job):
     k = _hashes.of(job.head.mesh)
     if k not in _meshes:
         from ..mesh import read_mesh
-        _meshes.clear() if len(_meshes) > 16 else None
+        if len(_meshes) > 16:                      # a worker holds a few heads at a time
+            _meshes.clear()
         _meshes[k] = read_mesh(job.head.mesh)
     return _meshes[k], k
 
