@@ -214,8 +214,11 @@ class ExpressionTransfer:
             return None
         pick = np.unique(np.linspace(0, len(f) - 1, BASIS_CHECK).round().astype(int))
         exact = self.solver.apply(f[pick], self._back)
-        motion = float(np.linalg.norm(exact - self.target.vertices, axis=2).max())
-        dev = float(np.linalg.norm(out[pick] - exact, axis=2).max()) / max(motion, 1e-300) if motion > 0 else 0.0
+        # against the frames' largest motion, and no less than 1e-6 of the face's size (frames at
+        # rest move by rounding alone)
+        motion = max(float(np.linalg.norm(exact - self.target.vertices, axis=2).max()),
+                     1e-6 * float(np.ptp(self.target.vertices, axis=0).max()))
+        dev = float(np.linalg.norm(out[pick] - exact, axis=2).max()) / motion
         self.basis_report = {"used": dev <= BASIS_DEVIATION, "deviation": dev, "checked": len(pick),
                              "why": "through the basis" if dev <= BASIS_DEVIATION else
                              f"the basis was off by {dev:.1e} of the motion on the frames checked"}
