@@ -244,21 +244,10 @@ def cmd_transfer(a):
              f"{len(xfer.mouth.copies_of)} added after the target's own (--cut-mouth off to keep them sealed)")
     _warn_sealed_eyes(target, lt, a.target)
     target = xfer.output_mesh
-    from .transfer import BASIS_MIN_FRAMES
-    if len(frames) >= BASIS_MIN_FRAMES:
-        # a long sequence at once: through its basis where its motion lies in a few shapes
-        out = xfer.apply(frames)
-        r = xfer.basis_report
-        if "deviation" in r:
-            _say(f"{len(frames)} frames through their basis, within {r['deviation']:.1e} of the motion of frame by "
-                 f"frame on {r['checked']} frames checked" if r["used"] else
-                 f"{len(frames)} frames one by one: their basis was {r['deviation']:.1e} of the motion off on "
-                 f"{r['checked']} frames checked (1e-3 allowed)")
-    else:
-        out = np.empty((len(frames), target.n_vertices, 3))
-        step = 32
-        for i in _progress(range(0, len(frames), step), (len(frames) + step - 1) // step, "transferring"):
-            out[i:i + step] = xfer.apply(frames[i:i + step])
+    out = np.empty((len(frames), target.n_vertices, 3))
+    step = 32
+    for i in _progress(range(0, len(frames), step), (len(frames) + step - 1) // step, "transferring"):
+        out[i:i + step] = xfer.apply(frames[i:i + step])
     t3 = time.perf_counter()
     outdir = Path(a.out)
     from .outputs import staged_dir

@@ -25,12 +25,11 @@ from ..mesh import Mesh
 from .core import DT_STABILIZER, METHODS, TransferSolver, static_vertices
 from .metrics import relative_error, song_vertex_error
 
-BASIS_MIN_FRAMES = 64     # sequences this long try the basis path (TransferSolver.apply_basis)
 BASIS_CHECK = 4           # frames solved one by one to check it
 BASIS_DEVIATION = 1e-3    # ... which must agree within this share of their largest motion
 
 __all__ = ["ExpressionTransfer", "TransferSolver", "static_vertices", "relative_error",
-           "song_vertex_error", "METHODS", "BASIS_MIN_FRAMES"]
+           "song_vertex_error", "METHODS"]
 
 
 class ExpressionTransfer:
@@ -156,7 +155,7 @@ class ExpressionTransfer:
         self._parts = PartMotion(self.source, ps, self.target, pt, t_skin, t_idx, self.similarity, ls_pos)
 
     def apply(self, frames: np.ndarray, batch: int = 32, workers: int | None = None,
-              basis: bool | None = None) -> np.ndarray:
+              basis: bool = False) -> np.ndarray:
         """Source frames (F, n_S, 3) or (n_S, 3) -> target frames (F, n_T, 3) or (n_T, 3).
 
         Frames go through in batches (one back-substitution with 3 x batch right-hand
@@ -164,10 +163,11 @@ class ExpressionTransfer:
         single-threaded BLAS, which keeps every core busy through all stages.
 
         basis: a sequence whose motion lies in a few shapes goes through their basis
-        (TransferSolver.apply_basis: one back-substitution per basis shape); None (default)
-        tries it from BASIS_MIN_FRAMES frames on the same topology (twice as fast there).  It is kept only when a few frames spread over
-        the sequence, solved one by one, agree within BASIS_DEVIATION of their motion;
-        `basis_report` says what happened.
+        (TransferSolver.apply_basis: one back-substitution per basis shape), kept only when a
+        few frames spread over the sequence, solved one by one, agree within BASIS_DEVIATION of
+        their motion; `basis_report` says what happened.  Off by default: on this machine it
+        measured 503 against 256 frames/s in one run and 452-544 against 480-488 in later ones
+        (bench/batch.py), no steady gain for its 2.7e-4 of the motion.
         """
         frames = np.asarray(frames, dtype=np.float64)
         single = frames.ndim == 2
@@ -179,10 +179,7 @@ class ExpressionTransfer:
             return out[0] if single else out
         out = None
         self.basis_report = {"used": False, "why": "frame by frame"}
-        # automatic where it pays: one element set (across topologies the tents' and the
-        # triangles' tips both need a basis, and a 300-frame sequence onto a remeshed head took
-        # 3.0 s that way against 1.7 s frame by frame)
-        if basis or (basis is None and len(f) >= BASIS_MIN_FRAMES and len(self.solver.terms_s) == 1):
+        if basis:
             out = self._through_basis(f)
         if out is None:
             out = np.empty((len(f), self.target.n_vertices, 3))
