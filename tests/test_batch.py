@@ -312,3 +312,17 @@ from = "talk"
     from mimica.image import read_image
     assert read_image(out / "look" / "one" / "talk.png").shape[0] > 100
     assert (out / "clip" / "one" / "talk.glb").stat().st_size > 0
+
+
+def test_a_frames_folder_is_read_as_transfer_reads_it(studio, tmp_path):
+    """A performance's folder is one format in natural order, as `mimica transfer` takes a folder:
+    a previous run's animation.glb beside the OBJ frames is no frame (mesh.io.sequence_files)."""
+    import shutil
+    from mimica.batch.manifest import frame_files, plan
+    d = tmp_path / "studio"
+    shutil.copytree(studio, d)
+    (d / "perf" / "talk" / "f10.obj").write_bytes((d / "perf" / "talk" / "f0.obj").read_bytes())
+    (d / "perf" / "talk" / "animation.glb").write_bytes(b"glTF")
+    jobs = plan(manifest(d, HEADS))
+    names = [f.name for f in frame_files(jobs[0].performance)]
+    assert names == ["f0.obj", "f1.obj", "f2.obj", "f3.obj", "f10.obj"]

@@ -173,30 +173,17 @@ def _say(msg):
     print(msg, file=sys.stderr)
 
 
-def _natural(path: Path):
-    """Natural order: frame2 before frame10."""
-    import re
-    return [(0, int(t), "") if t.isdigit() else (1, 0, t.lower()) for t in re.split(r"(\d+)", path.name) if t]
-
-
 def _expand_frames(items):
-    from .mesh import MESH_SUFFIXES
+    from .mesh.io import sequence_files
     out = []
     for it in items:
         p = Path(it)
         if p.is_dir():
-            files = sorted((f for f in p.iterdir() if f.suffix.lower() in MESH_SUFFIXES), key=_natural)
-            if not files:
-                raise MimicaError(f"{p}: the folder holds no mesh files ({', '.join(MESH_SUFFIXES)})")
-            # a sequence is one format: files of another (a previous run's animation.glb beside
-            # its frames) are left out, and said
-            kinds = [f.suffix.lower() for f in files]
-            main = max(sorted(set(kinds)), key=kinds.count)
-            other = [f.name for f, k in zip(files, kinds) if k != main]
-            if other:
-                _say(f"{p}: its {kinds.count(main)} {main} files are the frames; left out "
+            files, other = sequence_files(p)
+            if other:                                  # said: a previous run's animation.glb ...
+                _say(f"{p}: its {len(files)} {files[0].suffix.lower()} files are the frames; left out "
                      + (", ".join(other[:3]) + (f" and {len(other) - 3} more" if len(other) > 3 else "")))
-            out += [f for f, k in zip(files, kinds) if k == main]
+            out += files
         else:
             out.append(p)
     return out
@@ -755,10 +742,7 @@ def cmd_landmarks(a):
         return 0
     img = read_image(path)
     if a.list:
-        if a.detector == "mediapipe":
-            boxes = [tuple(int(round(c)) for c in (*f.min(0), *f.max(0))) for f in detect2d.mediapipe_faces(img)]
-        else:
-            boxes = detect2d.detect_faces(img)
+        boxes = detect2d.face_boxes(img, a.detector)
         _say(f"{path}: {len(boxes)} face(s), by size" + "".join(
             f"; {i}: {r - l}x{b - t} px at ({(l + r) // 2}, {(t + b) // 2})" for i, (l, t, r, b) in enumerate(boxes)))
         return 0

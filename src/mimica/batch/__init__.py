@@ -49,9 +49,8 @@ def _check_out(out: Path) -> None:
 def _inputs_inside(jobs: list[Job], out: Path) -> None:
     o = out.resolve()
     for j in jobs:
-        for p in [j.head.mesh, j.head.landmarks] + ([] if j.performance is None else [
-                f for v in j.performance.files.values() for f in (v if isinstance(v, list) else [v])]):
-            if p is not None and (p.resolve() == o or o in p.resolve().parents):
+        for p in j.input_files():
+            if p.resolve() == o or o in p.resolve().parents:
                 raise MimicaError(f"{p}: an input lies inside the batch's output folder {out}; "
                                   "choose another --out")
 
@@ -238,6 +237,8 @@ def run_batch(manifest, out, workers: int | None = None, ray: str | None = None,
                 continue
             d = job.to_dict()
             d["inputs"] = [str(by_id[a].outputs(out)) for a in job.after]
+            # the inputs' hashes the plan took (by size and time): the worker need not read them twice
+            d["hashes"] = {str(f): hashes.known[str(f)] for f in job.input_files() if str(f) in hashes.known}
             running[engine.submit(w, d, str(out))] = (w, group, job)
             return True
         return False

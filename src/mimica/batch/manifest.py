@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import MimicaError
+from ..mesh import MESH_SUFFIXES
 
 # job kind -> (what it runs on, the options it takes with their defaults)
 KINDS = {
@@ -54,7 +55,6 @@ KINDS = {
 FROM = {"animate": ("blendshapes",), "render": ("transfer", "simulate"), "export": ("transfer", "simulate")}
 PERFORMANCE_KINDS = {"frames": ("neutral", "frames"), "arkit": ("arkit",), "timeline": ("timeline",)}
 JOB_KEYS = {"run", "heads", "performances", "from"}
-MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf")
 
 
 @dataclass
@@ -90,9 +90,19 @@ class Job:
                 "simulate": base / str(p), "age": base / "age.png", "render": base / f"{p}.png",
                 "export": base / f"{p}.{self.options.get('format', 'glb')}"}[self.kind]
 
+    def input_files(self) -> list[Path]:
+        """The files the job reads from the user: its head, landmarks and performance's files
+        (a folder of frames as its frames; render and export read the jobs they come from)."""
+        out = [self.head.mesh] + ([self.head.landmarks] if self.head.landmarks else [])
+        if self.performance is not None and KINDS[self.kind][0] != "from":
+            for role, v in self.performance.files.items():
+                out += frame_files(self.performance) if role == "frames" else [v]
+        return out
+
     def to_dict(self) -> dict:
         return {"id": self.id, "name": self.name, "kind": self.kind, "head": _plain(self.head.__dict__),
-                "performance": None if self.performance is None else _plain(self.performance.__dict__),
+                "performance": None if self.performance is None else _plain(
+                    {k: getattr(self.performance, k) for k in ("name", "kind", "files")}),
                 "options": self.options, "after": self.after, "key": self.key}
 
     @classmethod
@@ -371,14 +381,6 @@ class FileHashes:
             tmp.write_text(json.dumps(self.known))
 
 
-def _frame_files(p) -> list[Path]:
-    if isinstance(p, list):
-        return p
-    if p.is_dir():
-        return sorted((f for f in p.iterdir() if f.suffix.lower() in MESH_SUFFIXES), key=lambda f: f.name)
-    return [p]
-
-
 def key_jobs(jobs: list[Job], hashes: FileHashes) -> None:
     """Each job's key: a hash of its kind, options, mimica's version, its inputs' contents and
     the keys of the jobs it reads from."""
@@ -386,27 +388,19 @@ def key_jobs(jobs: list[Job], hashes: FileHashes) -> None:
     keys = {}
     for j in jobs:
         parts = {"kind": j.kind, "options": j.options, "version": __version__,
-                 "head": hashes.of(j.head.mesh),
-                 "landmarks": hashes.of(j.head.landmarks) if j.head.landmarks else None,
-                 "after": [keys[a] for a in j.after]}
-        if j.performance is not None and KINDS[j.kind][0] != "from":      # render/export: in "after"
-            parts["performance"] = {role: [hashes.of(f) for f in frame_files(j.performance)] if role == "frames"
-                                    else hashes.of(v) for role, v in j.performance.files.items()}
+                 "inputs": [hashes.of(f) for f in j.input_files()], "after": [keys[a] for a in j.after]}
         j.key = hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()
         keys[j.id] = j.key
 
 
 def frame_files(perf: Performance) -> list[Path]:
-    """The expression meshes of a frames performance, in natural order."""
-    import re
-
-    def natural(path: Path):
-        return [(0, int(t), "") if t.isdigit() else (1, 0, t.lower()) for t in re.split(r"(\d+)", path.name) if t]
-    f = perf.files["frames"]
-    files = f if isinstance(f, list) else sorted(_frame_files(f), key=natural)
-    if not files:
-        raise MimicaError(f"performance {perf.name}: {f} holds no mesh files")
-    return files
+    """The expression meshes of a frames performance: its list, or its folder's frames (as the
+    `transfer` command takes a folder: natural order, one format)."""
+    from ..mesh.io import sequence_files
+    if getattr(perf, "_listed", None) is None:          # listed once per plan
+        f = perf.files["frames"]
+        perf._listed = f if isinstance(f, list) else sequence_files(f)[0]
+    return perf._listed
 
 
 def environment() -> dict:

@@ -140,6 +140,13 @@ def mediapipe_faces(img) -> list:
     return sorted(faces, key=lambda f: -float(np.prod(np.ptp(f, axis=0))))
 
 
+def face_boxes(img, detector: str = DEFAULT_DETECTOR) -> list:
+    """The photo's faces as boxes (left, top, right, bottom), largest first, as `detect` numbers them."""
+    if detector == "mediapipe":
+        return [tuple(int(round(c)) for c in (*f.min(0), *f.max(0))) for f in mediapipe_faces(img)]
+    return detect_faces(img)
+
+
 def detect(img, what="image", face: int = 0, detector: str = DEFAULT_DETECTOR) -> np.ndarray:
     """68 points of the photo's face number `face` (0: the largest, faces by size, as
     detect_faces lists them); a clear error when there is no such face."""

@@ -17,6 +17,25 @@ from .core import Mesh
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf")
 
 
+def natural_order(path: Path):
+    """Sort key: frame2 before frame10."""
+    import re
+    return [(0, int(t), "") if t.isdigit() else (1, 0, t.lower()) for t in re.split(r"(\d+)", Path(path).name) if t]
+
+
+def sequence_files(folder) -> tuple[list[Path], list[str]]:
+    """The frames of a folder of meshes, in natural order, and the files left out: a sequence is
+    one format, so files of another (a previous run's animation.glb beside OBJ frames) are not
+    frames.  A folder with no mesh file is refused in one line."""
+    folder = Path(folder)
+    files = sorted((f for f in folder.iterdir() if f.suffix.lower() in MESH_SUFFIXES), key=natural_order)
+    if not files:
+        raise MimicaError(f"{folder}: the folder holds no mesh files ({', '.join(MESH_SUFFIXES)})")
+    kinds = [f.suffix.lower() for f in files]
+    main = max(sorted(set(kinds)), key=kinds.count)
+    return [f for f, k in zip(files, kinds) if k == main], [f.name for f, k in zip(files, kinds) if k != main]
+
+
 def read_json(path, what="file"):
     """Parse a JSON file; a missing, unreadable or malformed one is a one-line MimicaError."""
     import json

@@ -128,7 +128,6 @@ class TransferSolver:
         kinds = [(method, 1.0)] + ([("dt", dt_weight)] if dt_weight > 0 and method != "dt" else [])
         self.terms_s = [(METHODS[k](source), k) for k, _ in kinds]
         terms_t = [(METHODS[k](target), k, w) for k, w in kinds]
-        self.el_s, self.el_t = self.terms_s[0][0], terms_t[0][0]
         es_all = [el.n_elements for el, _ in self.terms_s]
         et_all = [el.n_elements for el, _, _ in terms_t]
         es, et = sum(es_all), sum(et_all)

@@ -61,7 +61,7 @@ class Elements:
     @cached_property
     def tip_operators(self) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
         """Sparse (E x n) maps (base, a, b) of positions with tip = base x + g(a x, b x)
-        (`tip_of`): for VTC the vertex and its two tangents, for DT the first corner and the
+        (`tip_bend`): for VTC the vertex and its two tangents, for DT the first corner and the
         two edges from it.  The nonlinear part g acts element by element, so a batch of frames
         whose positions lie in a few shapes' span gets its tips from a few sparse products."""
         n = self.n_vertices
@@ -75,20 +75,10 @@ class Elements:
         p0 = pick(0)
         return p0, (pick(1) - p0).tocsr(), (pick(2) - p0).tocsr()
 
-    def tip_of(self, base: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """base + g(a, b) over the last axis (3): the same tips as `tips`, from the parts that
-        `tip_operators` give (arrays (E, ..., 3))."""
-        c = _cross(a, b)
-        ln = np.sqrt(np.einsum("...k,...k->...", c, c))
-        if self.kind == "vtc":
-            h = self.ring_length.reshape((-1,) + (1,) * (c.ndim - 2))
-            np.divide(c, ln[..., None], out=c, where=ln[..., None] > 0)
-            return base + c * h[..., None]
-        return base + c / np.sqrt(np.maximum(ln, 1e-300))[..., None]
-
     def tip_bend(self, a, b):
-        """g(a, b) of `tip_of` component by component: a and b are (x, y, z) triples of arrays
-        whose last axis runs over the elements (any precision); returns the triple g."""
+        """g(a, b) of `tip_operators`, component by component: a and b are (x, y, z) triples of
+        arrays whose last axis runs over the elements (any precision); returns the triple g.
+        The same tips as `tips` (tested), written for the basis path's layout."""
         cx = a[1] * b[2] - a[2] * b[1]
         cy = a[2] * b[0] - a[0] * b[2]
         cz = a[0] * b[1] - a[1] * b[0]
