@@ -100,11 +100,32 @@ def test_warp_rotation_is_the_integrated_rotation():
     np.testing.assert_allclose(Rt, avg, atol=1e-6)
 
 
-def test_face_at_rest_stays_at_rest(rig):
-    sim = FaceSimulator(rig)
+@pytest.mark.parametrize("warp", [True, False])
+def test_face_at_rest_stays_at_rest(rig, warp):
+    sim = FaceSimulator(rig, warp=warp)
+    for sm in sim.systems:                        # stepped, not skipped as resting systems are
+        sm.resting = False
     for _ in range(50):
         sim.step(np.zeros(len(rig.muscles)))
     assert np.abs(sim.displacement()).max() == 0.0
+
+
+def test_tangent_rotation_keeps_the_tilt_and_drops_the_spin():
+    """The warp's rotation field (rotation_operator(tangent=True)): a plate tilting about an
+    axis in its plane turns exactly; a plate spinning about its normal (what a muscle's sliding
+    shear looks like to the curl) does not turn the nodes' frames."""
+    m = plane_grid(6, 6, 1.0, 1.0)
+    x = m.vertices
+    for smooth, diffuse in ((0, False), (3, False), (16.0, True)):
+        W = rotation_operator(x, m.triangles, smooth=smooth, tangent=True, diffuse=diffuse)
+        tilt = np.zeros_like(x)
+        tilt[:, 2] = 0.01 * x[:, 0]                           # about -y
+        w = (W @ tilt.ravel()).reshape(-1, 3)
+        np.testing.assert_allclose(w, np.tile([0.0, -0.01, 0.0], (len(x), 1)), atol=1e-12)
+        spin = np.stack([-0.01 * x[:, 1], 0.01 * x[:, 0], 0 * x[:, 0]], 1)
+        assert np.abs(W @ spin.ravel()).max() < 1e-12
+        full = rotation_operator(x, m.triangles, smooth=smooth, diffuse=diffuse)
+        assert np.abs((full @ spin.ravel()).reshape(-1, 3)[:, 2] - 0.01).max() < 1e-12   # the curl sees it
 
 
 def test_only_the_roi_moves_and_fields_add_up(rig, face):
@@ -261,7 +282,7 @@ def test_reduced_output_matches_the_full_sum(rig):
     """The reduced output (each muscle's reachable output subspace) stays within 0.1% of the
     largest displacement of the exact modal sum, for a ramp and for random activations,
     with far fewer shapes than modes; the per-force fields stay exact."""
-    full = FaceSimulator(rig, fps=60)
+    full = FaceSimulator(rig, fps=60, warp=False)                  # the reduced model is the linear face's
     red = FaceSimulator(rig, fps=60, reduced=1e-4)
     rng = np.random.default_rng(4)
     worst = peak = 0.0
@@ -283,7 +304,7 @@ def test_reduced_output_matches_the_full_sum(rig):
 def test_frame_advance_equals_its_substeps(rig):
     """advance(): the substeps of a frame folded into one transition per muscle give the
     same states as stepping them one by one."""
-    a, b = FaceSimulator(rig, fps=60), FaceSimulator(rig, fps=60)
+    a, b = FaceSimulator(rig, fps=60, warp=False), FaceSimulator(rig, fps=60, warp=False)
     rng = np.random.default_rng(8)
     for _ in range(20):
         act = rng.uniform(-1, 1, len(rig.muscles))
@@ -316,7 +337,7 @@ def test_reduced_frames_match_the_exact_frames(rig):
     """advance() with `reduced`: the muscles step in their balanced truncations (far fewer
     states); the skin stays within 0.05% of the largest displacement of the exact frames for a
     ramp, random activations and a release, and step() after it carries on from the same skin."""
-    full = FaceSimulator(rig, fps=60)
+    full = FaceSimulator(rig, fps=60, warp=False)
     red = FaceSimulator(rig, fps=60, reduced=1e-4).prepare()
     rng = np.random.default_rng(11)
     worst = peak = 0.0
@@ -352,7 +373,7 @@ def test_reset_returns_to_rest_and_replays_the_same_frames(rig):
         runs.append(sim.displacement())
     assert np.abs(runs[0]).max() > 0.1
     np.testing.assert_array_equal(runs[0], runs[1])
-    assert sim.reduced_size[1] < 0.5 * FaceSimulator(rig).reduced_size[1]
+    assert sim.reduced_size[1] < 0.5 * FaceSimulator(rig, warp=False).reduced_size[1]
 
 
 def test_full_solver_face_agrees_with_the_modal_face_for_small_activations(rig, face):
@@ -372,10 +393,12 @@ def test_full_solver_face_agrees_with_the_modal_face_for_small_activations(rig, 
     assert full.solver.stats["unconverged"] == 0
 
 
-def test_full_solver_face_smiles_closer_to_ict_than_the_modal_face(rig, face):
+def test_full_solver_face_smiles_like_ict_at_full_activation(rig, face):
     """At full activation, where the skin folds, Newton still converges every step (the line
-    search on implicit Euler's potential), and the nonlinear skin moves more like ICT's
-    sculpted mouthSmile_L than the modal face does (measured 0.878 against 0.785)."""
+    search on implicit Euler's potential), and the nonlinear skin moves like ICT's sculpted
+    mouthSmile_L.  (Before the library's calibration (issue 18) it was much closer than the
+    modal face, 0.878 against 0.785; zygomaticus major is now calibrated on the modal face,
+    which reaches 0.887, the full solver 0.880.)"""
     from mimica.physics.fullface import FullFaceSimulator
     a = np.array([1.0, 0.0])
     full = FullFaceSimulator(rig, fps=60)
@@ -384,7 +407,7 @@ def test_full_solver_face_smiles_closer_to_ict_than_the_modal_face(rig, face):
     smile = face.delta({"mouthSmile_L": 1.0})
     assert full.solver.stats["unconverged"] == 0 and np.isfinite(uf).all()
     assert displacement_cosine(uf, smile) > 0.83
-    assert displacement_cosine(uf, smile) > displacement_cosine(um, smile) + 0.05
+    assert displacement_cosine(um, smile) > 0.83
 
 
 def test_sprung_engine_at_low_frame_rates_stays_bounded(rig):

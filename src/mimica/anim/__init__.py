@@ -29,14 +29,17 @@ ACTIVATION_RANGE = (-2.0, 2.0)
 # the muscles that produce them, after Ekman & Friesen and Hjortsjö)
 PRESETS = {
     "neutral": {},
-    "happiness": {"zygomaticus_major": 1.0, "orbicularis_oculi": 0.3},                     # AU6+12
-    "sadness": {"frontalis": 0.4, "corrugator_supercilii": 0.5, "depressor_anguli_oris": 1.0,  # AU1+4+15
+    "happiness": {"zygomaticus_major": 1.0, "orbicularis_oculi": 0.3, "orbicularis_oculi_lower": 0.4},  # AU6+12
+    "sadness": {"frontalis_medial": 0.6, "corrugator_supercilii": 0.5, "depressor_anguli_oris": 1.0,  # AU1+4+15
                 "mentalis": 0.3},
-    "surprise": {"frontalis": 1.0, "depressor_labii_inferioris": 0.4},                     # AU1+2+26
-    "anger": {"corrugator_supercilii": 1.0, "orbicularis_oris": 0.5, "orbicularis_oculi": 0.4},  # AU4+7+23
-    "disgust": {"levator_labii_superioris_alaeque_nasi": 1.0, "levator_labii_superioris": 0.6,  # AU9+10+15
-                "depressor_anguli_oris": 0.4, "nasalis": 0.5},
-    "fear": {"frontalis": 0.8, "corrugator_supercilii": 0.5, "depressor_labii_inferioris": 0.6},  # AU1+2+4+20
+    "surprise": {"frontalis": 0.6, "frontalis_medial": 0.6, "levator_palpebrae": 0.5,               # AU1+2+5+26
+                 "digastric": 0.35, "depressor_labii_inferioris": 0.2},
+    "anger": {"corrugator_supercilii": 1.0, "procerus": 0.6, "orbicularis_oris": 0.5,                 # AU4+5+7+23
+              "orbicularis_oculi_lower": 0.6, "levator_palpebrae": 0.3},
+    "disgust": {"levator_labii_superioris_alaeque_nasi": 0.6, "levator_labii_superioris": 0.4,  # AU9+10+15
+                "depressor_anguli_oris": 0.4, "nasalis": 0.5, "procerus": 0.4},
+    "fear": {"frontalis": 0.5, "frontalis_medial": 0.6, "corrugator_supercilii": 0.4,            # AU1+2+4+5+20+26
+             "levator_palpebrae": 0.6, "risorius": 0.6, "digastric": 0.2},
 }
 
 

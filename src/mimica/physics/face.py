@@ -3,8 +3,13 @@ force type moves the skin in its own modal system; the displacement fields are s
 
 Per step and per muscle i (all vectorized over the muscle's spring nodes):
   muscle:  q_m'' + 2 w q_m' + w^2 q_m = w^2 a_i(t)     (the stretch mode, Kim eqs. 11-13)
-  springs: |F| = k |S_d| - |S_init| / |S_init|  along (S_d - S_ud)/|S_d - S_ud|  (eqs. 14-16)
-  skin:    modal warping of the muscle's ROI system driven by F         (eqs. 17-19)
+  springs: F = k (u_m - u_s), implicit in the skin's modes: Kim's eq. 15 (relative elongation)
+           in the limit of motions large against the layer's thickness, along u_m - u_s (eq. 16's
+           S_d - S_ud with the skin's end moving too).  Eq. 15 itself is not used (issue 18).
+  skin:    the muscle's ROI system driven by R^T F, its displacement warped by the integrated
+           rotation (modal warping, eqs. 10, 17-19; warp=False: linear)
+  drives:  the jaw, the lids and the cheeks' pressure (rig.drives): anchors moving with their
+           part pull the skin through springs that are part of the system's stiffness
   total:   u_s = sum_f u_f                                               (eqs. 20-21)
 """
 
@@ -14,10 +19,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import MimicaError
-from .modal import ModalBasis, ModalWarpingSolver, rotation_operator
+from ..rig.drives import JAW_CLOSERS, LID_MARGIN, jaw_open_factors, jaw_open_parts, lid_opening
+from .modal import ModalBasis, ModalWarpingSolver, rotation_operator, rotations
 from .shell import ShellEnergy, lumped_mass
 
-WARP_SMOOTH = 4                  # rings over which the modal-warping rotation is averaged
+# the modal-warping rotation is smoothed by one implicit diffusion step of this time (in squared
+# edges, graph Laplacian): a full smile against --solver full, max deviation 0.311 (0.321 at 4,
+# 0.309 at 64; 32 rings of averaging: 0.315, and twice the precompute), docs/benchmarks.md
+WARP_DIFFUSION = 16.0
 
 
 def _dlyap(M, Q):
@@ -47,22 +56,45 @@ class _MuscleSystem:
     k u_m is linear in the muscle's stretch amplitude, so its modal force is precomputed.
     """
 
-    def __init__(self, rig, muscle, h, spring, xi, zeta, rho):
+    def __init__(self, rig, muscle, h, spring, xi, zeta, rho, warp=False):
         b = muscle.basis
         self.solver = sv = ModalWarpingSolver(b, h, xi=xi, zeta=zeta, density=rho)
+        self.h, self.w, self.warp = h, muscle.omega, warp
+        self.q = self.v = 0.0
+        self.resting = True           # exactly at rest (never moved since made or set): skipped
+        self.fq_parts = None
         uniq, inv = np.unique(muscle.attach, return_inverse=True)
         phi = sv.rows(uniq)                                           # (u, 3, r)
-        k = spring_stiffness(rig, spring)
-        springs_at = np.bincount(inv, minlength=len(uniq)).astype(float)
-        pr = phi.reshape(-1, phi.shape[2])
-        ks = k * pr.T @ (np.repeat(springs_at, 3)[:, None] * pr) / rho   # Phi_a^T K_s Phi_a
-        self.stiff = np.diag(sv.lam) + ks
+        if muscle.kind == "drive":
+            # a drive's springs are in its system's stiffness (precompute): its modes are those of
+            # the skin held by its anchors, loaded by the anchors' motion K_s u_part
+            self.stiff = np.diag(sv.lam)
+            loads = [drive_load(rig, muscle, mo)[uniq] / rho for mo in _drive_motions(muscle)]
+            if len(loads) == 2:                      # the jaw: exact rotation of its anchors at any angle
+                self.phi = float(np.radians(muscle.info["angle"]))
+        else:
+            k = spring_stiffness(rig, spring)
+            springs_at = np.bincount(inv, minlength=len(uniq)).astype(float)
+            pr = phi.reshape(-1, phi.shape[2])
+            ks = k * pr.T @ (np.repeat(springs_at, 3)[:, None] * pr) / rho   # Phi_a^T K_s Phi_a
+            self.stiff = np.diag(sv.lam) + ks
+            pull = np.zeros((len(uniq), 3))
+            np.add.at(pull, inv, k * muscle.stretch / rho)               # K_s u_m per unit stretch
+            loads = [pull]
         self.step_inv = np.linalg.inv(np.eye(len(b.lam)) + h * np.diag(sv.c) + h * h * self.stiff)
-        pull = np.zeros((len(uniq), 3))
-        np.add.at(pull, inv, k * muscle.stretch / rho)               # K_s u_m per unit stretch
-        self.fq_unit = np.einsum("kcr,kc->r", phi, pull)
-        self.h, self.w = h, muscle.omega
-        self.q = self.v = 0.0
+        parts = [np.einsum("kcr,kc->r", phi, f) for f in loads]
+        self.fq_unit = sum(parts)                     # at full activation (the linear model: chord)
+        if len(parts) == 2:
+            self.fq_parts = parts
+        if warp:                                      # Kim eq. 10: the pulls in the nodes' frames, R^T F
+            pos = np.full(b.n, -1)
+            pos[b.free] = np.arange(len(b.free))
+            p = pos[uniq]
+            ok = p >= 0
+            self._rows = (3 * p[ok][:, None] + np.arange(3)).ravel()
+            self._psi_a = None                        # the rotation field there, when first needed
+            self._phi_a = phi[ok]
+            self._loads = [f[ok] for f in loads]
 
     def state(self) -> np.ndarray:
         sv = self.solver
@@ -73,6 +105,7 @@ class _MuscleSystem:
         r = len(sv.q)
         self.q, self.v = float(x[0]), float(x[1])
         sv.q, sv.v = np.array(x[2:2 + r]), np.array(x[2 + r:])
+        self.resting = not np.any(x)
 
     def transition(self):
         """The step is linear in (state, activation): x' = A x + B a; A and B, column by column
@@ -81,7 +114,33 @@ class _MuscleSystem:
             self._tr = self._transition()
         return self._tr
 
+    _linear = False                  # the jaw's exact rotation and R^T off: the linear model (transitions)
+
+    def _pull(self) -> np.ndarray:
+        """The modal force of the muscle's (or the drive's) pull on the skin at its stretch q:
+        q times the pull at full activation; the jaw's turned exactly (rig.drives.jaw_open_parts);
+        with warping, each spring's pull taken into its skin node's frame, R_i^T F_i (Kim eq. 10,
+        R from the tangent rotation of the skin's present modal displacement).  The springs'
+        own stiffness (-K_s u_s) stays in the nodes' frames, in the implicit step."""
+        if self._linear or (not self.warp and self.fq_parts is None):
+            return self.q * self.fq_unit
+        factors = (self.q,) if self.fq_parts is None else jaw_open_factors(self.q, self.phi)
+        if not self.warp:
+            return factors[0] * self.fq_parts[0] + factors[1] * self.fq_parts[1]
+        if self._psi_a is None:
+            self._psi_a = self.solver.b.psi[self._rows]                   # (3u, r)
+        R, _ = rotations((self._psi_a @ self.solver.q).reshape(-1, 3))
+        f = sum(c * load for c, load in zip(factors, self._loads))
+        return np.einsum("kcr,kc->r", self._phi_a, np.einsum("kji,kj->ki", R, f))
+
     def _transition(self):
+        self._linear = True
+        try:
+            return self._transition_linear()
+        finally:
+            self._linear = False
+
+    def _transition_linear(self):
         saved = self.state()
         n = len(saved)
         A = np.empty((n, n))
@@ -156,14 +215,89 @@ class _MuscleSystem:
         return T @ Af @ Ti, T @ Bf, C @ Ti, T, Ti
 
     def step(self, a):
+        if self.resting and a == 0.0:             # at rest and not driven: stays exactly at rest
+            return
+        self.resting = False
         h, w = self.h, self.w
         self.q, self.v = follow_activation(self.q, self.v, a, h, w)
         sv = self.solver
-        # the spring pull in the modes' frame; the rotation is applied to the displacement
-        # (modal warping, see displacement()); rotating the forces too would feed the
-        # rotation back into the stiff spring layer and is left out
-        sv.v = self.step_inv @ (sv.v + h * (self.q * self.fq_unit - self.stiff @ sv.q))
+        sv.v = self.step_inv @ (sv.v + h * (self._pull() - self.stiff @ sv.q))
         sv.q = sv.q + h * sv.v
+
+
+DRIVE_SPRING = 4.0               # a drive's attachments, as stiff as this many `spring`s (at weight 1)
+
+
+def drive_springs(rig, muscle, spring: float = 4.0) -> np.ndarray:
+    """(n,) a drive's attachment stiffness per skin node: DRIVE_SPRING springs x its weight."""
+    k = np.zeros(rig.skin.n_vertices)
+    w = muscle.weight if muscle.weight is not None else np.ones(len(muscle.attach))
+    np.add.at(k, muscle.attach, DRIVE_SPRING * spring_stiffness(rig, spring) * w)
+    return k
+
+
+def drive_load(rig, muscle, motion=None, spring: float = 4.0) -> np.ndarray:
+    """(n, 3) the force of a drive's anchors moved by `motion` (default: their motion at full
+    activation), K_s u_part."""
+    f = np.zeros((rig.skin.n_vertices, 3))
+    k = drive_springs(rig, muscle, spring)
+    f[muscle.attach] = k[muscle.attach, None] * (muscle.stretch if motion is None else motion)
+    return f
+
+
+def _drive_motions(m) -> list:
+    """A drive's anchor motions whose loads its system must hold: the jaw's opening as its two
+    parts (exact rotation at any angle, rig.drives.jaw_open_parts), any other its one motion."""
+    if m.info.get("part") == "jaw" and m.info.get("motion") == "open" and "pivot" in m.info:
+        ms, mc, _ = jaw_open_parts(m.nodes, m.info)
+        return [ms, mc]
+    return [m.stretch]
+
+
+CONTACT_SLACK = 1.15            # measured: the lower lid's skin rises 2 % of the opening past its anchors
+
+
+class ActivationMap:
+    """The muscles' activations -> each force system's input.  A muscle's input is its
+    activation, except for the drives (rig.drives): the jaw opens by the digastric's activation
+    less its strongest closer's (masseter, temporalis: the teeth stop it at rest, so never below
+    0), and a lid closes at most until its rim meets the other (lid contact: the closing drive
+    moves the rim by its input x the opening, the lower lid's raise by its `raise` part of it,
+    the levator lifts it by its `wide` angle; the input is held where they meet).  Drive
+    inputs stay in 0..1."""
+
+    def __init__(self, muscles):
+        names = [m.name for m in muscles]
+        self.drives = [i for i, m in enumerate(muscles) if m.kind == "drive"]
+        self.closers = [i for i, n in enumerate(names) if n.rsplit("_", 1)[0] in JAW_CLOSERS]
+        self.jaw_open = [i for i, m in enumerate(muscles) if m.kind == "drive"
+                         and m.info.get("part") == "jaw" and m.info.get("motion") == "open"]
+        self.lids = []
+        self.lid_close = [i for i, m in enumerate(muscles) if m.kind == "drive" and m.info.get("part") == "lid"
+                          and m.info.get("motion") == "close"]
+        for i, m in enumerate(muscles):
+            if m.kind == "drive" and m.info.get("part") == "lid" and m.info.get("motion") == "close":
+                same = {muscles[j].info.get("motion"): j for j in self.drives
+                        if muscles[j].info.get("eye") == m.info["eye"]}
+                w, r = same.get("wide"), same.get("raise")
+                ratio = (muscles[w].info["wide"] / max(float(m.info.get("gap_max", 1.0)), 1e-9)) if w is not None else 0
+                lift = muscles[r].info["raise"] if r is not None else 0.0
+                self.lids.append((i, r, w, ratio, lift))
+
+    def __call__(self, activations) -> np.ndarray:
+        if not self.drives:
+            return activations
+        a = np.array(activations, float)
+        if self.closers:
+            for j in self.jaw_open:
+                a[j] -= max(a[self.closers].max(), 0.0)
+        a[self.drives] = np.clip(a[self.drives], 0.0, 1.0)
+        for c, r, w, ratio, lift in self.lids:
+            # (the raised lower lid's skin reaches a little past its anchors: CONTACT_SLACK)
+            room = 1.0 - (a[r] * lift * CONTACT_SLACK if r is not None else 0.0) + \
+                (a[w] * ratio if w is not None else 0.0)
+            a[c] = min(a[c], max(room, 0.0) / (1.0 - LID_MARGIN))
+        return a
 
 
 def tether_springs(tether: float, k_length: float, mean_edge: float, mass: np.ndarray) -> np.ndarray:
@@ -172,14 +306,16 @@ def tether_springs(tether: float, k_length: float, mean_edge: float, mass: np.nd
     return tether * 2 * k_length / mean_edge * mass / mass.mean()
 
 
-def _skin_system(rig):
-    """The skin's shell, lumped masses, stiffness with the tethers, and rotation operator."""
+def _skin_system(rig, rotation: bool = True):
+    """The skin's shell, lumped masses, stiffness with the tethers, and rotation operator (None
+    without `rotation`)."""
     skin, p = rig.skin, rig.params
     energy = ShellEnergy.default(skin)
     mass = lumped_mass(skin)
     k_node = tether_springs(p.get("tether", 0.0), energy.k_length, p["mean_edge"], mass)   # K + the tethers
     K = (energy.hessian(energy.rest) + sp.diags(np.repeat(k_node, 3))).tocsr()
-    W = rotation_operator(skin.vertices, skin.triangles, smooth=WARP_SMOOTH)
+    W = (rotation_operator(skin.vertices, skin.triangles, smooth=WARP_DIFFUSION, tangent=True, diffuse=True)
+         if rotation else None)
     return energy, mass, K, W
 
 
@@ -198,14 +334,21 @@ def precompute(rig, progress=None):
     energy, mass, K, W = _skin_system(rig)
     p.update(k_area=energy.k_area, k_length=energy.k_length, k_bend=energy.k_bend)
     modes = int(p.get("modes", 8))
-    for k, m in enumerate(todo):
+    def system(m):
+        if isinstance(m.basis, dict):
+            return ModalBasis.from_arrays(m.basis, W)
+        if m.kind == "drive":
+            # the drive's springs join the stiffness; its loads: the anchors' motion
+            Kd = (K + sp.diags(np.repeat(drive_springs(rig, m), 3))).tocsr()
+            loads = [drive_load(rig, m, motion) for motion in _drive_motions(m)]
+            return ModalBasis.compute(energy, mass, ~m.roi, r=modes, stiffness=Kd, rotation=W,
+                                      load_shapes=np.stack([f.ravel() for f in loads], 1))
+        return ModalBasis.compute(energy, mass, ~m.roi, r=modes, load_nodes=np.unique(m.attach),
+                                  stiffness=K, rotation=W)
+    for k, m in enumerate(todo):                   # (two threads measured slower: BLAS has both cores)
         if progress:
             progress(k, len(todo), m.name)
-        if isinstance(m.basis, dict):
-            m.basis = ModalBasis.from_arrays(m.basis, W)
-        else:
-            m.basis = ModalBasis.compute(energy, mass, ~m.roi, r=modes, load_nodes=np.unique(m.attach),
-                                         stiffness=K, rotation=W)
+        m.basis = system(m)
     if isinstance(rig.gravity_basis, dict):
         rig.gravity_basis = ModalBasis.from_arrays(rig.gravity_basis, W)
     elif gravity and rig.gravity_basis is None:
@@ -300,20 +443,24 @@ class FaceSimulator:
     """Step a rig's muscles (activations in [-1, 1]: contraction > 0, relaxation < 0)."""
 
     def __init__(self, rig, fps: float = 60.0, substeps: int = 4, spring: float = 4.0,
-                 frequency: float = 4.0, damping: float = 1.6, zeta: float = 0.0005, warp: bool = False,
+                 frequency: float = 4.0, damping: float = 1.6, zeta: float = 0.0005, warp: bool | None = None,
                  reduced: float | None = None):
-        """warp: modal warping of the output (Kim §III.B, Choi & Ko's integrated rotation).
-        Off by default: it pays off where thin parts bend through large angles (a bent
-        strip: 3-4x closer to the full solver than plain linear modes, tests/test_simulate.py),
-        but a muscle slides the skin along itself, and the curl of that sliding is shear
-        more than rotation: at full activation the warped smile folds into itself and the
-        anatomy cosines drop (0.70-0.82 vs 0.71-0.80 linear, docs/benchmarks.md).
+        """warp: modal warping (Kim eq. 10, Choi & Ko's integrated rotation), on by default
+        (None: on unless `reduced`).  Each node's frame turns with the tangent rotation of its
+        system's displacement (rotation_operator(tangent=True): the spin of a muscle sliding the
+        skin is left out, it creased a full smile), smoothed by diffusion (WARP_DIFFUSION); each
+        spring's pull enters its node's frame by R^T and the displacement leaves it by the
+        integrated rotation.  On a full smile against --solver full: 0.311 max deviation warped,
+        0.333 linear (bench/simulate.py); a bent strip: 3-4x closer than linear modes
+        (tests/test_simulate.py).  warp=False: the linear modal face (twice the skin output
+        rate), which fit-muscles' fields and the reduced model are made of.
 
         reduced: a relative RMS tolerance (e.g. 1e-4): the muscles' summed output is then
         drawn from a few shapes per muscle (output_subspace, about 12 each instead of ~116
         modes): one small matrix product per frame instead of one per muscle; advance()
         then steps each muscle's balanced truncation at the same tolerance.  step() and
-        `fields()` stay exact."""
+        `fields()` stay exact.  The reduced model is linear: with it, warp defaults to off."""
+        warp = (reduced is None) if warp is None else bool(warp)
         self.warp = warp
         self.reduced = reduced
         self._joint = self._fm = self._xr = None
@@ -326,8 +473,9 @@ class FaceSimulator:
         self.pulls = []
         self.pull_scale = 1.0          # scales every user pull (a timeline's "pull" channel)
         self.gravity_scale = 1.0       # scales gravity (a timeline's "gravity" channel)
-        self.systems = [_MuscleSystem(rig, m, self.h, spring, xi, zeta, rho) for m in rig.muscles]
+        self.systems = [_MuscleSystem(rig, m, self.h, spring, xi, zeta, rho, warp) for m in rig.muscles]
         self.names = [m.name for m in rig.muscles]
+        self.inputs = ActivationMap(rig.muscles)
         self.gravity = None
         if rig.gravity_basis is not None:
             self.gravity = ModalWarpingSolver(rig.gravity_basis, self.h, xi=xi, zeta=zeta, density=rho)
@@ -426,7 +574,7 @@ class FaceSimulator:
         """One time step with activations (n_muscles,)."""
         self._sync()
         self._step_forces()
-        for s, a in zip(self.systems, activations):
+        for s, a in zip(self.systems, self.inputs(activations)):
             s.step(float(a))
 
     def advance(self, activations: np.ndarray):
@@ -438,6 +586,11 @@ class FaceSimulator:
         (`_MuscleSystem.frame_model`): a few states each, all in one small product; their
         full states come back (x = Ti xr) when step() or fields() needs them."""
         a = np.asarray(activations, float)[:len(self.systems)]
+        if self.warp:                                  # warping is not linear: step by step
+            for _ in range(self.substeps):
+                self.step(a)
+            return
+        a = self.inputs(a)
         if self.reduced and not self.warp:
             # the reduced frame model (balanced truncation): one small product for all muscles
             Ar, Br, _, Ts, _, offs = self._frame_model()
@@ -451,9 +604,12 @@ class FaceSimulator:
         for (Ak, Bk), sm, ai in zip(self._frame_transitions(), self.systems, a):
             sv = sm.solver
             r = len(sv.q)
+            if sm.resting and ai == 0.0:
+                continue
             x = Ak @ np.concatenate(((sm.q, sm.v), sv.q, sv.v)) + Bk * ai
             sm.q, sm.v = float(x[0]), float(x[1])
             sv.q, sv.v = x[2:2 + r], x[2 + r:]
+            sm.resting = False
         if self.pulls or self._g_fq is not None:
             for _ in range(self.substeps):
                 self._step_forces()
@@ -491,8 +647,28 @@ class FaceSimulator:
             return u
         self._sync()
         u = np.zeros_like(self.rig.skin.vertices)
-        for sv in [s.solver for s in self.systems] + self._other_solvers():
+        for sv in [s.solver for s in self.systems if not s.resting] + self._other_solvers():
             sv.add_displacement(u, self.warp)
+        return self._lid_contact(u)
+
+    def _lid_contact(self, u):
+        """Lid contact: where the upper and lower margins of an eye would cross (the closing lid
+        with the other muscles around the eye), the closing drive's field is backed off, by
+        bisection on its share, until they meet (rig.drives.lid_opening >= 0 at every pair)."""
+        rest = self.rig.skin.vertices
+        for i in self.inputs.lid_close:
+            info = self.rig.muscles[i].info
+            if not info.get("rims") or lid_opening(rest + u, info).min() >= 0:
+                continue
+            uc = np.zeros_like(u)
+            self.systems[i].solver.add_displacement(uc, self.warp)
+            lo, hi = 0.0, 1.0                                      # the share of uc taken away
+            if lid_opening(rest + u - uc, info).min() < 0:
+                lo = hi                                            # crossed without it: take it all
+            for _ in range(20 if lo < hi else 0):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (lo, mid) if lid_opening(rest + u - mid * uc, info).min() >= 0 else (mid, hi)
+            u -= hi * uc
         return u
 
     def fields(self) -> dict:

@@ -10,8 +10,11 @@ A target displacement d is then fitted by a bounded least squares,
 
 over the skin that muscles move (W: the vertices' area, zero where no muscle reaches).  The
 normal equations G = U^T W U (m x m) are formed once: a frame costs one small bounded solve
-on the Cholesky factor of G, independent of the mesh size.  The gaze, the jaw's rotation and
-the lids are not muscles of the rig yet (issue 18, part 1): what they move stays unfitted.
+on the Cholesky factor of G, independent of the mesh size.  The jaw and the lids are drives of
+the rig (rig.drives: the jaw's pose is the digastric's and the lateral pterygoids' activations),
+fitted with the muscles; a closing lid is then held where the rims meet (lid contact), and the
+jaw's closers are left at 0.  The fields are the linear modal face's (warp off); the gaze is not
+a muscle and stays unfitted.
 """
 
 from __future__ import annotations
@@ -39,26 +42,60 @@ def muscle_fields(sim) -> np.ndarray:
     return out
 
 
+def static_fields(rig, spring: float = 4.0) -> np.ndarray:
+    """(m, n, 3): the same steady states as muscle_fields, each by one sparse solve in full
+    space, (K + K_s) u = K_s u_m over the muscle's region of interest (the modal system's
+    static shapes make its steady state exact, tests/test_muscles.py) -- what calibration
+    (tools/calibrate_muscles.py) evaluates hundreds of times, without the modes."""
+    import scipy.sparse as sp
+    from ..solver import SPDSolver
+    from .face import _skin_system, drive_load, drive_springs, spring_stiffness
+    energy, mass, K, _ = _skin_system(rig, rotation=False)
+    rig.params.update(k_area=energy.k_area, k_length=energy.k_length, k_bend=energy.k_bend)
+    n = rig.skin.n_vertices
+    out = np.zeros((len(rig.muscles), n, 3))
+    k = spring_stiffness(rig, spring)
+    for i, m in enumerate(rig.muscles):
+        if m.kind == "drive":
+            ks, f = drive_springs(rig, m), drive_load(rig, m)          # fixed at precompute
+        else:
+            ks = np.bincount(m.attach, minlength=n) * k
+            f = np.zeros((n, 3))
+            np.add.at(f, m.attach, k * m.stretch)
+        free = np.nonzero(m.roi)[0]
+        dof = (3 * free[:, None] + np.arange(3)).ravel()
+        A = (K + sp.diags(np.repeat(ks, 3))).tocsr()[dof][:, dof]
+        out[i].reshape(-1)[dof] = SPDSolver(A.tocsc()).solve(f.reshape(-1)[dof])
+    return out
+
+
 def _box_ls(M: np.ndarray, y: np.ndarray, upper: float) -> np.ndarray:
-    """argmin ||M a - y||, 0 <= a <= upper: Lawson-Hanson NNLS (fast, in C), the activations over
-    `upper` then held there and the rest solved again; the result checked against the
-    Karush-Kuhn-Tucker conditions, and solved by bounded-variable least squares where they fail
-    (24 us a frame instead of 580 us for BVLS alone, 8 muscles)."""
+    """argmin ||M a - y||, 0 <= a <= upper: Lawson-Hanson NNLS (fast, in C) on the activations
+    not held at `upper`; those that overshoot are then held there, those held whose gradient asks
+    to come down are let go, until the Karush-Kuhn-Tucker conditions hold (bounded-variable least
+    squares where they still fail).  24 us a frame instead of 580 us for BVLS alone (8 muscles);
+    with 56 channels, letting held ones go (it only held before) took BVLS from 3 frames in 4 to
+    none."""
     from scipy.optimize import lsq_linear, nnls
     m = M.shape[1]
     top = np.zeros(m, bool)
+    tol = 1e-9 * max(float(np.abs(M.T @ y).max()), 1e-300)
     a = np.zeros(m)
-    for _ in range(m + 1):
+    for _ in range(2 * m + 2):
         free = ~top
         r = y - M[:, top].sum(1) * upper
         a = np.full(m, upper)
         a[free] = nnls(M[:, free], r)[0] if free.any() else []
         over = free & (a > upper)
-        if not over.any():
+        if over.any():
+            top |= over
+            continue
+        g = M.T @ (M @ a - y)                                # the gradient of 1/2 ||M a - y||^2
+        down = top & (g > tol)                               # held, but better lower
+        if not down.any():
             break
-        top |= over
-    g = M.T @ (M @ a - y)                                    # the gradient of 1/2 ||M a - y||^2
-    tol = 1e-9 * max(float(np.abs(M.T @ y).max()), 1e-300)
+        top &= ~down
+    g = M.T @ (M @ a - y)
     ok = np.where(a <= 0, g >= -tol, np.where(a >= upper, g <= tol, np.abs(g) <= 1e3 * tol))
     if ok.all():
         return a
@@ -71,6 +108,7 @@ class MuscleFit:
     names: list
     fields: np.ndarray           # (m, n, 3)
     weights: np.ndarray          # (n,) vertex weights of the misfit (area; 0 off the muscles' reach)
+    inputs: object = None        # the rig's ActivationMap: lid contact applied to the fitted activations
 
     def __post_init__(self):
         U = self.fields.reshape(len(self.names), -1)                 # (m, 3n)
@@ -87,14 +125,17 @@ class MuscleFit:
         """The fit for a rig: its muscles' fields, the misfit weighted by vertex area over the
         skin some muscle's region of interest covers."""
         from .face import FaceSimulator
-        sim = sim or FaceSimulator(rig)
+        sim = sim or FaceSimulator(rig, warp=False)                  # the fields are the linear face's
         fields = muscle_fields(sim)
+        # the jaw's closers are left out (at 0): they only hold the jaw that the digastric opens
+        # (ActivationMap), so the fitted opening is the digastric's own activation
+        fields[sim.inputs.closers] = 0.0
         reach = np.zeros(rig.skin.n_vertices, bool)
         for m in rig.muscles:
             reach |= np.asarray(m.roi, bool)
         from .shell import lumped_mass
         area = lumped_mass(rig.skin)                                  # a third of each triangle's area
-        return cls([m.name for m in rig.muscles], fields, np.where(reach, area, 0.0))
+        return cls([m.name for m in rig.muscles], fields, np.where(reach, area, 0.0), sim.inputs)
 
     def fit(self, displacements: np.ndarray, upper: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """((F, m) activations in [0, upper], (F,) relative misfit) of displacements (F, n, 3)
@@ -110,7 +151,7 @@ class MuscleFit:
         Lt = self._L.T
         act = np.empty((len(d), len(self.names)))
         for f in range(len(d)):
-            act[f] = _box_ls(Lt, y[:, f], upper)
+            act[f] = self._contact(_box_ls(Lt, y[:, f], upper))
         dd = (d * d * self._w3).sum(1)
         res = act @ self._U - d
         mis = np.sqrt((res * res * self._w3).sum(1) / np.maximum(dd, 1e-300))
@@ -131,11 +172,15 @@ class MuscleFit:
         h = H @ w.T                                                   # (m, F): U^T W d_f
         y = solve_triangular(self._L, h, lower=True)                  # (m, F)
         Lt = self._L.T
-        act = np.array([_box_ls(Lt, y[:, f], upper) for f in range(len(w))]).reshape(len(w), -1)
+        act = np.array([self._contact(_box_ls(Lt, y[:, f], upper)) for f in range(len(w))]).reshape(len(w), -1)
         G = self._G
         dd = np.einsum("fj,jk,fk->f", w, D, w)
         err = np.einsum("fi,ij,fj->f", act, G, act) - 2 * np.einsum("fi,if->f", act, h) + dd
         return act, np.sqrt(np.maximum(err, 0.0) / np.maximum(dd, 1e-300))
+
+    def _contact(self, a):
+        """Lid contact on fitted activations: a closing lid held where the rims meet."""
+        return a if self.inputs is None or not self.inputs.lids else self.inputs(a)
 
     def displacement(self, activations: np.ndarray) -> np.ndarray:
         """The rest displacement (n, 3) of the fitted activations (m,)."""

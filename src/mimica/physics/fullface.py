@@ -17,7 +17,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import MimicaError
-from .face import follow_activation, precompute, run_frames, skin_density, spring_stiffness, tether_springs
+from ..rig.drives import jaw_open_factors
+from .face import (DRIVE_SPRING, ActivationMap, _drive_motions, follow_activation, precompute, run_frames,
+                   skin_density, spring_stiffness, tether_springs)
 from .modal import FullSolver
 from .shell import ShellEnergy, lumped_mass
 
@@ -70,6 +72,10 @@ class FullFaceSimulator:
             if (at < 0).any():
                 raise MimicaError(f"rig: muscle {m.name} is attached outside every region of interest; "
                                   "rebuild it with `mimica rig`")
+            if m.kind == "drive":                      # a drive's anchors hold their own nodes, by weight
+                w = DRIVE_SPRING * (m.weight if m.weight is not None else np.ones(len(at)))
+                self.spread.append(sp.csr_matrix((w, (at, np.arange(len(at)))), shape=(len(x), len(at))))
+                continue
             near_at = tree.query_ball_point(x[at], R)  # each attachment node is among its own
             cols = np.repeat(np.arange(len(at)), [len(js) for js in near_at])
             rows = np.concatenate(near_at).astype(int)
@@ -82,22 +88,30 @@ class FullFaceSimulator:
                                  tol=tol, xtol=xtol * p["mean_edge"],
                                  springs=self.tether + sum(self.spring_sum))
         self.stretch = [m.stretch for m in rig.muscles]
+        # the anchors' displacement at stretch q: q x the stretch, the jaw's exactly turned
+        self.parts = [_drive_motions(m) if m.kind == "drive" else None for m in rig.muscles]
+        self.phi = [np.radians(m.info["angle"]) if "angle" in m.info else None for m in rig.muscles]
         self.omega = np.array([m.omega for m in rig.muscles])
         self.q = np.zeros(len(rig.muscles))
         self.v = np.zeros(len(rig.muscles))
         self.names = [m.name for m in rig.muscles]
+        self.inputs = ActivationMap(rig.muscles)
 
     def step(self, activations) -> None:
-        a = np.asarray(activations, float)[:len(self.q)]
+        a = self.inputs(np.asarray(activations, float)[:len(self.q)])
         self.q, self.v = follow_activation(self.q, self.v, a, self.h, self.omega)
         # a muscle's springs engage as it contracts or relaxes (stiffness ramps in with |q| up
         # to `engage`): a muscle at rest exerts nothing and does not hold the skin, as in the
         # modal face, where each muscle's springs are in its own system only (eqs. 20-21)
         e = np.minimum(np.abs(self.q) / self.engage, 1.0)
         f = np.zeros((len(self.nodes), 3))
-        for ei, q, W, st in zip(e, self.q, self.spread, self.stretch):
+        for ei, q, W, st, parts, phi in zip(e, self.q, self.spread, self.stretch, self.parts, self.phi):
             if ei > 0:
-                f += W @ (ei * self.k * q * st)            # k u_m; the -k u_s part is in the springs
+                um = q * st
+                if parts is not None and len(parts) == 2:
+                    fs, fc = jaw_open_factors(q, phi)
+                    um = fs * parts[0] + fc * parts[1]
+                f += W @ (ei * self.k * um)                # k u_m; the -k u_s part is in the springs
         self.solver.set_springs(self.tether + sum(ei * s for ei, s in zip(e, self.spring_sum)))
         self.solver.step(f)
 

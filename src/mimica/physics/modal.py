@@ -23,12 +23,23 @@ from ..solver import SPDSolver
 from .shell import ShellEnergy
 
 
-def rotation_operator(rest: np.ndarray, triangles: np.ndarray, smooth: int = 0):
+def rotation_operator(rest: np.ndarray, triangles: np.ndarray, smooth: float = 0, tangent: bool = False,
+                      diffuse: bool = False):
     """Sparse W (3n x 3n): displacements -> per-node infinitesimal rotation vectors.
 
     Per triangle, the displacement gradient on the tangent plane is completed by the
     linearized normal change; the axial vector of its skew part is the rotation; nodes
     take the area-weighted mean of their triangles.  Exact for infinitesimal rotations.
+
+    tangent: keep only the rotation about axes in the skin's tangent plane (its normal
+    tilting, as the skin bends) and drop the spin about the normal, the "drilling" rotation a
+    shell does not carry: a muscle sliding the skin along itself shears it, and the curl of
+    that shear is spin, not a turn of the material's frame (with it, a full smile warped
+    folds into itself: deviation from --solver full 0.522 against 0.367 without, the
+    linear modes' 0.333, at 4 rings; docs/benchmarks.md).
+
+    smooth: average over this many rings; with diffuse, one implicit diffusion step of that
+    time instead, (I + smooth L)^-1 (one factorization, then a solve per use).
     """
     x, t = rest, triangles
     e1, e2 = x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]]
@@ -68,8 +79,17 @@ def rotation_operator(rest: np.ndarray, triangles: np.ndarray, smooth: int = 0):
         cols.append(np.repeat(dof[:, None, :], 3, axis=1).ravel())
         vals.append((local * wgt[:, None, None]).ravel())
     W = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * nv, 3 * nv))
+    P = None
+    if tangent:                                                      # I - n n^T at every node
+        vn = np.zeros((nv, 3))
+        np.add.at(vn, t.ravel(), np.repeat(nrm, 3, axis=0))
+        vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
+        blocks = np.eye(3)[None] - vn[:, :, None] * vn[:, None, :]
+        r = (3 * np.arange(nv)[:, None, None] + np.arange(3)[None, :, None]) + 0 * np.arange(3)[None, None, :]
+        c = (3 * np.arange(nv)[:, None, None] + np.arange(3)[None, None, :]) + 0 * np.arange(3)[None, :, None]
+        P = sp.csr_matrix((blocks.ravel(), (r.ravel(), c.ravel())), shape=(3 * nv, 3 * nv))
     if not smooth:
-        return W
+        return W if P is None else (P @ W).tocsr()
     # average the rotation field over `smooth` rings: a node's frame turns with its
     # neighbourhood, not with the spikes that point loads make in the strain field.  The
     # average is kept as a separate operator (applied to the few mode columns, not
@@ -78,21 +98,30 @@ def rotation_operator(rest: np.ndarray, triangles: np.ndarray, smooth: int = 0):
     adj = sp.csr_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(nv, nv))
     adj = (adj + sp.identity(nv)).tocsr()
     adj.data[:] = 1.0
+    if diffuse:
+        # one implicit diffusion step instead of many ring averages: (I + t L)^-1, L the graph
+        # Laplacian, factored once for the skin; a solve per system instead of `smooth` products
+        L = sp.diags(np.asarray(adj.sum(1)).ravel()) - adj
+        return SmoothedRotation(W, None, 0, P, SPDSolver((sp.identity(nv) + smooth * L).tocsc()))
     avg = sp.diags(1.0 / np.asarray(adj.sum(1)).ravel()) @ adj
-    return SmoothedRotation(W, sp.kron(avg, sp.identity(3), format="csr"), smooth)
+    return SmoothedRotation(W, sp.kron(avg, sp.identity(3), format="csr"), smooth, P)
 
 
 class SmoothedRotation:
-    """W followed by `rings` ring averages, as an operator: (S^rings W) @ X."""
+    """W followed by `rings` ring averages (and the tangent projection P, if any), as an
+    operator: (P S^rings W) @ X."""
 
-    def __init__(self, W, S, rings):
-        self.W, self.S, self.rings = W, S, rings
+    def __init__(self, W, S, rings, P=None, diffusion=None):
+        self.W, self.S, self.rings, self.P, self.diffusion = W, S, rings, P, diffusion
 
     def __matmul__(self, x):
         y = self.W @ x
         for _ in range(self.rings):
             y = self.S @ y
-        return y
+        if self.diffusion is not None:                 # node by node: (n, 3 k) right-hand sides
+            shape = y.shape
+            y = self.diffusion.solve(y.reshape(self.diffusion.n, -1)).reshape(shape)
+        return y if self.P is None else self.P @ y
 
 
 def _skew(w: np.ndarray) -> np.ndarray:
@@ -130,9 +159,22 @@ class ModalBasis:
     free: np.ndarray          # (n_free,) free node indices
     phi: np.ndarray           # (3 n_free, r) mass-normalized mode shapes
     lam: np.ndarray           # (r,) eigenvalues
-    psi: np.ndarray           # (3 n_free, r) rotation field of each mode
+    _psi: np.ndarray | None   # (3 n_free, r) rotation field of each mode (None: made when first used)
     mass: np.ndarray          # (n,) lumped masses
     n: int
+    rotation: object = None   # the skin's rotation operator, for psi
+
+    @property
+    def psi(self) -> np.ndarray:
+        """The rotation field of each mode, W Phi, made the first time warping needs it: most
+        of a library's systems are never warped in a given performance, and smoothing the
+        field was 0.2 s a system (12 of 29 s for the whole library on the 11k head)."""
+        if self._psi is None:
+            dof = (3 * self.free[:, None] + np.arange(3)).ravel()
+            full = np.zeros((3 * self.n, self.phi.shape[1]))
+            full[dof] = self.phi
+            self._psi = (self.rotation @ full)[dof]
+        return self._psi
 
     @cached_property
     def output32(self) -> tuple[np.ndarray, bool]:
@@ -150,10 +192,11 @@ class ModalBasis:
 
     @classmethod
     def compute(cls, energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, r: int = 20,
-                load_nodes=None, stiffness=None, rotation=None) -> "ModalBasis":
-        """Modes of the shell with `fixed` nodes removed, for forces on `load_nodes`.
+                load_nodes=None, stiffness=None, rotation=None, load_shapes=None) -> "ModalBasis":
+        """Modes of the shell with `fixed` nodes removed, for forces on `load_nodes`, or of the
+        given force patterns `load_shapes` (3n, k) (a drive's anchors moving).
 
-        Without load nodes, the loads are uniform body forces (gravity); r sets how many
+        Without either, the loads are uniform body forces (gravity); r sets how many
         Krylov vectors are added beyond the static load shapes.
         """
         n = energy.n
@@ -174,7 +217,9 @@ class ModalBasis:
         # for forces along the skin.
         shift = -1e-9 * float(np.abs(Kff.diagonal()).mean() / m.mean())   # keeps drifting parts solvable
         fac = SPDSolver((Kff - shift * sp.diags(m)).tocsc())
-        if load_nodes is not None and len(load_nodes):
+        if load_shapes is not None:
+            loads = np.asarray(load_shapes, float).reshape(3 * n, -1)[dof]
+        elif load_nodes is not None and len(load_nodes):
             pos = np.full(n, -1)
             pos[free] = np.arange(len(free))
             ln = pos[np.asarray(load_nodes)]
@@ -194,9 +239,16 @@ class ModalBasis:
             width += prev.shape[1]
         V = np.hstack(blocks)
         # M-orthonormal basis of the span, then the reduced eigenproblem (Rayleigh-Ritz)
-        q, rr = np.linalg.qr(np.sqrt(m)[:, None] * V)
-        keep = np.abs(np.diag(rr)) > 1e-10 * np.abs(np.diag(rr)).max()
-        V = q[:, keep] / np.sqrt(m)[:, None]
+        S = np.sqrt(m)[:, None] * V
+        g, U = np.linalg.eigh(S.T @ S)
+        if g[0] > 1e-8 * g[-1]:
+            # well conditioned: orthonormal through the Gram matrix (orthonormal to about
+            # 1e-8, a third of Householder's time on the whole library)
+            V = (V @ U) / np.sqrt(g)
+        else:
+            q, rr = np.linalg.qr(S)
+            keep = np.abs(np.diag(rr)) > 1e-10 * np.abs(np.diag(rr)).max()
+            V = q[:, keep] / np.sqrt(m)[:, None]
         kr = V.T @ (Kff @ V)
         lam, y = np.linalg.eigh(0.5 * (kr + kr.T))
         phi = V @ y
@@ -204,10 +256,7 @@ class ModalBasis:
         lam, phi = np.maximum(lam[order], 0.0), phi[:, order]
         phi /= np.sqrt(np.einsum("ij,i,ij->j", phi, m, phi))[None, :]      # Phi^T M Phi = I
         W = rotation_operator(energy.rest, energy.triangles) if rotation is None else rotation
-        full = np.zeros((3 * n, phi.shape[1]))
-        full[dof] = phi
-        psi = (W @ full)[dof]
-        return cls(free, phi, lam, psi, mass, n)
+        return cls(free, phi, lam, None, mass, n, W)
 
     def to_arrays(self) -> dict:
         """Plain arrays for a file (the rig's); mode shapes in single precision, the rotation
@@ -219,10 +268,7 @@ class ModalBasis:
     def from_arrays(cls, d: dict, rotation) -> "ModalBasis":
         """The basis of to_arrays(); `rotation` is the skin's rotation operator (rotation_operator)."""
         free, phi, n = np.asarray(d["free"]), np.asarray(d["phi"], np.float64), int(d["n"])
-        dof = (3 * free[:, None] + np.arange(3)).ravel()
-        full = np.zeros((3 * n, phi.shape[1]))
-        full[dof] = phi
-        return cls(free, phi, np.asarray(d["lam"], np.float64), (rotation @ full)[dof], np.asarray(d["mass"]), n)
+        return cls(free, phi, np.asarray(d["lam"], np.float64), None, np.asarray(d["mass"]), n, rotation)
 
 
 class ModalWarpingSolver:

@@ -20,6 +20,7 @@ from ..align import face_cylinder
 from ..errors import MimicaError
 from ..mesh import Mesh, atomic_path, validate
 from ..mesh.query import TriangleLocator
+from .drives import DRIVES, place_drive
 from .muscles import KIM_MUSCLES, MUSCLES, MuscleDef
 
 ROWS, COLS = 9, 4                # strip resolution along / across (Kim: 36 nodes a muscle)
@@ -37,6 +38,9 @@ class Muscle:
     attach: np.ndarray           # (k,) skin node of each muscle node's spring
     roi: np.ndarray              # (n_skin,) bool, Kim eq. 19
     basis: object = None         # its skin system (physics.precompute); a dict of arrays when loaded
+    kind: str = "strip"          # "strip": a muscle of the library; "drive": the jaw or a lid (rig.drives)
+    weight: np.ndarray | None = None   # (k,) a drive's attachment strengths (springs k x weight)
+    info: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -69,9 +73,11 @@ class Rig:
             arrays.update(skin_uv=self.skin.uv, skin_fuv=self.skin.face_uv_indices)   # for texture maps
         meta = {"format": FORMAT, "params": self.params, "muscles": []}
         for i, m in enumerate(self.muscles):
-            meta["muscles"].append({"name": m.name, "omega": m.omega})
+            meta["muscles"].append({"name": m.name, "omega": m.omega, "kind": m.kind, "info": m.info})
             arrays.update({f"m{i}_nodes": m.nodes, f"m{i}_stretch": m.stretch, f"m{i}_attach": m.attach,
                            f"m{i}_roi": m.roi})
+            if m.weight is not None:
+                arrays[f"m{i}_weight"] = m.weight
             _put_basis(arrays, f"m{i}_b", m.basis)
         _put_basis(arrays, "g_b", self.gravity_basis)
         arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
@@ -100,7 +106,9 @@ class Rig:
             skin = Mesh(np.asarray(z["skin_v"], np.float64), z["skin_fi"], z["skin_fs"], *uv)
             validate(skin, f"{path} (the rig's skin)")
             muscles = [Muscle(str(d["name"]), z[f"m{i}_nodes"], z[f"m{i}_stretch"], float(d["omega"]),
-                              z[f"m{i}_attach"], z[f"m{i}_roi"], _get_basis(z, f"m{i}_b"))
+                              z[f"m{i}_attach"], z[f"m{i}_roi"], _get_basis(z, f"m{i}_b"),
+                              str(d.get("kind", "strip")), z[f"m{i}_weight"] if f"m{i}_weight" in z.files else None,
+                              dict(d.get("info", {})))
                        for i, d in enumerate(meta["muscles"])]
             rig = cls(skin, z["landmarks"], muscles, meta["params"], _get_basis(z, "g_b"))
         except KeyError as e:
@@ -189,13 +197,50 @@ def stretch_mode(nodes: np.ndarray) -> np.ndarray:
     return (-arc[:, :, None] * tan).reshape(-1, 3)
 
 
+def strip_muscle(mdef: MuscleDef, skin: Mesh, lm: np.ndarray, near, alpha: float = 10.0,
+                 contraction: float = 0.25, omega: float = 40.0) -> Muscle:
+    """One muscle of the library placed on the skin; near: (TriangleLocator, vertex normals,
+    cKDTree) of the skin, made once for all its muscles."""
+    loc, normals, tree = near
+    nodes, tris = place_strip(mdef, skin, lm, loc, normals)
+    shape = stretch_mode(nodes)
+    dist, attach = tree.query(nodes)                           # spring to the nearest skin node
+    s_init = np.maximum(dist, 1e-9)
+    # Kim eq. 19: skin node j is in the ROI when alpha |S_init^i| > |m_i - s_j| for some i
+    roi = np.zeros(skin.n_vertices, bool)
+    for js in tree.query_ball_point(nodes, (mdef.alpha or alpha) * s_init):
+        roi[js] = True
+    roi[attach] = True
+    # a calibrated muscle's own contraction, scaled as the rig's knob is (0.25 by default)
+    c = contraction if mdef.contraction is None else mdef.contraction * contraction / 0.25
+    return Muscle(mdef.name, nodes, shape * c, omega, attach, roi)
+
+
+DRIVE_REACH = 0.25               # a drive's region of interest: its attached skin and this many eye widths
+
+
+def _drive_muscle(name, skin, lm, tree, omega) -> Muscle:
+    """A drive (rig.drives: the jaw, a lid) as one more force type of the rig: its anchors at the
+    attached skin nodes, their motion at full activation as the stretch."""
+    d = place_drive(name, skin.vertices, lm)
+    if len(d.attach) == 0:
+        raise MimicaError(f"rig: {name} finds no skin to move (is the face's {d.info['part']} in the mesh?)")
+    ew = float(np.linalg.norm(lm[45] - lm[36]))
+    roi = np.zeros(skin.n_vertices, bool)
+    for js in tree.query_ball_point(skin.vertices[d.attach], DRIVE_REACH * ew):
+        roi[js] = True
+    return Muscle(name, skin.vertices[d.attach].copy(), d.motion, omega, d.attach, roi, kind="drive",
+                  weight=d.weight, info=d.info)
+
+
 def build_rig(skin: Mesh, landmarks: np.ndarray, muscles=None, alpha: float = 10.0, modes: int = 8,
               contraction: float = 0.25, gravity: bool = True, muscle_omega: float = 40.0,
               tether: float = 0.02, progress=None) -> Rig:
     """Place the muscles, springs and ROIs on a face (the modal system of each force is the
     physics stage's: `mimica.physics.precompute(rig)`, or made when the rig is first simulated).
 
-    alpha: Kim eq. 19 ROI range; contraction: muscle shortening at full activation;
+    alpha: Kim eq. 19 ROI range; contraction: muscle shortening at full activation (a calibrated
+    muscle's own, rig/calibration.json, is scaled by contraction / 0.25);
     muscle_omega: the stretch mode's frequency (rad/s; the muscle follows its activation
     critically damped, time constant 1/omega); tether: stiffness of the subcutaneous
     layer that ties every skin node to the skull, relative to a skin edge (Viaud & Yahia's
@@ -207,12 +252,13 @@ def build_rig(skin: Mesh, landmarks: np.ndarray, muscles=None, alpha: float = 10
         raise MimicaError("rig: all 68 landmarks are needed to place the muscles")
     if isinstance(muscles, str) and muscles not in ("kim", "all"):
         muscles = [m.strip() for m in muscles.split(",") if m.strip()]
-    names = list(KIM_MUSCLES if muscles in (None, "kim") else MUSCLES if muscles == "all" else muscles)
+    names = list(KIM_MUSCLES if muscles in (None, "kim") else list(MUSCLES) + list(DRIVES) if muscles == "all"
+                 else muscles)
     if not names:
         raise MimicaError("rig: no muscles named; give 'kim', 'all' or muscle names separated by commas")
     for n in names:
-        if n not in MUSCLES:
-            raise MimicaError(f"rig: unknown muscle {n!r}; known: {', '.join(MUSCLES)}")
+        if n not in MUSCLES and n not in DRIVES:
+            raise MimicaError(f"rig: unknown muscle {n!r}; known: {', '.join(list(MUSCLES) + list(DRIVES))}")
     mean_edge = skin.mean_edge_length()
     loc = TriangleLocator(skin.vertices, skin.triangles)
     normals = skin.vertex_normals()
@@ -221,17 +267,10 @@ def build_rig(skin: Mesh, landmarks: np.ndarray, muscles=None, alpha: float = 10
     for k, n in enumerate(names):
         if progress:
             progress(k, len(names), n)
-        nodes, tris = place_strip(MUSCLES[n], skin, lm, loc, normals)
-        shape = stretch_mode(nodes)
-        dist, attach = tree.query(nodes)                           # spring to the nearest skin node
-        s_init = np.maximum(dist, 1e-9)
-        # Kim eq. 19: skin node j is in the ROI when alpha |S_init^i| > |m_i - s_j| for some i
-        roi = np.zeros(skin.n_vertices, bool)
-        a_m = MUSCLES[n].alpha or alpha
-        for p, r in zip(nodes, a_m * s_init):
-            roi[tree.query_ball_point(p, r)] = True
-        roi[attach] = True
-        out.append(Muscle(n, nodes, shape * contraction, muscle_omega, attach, roi))
+        if n in DRIVES:
+            out.append(_drive_muscle(n, skin, lm, tree, muscle_omega))
+            continue
+        out.append(strip_muscle(MUSCLES[n], skin, lm, (loc, normals, tree), alpha, contraction, muscle_omega))
     params = {"alpha": alpha, "modes": modes, "contraction": contraction, "tether": tether,
               "gravity": bool(gravity), "mean_edge": mean_edge}
     return Rig(skin, lm, out, params)

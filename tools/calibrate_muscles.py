@@ -1,0 +1,220 @@
+"""Calibrate the muscle library against ICT-FaceKit's sculpted shapes (issue 18, part 1).
+
+Each muscle of rig/muscles.py is placed from the 68 landmarks by a few numbers (offsets of its
+origin and insertion, width, depths, its reach alpha, its contraction).  For each muscle with a
+shape of ICT-FaceKit that it makes (TARGETS), this searches those numbers (Nelder-Mead from the
+anatomical guess) for the largest mean cosine between the muscle's rest field at activation 1
+and the shape, on TRAINING identities only: ICT's generic face and two random identities whose
+seeds bench/simulate.py never uses (it measures on 1001-1003).  A shape of both sides (a pucker)
+is matched by the muscle and its mirror twin together.  The contraction is then set so that the
+shape is reached at activation 0.8 (the fit's activations stay inside 0..1 with room to spare).
+
+Writes src/mimica/rig/calibration.json, which rig/muscles.py applies to its definitions.
+The drives' attachments (rig.drives.PARAMS: the jaw's, the lids', the cheeks') likewise, against
+jawOpen, eyeBlink, eyeSquint and cheekPuff: `--drives`.
+
+Run from the project root: .venv/bin/python tools/calibrate_muscles.py [muscle ... | --drives]  (~40 min)
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import minimize
+from scipy.spatial import cKDTree
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+
+from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel  # noqa: E402
+from mimica.mesh.query import TriangleLocator  # noqa: E402
+from mimica.physics.face import _skin_system, displacement_cosine, spring_stiffness  # noqa: E402
+from mimica.rig import build_rig, strip_muscle  # noqa: E402
+from mimica.rig.muscles import _RIGHT, _mirror  # noqa: E402
+from mimica.solver import SPDSolver  # noqa: E402
+
+TRAIN = (None, 11, 12)           # the generic face, then identity seeds (held-out: 1001-1003)
+TARGETS = {
+    "zygomaticus_major_R": "mouthSmile_R", "corrugator_supercilii_R": "browDown_R",
+    "depressor_labii_inferioris_R": "mouthLowerDown_R", "depressor_anguli_oris_R": "mouthFrown_R",
+    "frontalis_R": "browOuterUp_R", "frontalis_medial_R": "browInnerUp_R", "orbicularis_oculi_R": "cheekSquint_R",
+    "levator_labii_superioris_alaeque_nasi_R": "noseSneer_R", "levator_labii_superioris_R": "mouthUpperUp_R",
+    "zygomaticus_minor_R": "cheekRaiser_R", "levator_anguli_oris_R": "mouthShrugUpper",
+    "mentalis_R": "mouthShrugLower", "orbicularis_oris_R": "mouthPucker",
+    "orbicularis_oris_upper_R": "mouthRollUpper", "orbicularis_oris_lower_R": "mouthRollLower",
+    "buccinator_R": "mouthDimple_R", "risorius_R": "mouthStretch_R", "platysma_R": "mouthStretch_R",
+    "procerus_R": "browDown_R",
+}
+# no ICT shape: nasalis (the nostrils), masseter and temporalis (they clench and close the jaw)
+PARAMS = ("origin_lift", "origin_out", "insertion_lift", "insertion_out", "width", "origin_depth",
+          "insertion_depth", "alpha")
+STEP = np.array([0.08, 0.08, 0.08, 0.08, 0.04, 0.03, 0.02, 4.0])
+LOW = np.array([-2.0, -2.0, -2.0, -2.0, 0.03, 0.01, 0.005, 3.0])
+HIGH = np.array([2.0, 2.0, 2.0, 2.0, 1.5, 0.4, 0.3, 40.0])
+REACH = 0.8                      # the shape is reached at this activation
+SPRING = 4.0                     # FaceSimulator's default spring layer
+
+
+class Face:
+    """One training identity: its skin, landmarks, stiffness and the ICT shapes."""
+
+    def __init__(self, model, seed):
+        tv = model.neutral if seed is None else model.identity(np.random.default_rng(seed).normal(0, 0.8, 20))
+        self.skin = model.mesh.with_vertices(tv)
+        self.lm = tv[ICT_LANDMARKS_68]
+        self.near = (TriangleLocator(tv, self.skin.triangles), self.skin.vertex_normals(), cKDTree(tv))
+        rig = build_rig(self.skin, self.lm, muscles=["zygomaticus_major_R"], gravity=False)
+        _, _, self.K, _ = _skin_system(rig, rotation=False)
+        from mimica.physics.shell import ShellEnergy
+        e = ShellEnergy.default(self.skin)
+        rig.params.update(k_length=e.k_length)
+        self.k = spring_stiffness(rig, SPRING)
+        self.model = model
+
+    def field(self, mdef):
+        m = strip_muscle(mdef, self.skin, self.lm, self.near)
+        n = self.skin.n_vertices
+        ks = np.bincount(m.attach, minlength=n) * self.k
+        f = np.zeros((n, 3))
+        np.add.at(f, m.attach, self.k * m.stretch)
+        dof = (3 * np.nonzero(m.roi)[0][:, None] + np.arange(3)).ravel()
+        A = (self.K + sp.diags(np.repeat(ks, 3))).tocsr()[dof][:, dof]
+        u = np.zeros(3 * n)
+        u[dof] = SPDSolver(A.tocsc()).solve(f.reshape(-1)[dof])
+        return u.reshape(-1, 3)
+
+
+# the drives' attachment shapes (rig.drives.PARAMS): (parameters, the drive, its ICT shape,
+# the parameter that sets its strength or None)
+DRIVE_TARGETS = [
+    (("jaw_side", "jaw_below", "jaw_under", "jaw_under_fade"), "digastric", "jawOpen", None),
+    (("lid_band",), "orbicularis_oculi_palpebral_R", "eyeBlink_R", None),
+    (("lower_band",), "orbicularis_oculi_lower_R", "eyeSquint_R", "lid_raise"),
+    (("cheek_centre", "cheek_radius", "cheek_cavity"), "cheek_pressure_R", "cheekPuff_R", "cheek_push"),
+]
+
+
+def drive_field(face, name):
+    from mimica.physics.face import DRIVE_SPRING
+    from mimica.rig import _drive_muscle
+    m = _drive_muscle(name, face.skin, face.lm, face.near[2], 40.0)
+    n = face.skin.n_vertices
+    ks = np.zeros(n)
+    np.add.at(ks, m.attach, DRIVE_SPRING * face.k * m.weight)
+    f = np.zeros((n, 3))
+    f[m.attach] = ks[m.attach, None] * m.stretch
+    dof = (3 * np.nonzero(m.roi)[0][:, None] + np.arange(3)).ravel()
+    A = (face.K + sp.diags(np.repeat(ks, 3))).tocsr()[dof][:, dof]
+    u = np.zeros(3 * n)
+    u[dof] = SPDSolver(A.tocsc()).solve(f.reshape(-1)[dof])
+    return u.reshape(-1, 3)
+
+
+def calibrate_drives(faces, model, evals=60):
+    from mimica.rig import drives
+    out = {}
+    for keys, name, shape, strength in DRIVE_TARGETS:
+        target = model.delta({shape: 1.0})
+        x0 = np.concatenate([np.atleast_1d(drives.PARAMS[k]).astype(float) for k in keys])
+        sizes = [np.size(drives.PARAMS[k]) for k in keys]
+
+        def put(x):
+            i = 0
+            for k, n in zip(keys, sizes):
+                drives.PARAMS[k] = float(x[i]) if n == 1 else [float(v) for v in x[i:i + n]]
+                i += n
+
+        def cost(x):
+            put(x)
+            try:
+                return -float(np.mean([displacement_cosine(drive_field(f, name), target) for f in faces]))
+            except Exception:
+                return 1.0
+        t = time.time()
+        c0 = cost(x0)
+        simplex = np.vstack([x0] + [x0 + np.eye(len(x0))[i] * max(0.15 * abs(x0[i]), 0.05) for i in range(len(x0))])
+        res = minimize(cost, x0, method="Nelder-Mead", options=dict(maxfev=evals, initial_simplex=simplex,
+                                                                     xatol=1e-3, fatol=1e-4))
+        put(res.x)
+        got = {k: drives.PARAMS[k] for k in keys}
+        if strength:
+            us = [drive_field(f, name) for f in faces]
+            scale = np.mean([(u * target).sum() / max((u * u).sum(), 1e-300) for u in us])
+            got[strength] = drives.PARAMS[strength] = float(drives.PARAMS[strength] * scale / REACH)
+        out.update(got)
+        print(f"{name:42s} {shape:16s} cosine {-c0:.3f} -> {-res.fun:.3f}  {got}  ({res.nfev} evaluations, "
+              f"{time.time() - t:.0f} s)", flush=True)
+    return out
+
+
+def calibrate(name, faces, targets, evals=160):
+    base = next(d for d in _RIGHT if d.name == name)
+    both = not targets[0][1].endswith(("_L", "_R"))          # a shape of both sides: the muscle and its twin
+    x0 = np.array([getattr(base, p) if getattr(base, p) is not None else 10.0 for p in PARAMS], float)
+
+    def mdef(x):
+        x = np.clip(x, LOW, HIGH)
+        return replace(base, **dict(zip(PARAMS, map(float, x))))
+
+    def fields(d):
+        out = []
+        for f in faces:
+            u = f.field(d)
+            if both:
+                u = u + f.field(_mirror(d))
+            out.append(u)
+        return out
+
+    def cost(x):
+        try:
+            us = fields(mdef(x))
+        except Exception:                                  # a placement off the skin
+            return 1.0
+        return -float(np.mean([displacement_cosine(u, t) for u, (t, _) in zip(us, targets)]))
+
+    t = time.time()
+    c0 = cost(x0)
+    simplex = np.vstack([x0] + [x0 + np.eye(len(x0))[i] * STEP[i] for i in range(len(x0))])
+    res = minimize(cost, x0, method="Nelder-Mead",
+                   options=dict(maxfev=evals, initial_simplex=simplex, xatol=1e-3, fatol=1e-4))
+    best = mdef(res.x)
+    us = fields(best)
+    # strength: the least-squares scale of the field onto the shape, so the shape is at REACH
+    scale = np.mean([(u * tg).sum() / max((u * u).sum(), 1e-300) for u, (tg, _) in zip(us, targets)])
+    contraction = float((best.contraction or 0.25) * scale / REACH)
+    if contraction <= 0:
+        raise SystemExit(f"{name}: its best field points away from {targets[0][1]} (cosine {-res.fun:.3f}); "
+                         "its origin and insertion need another placement in rig/muscles.py")
+    print(f"{name:42s} {targets[0][1]:16s} cosine {-c0:.3f} -> {-res.fun:.3f}  contraction {contraction:.3f}  "
+          f"({res.nfev} evaluations, {time.time() - t:.0f} s)", flush=True)
+    out = {p: round(float(v), 4) for p, v in zip(PARAMS, np.clip(res.x, LOW, HIGH))}
+    out["contraction"] = round(contraction, 4)
+    return out, -c0, -res.fun
+
+
+def main():
+    model = ICTModel(ICT_FACE_AREA_VERTICES)
+    faces = [Face(model, s) for s in TRAIN]
+    path = Path(__file__).resolve().parents[1] / "src/mimica/rig/calibration.json"
+    cal = json.loads(path.read_text()) if path.exists() else {"muscles": {}}
+    if sys.argv[1:] == ["--drives"]:
+        cal.setdefault("drives", {}).update(calibrate_drives(faces, model))
+        path.write_text(json.dumps(cal, indent=1, sort_keys=True) + "\n")
+        return
+    names = sys.argv[1:] or list(TARGETS)
+    for name in names:
+        shape = TARGETS[name]
+        targets = [(model.delta({shape: 1.0}), shape) for _ in faces]   # ICT's deltas hold across identities
+        cal["muscles"][name], _, _ = calibrate(name, faces, targets)
+        cal["about"] = ("tools/calibrate_muscles.py: each muscle's placement fitted to its ICT-FaceKit shape on "
+                        f"training identities (generic face, seeds {TRAIN[1:]}); held-out identities are never used")
+        path.write_text(json.dumps(cal, indent=1, sort_keys=True) + "\n")
+
+
+if __name__ == "__main__":
+    main()
