@@ -160,8 +160,10 @@ def test_a_killed_run_leaves_the_old_output_or_the_complete_new_one(heads, tmp_p
     new = sorted([".mimica-run.json"] + [f"f{i:02d}.obj" for i in range(24)])
     seen = set()
     for delay in (0.5, 1.5, 2.5, 3.5, 5.0):
+        # (a suite started from a background job inherits SIGINT ignored, and so would the run)
         p = subprocess.Popen(cmd + [str(seq), "--target", str(heads / "neutral.obj"), "--out", str(out)],
-                             env=env, stderr=subprocess.PIPE, text=True)
+                             env=env, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         time.sleep(delay)
         p.send_signal(sig)
         p.wait(60)

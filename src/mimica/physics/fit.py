@@ -45,7 +45,7 @@ def muscle_fields(sim) -> np.ndarray:
 def static_fields(rig, spring: float = 4.0) -> np.ndarray:
     """(m, n, 3): the same steady states as muscle_fields, each by one sparse solve in full
     space, (K + K_s) u = K_s u_m over the muscle's region of interest (the modal system's
-    static shapes make its steady state exact, tests/test_muscles.py) -- what calibration
+    static shapes make its steady state exact, tests/test_drives.py) -- what calibration
     (tools/calibrate_muscles.py) evaluates hundreds of times, without the modes."""
     import scipy.sparse as sp
     from ..solver import SPDSolver
