@@ -261,10 +261,7 @@ def blink_gaps(rig, mf, expr, act, rest):
     rest opening, and the smallest opening anywhere (negative: crossed)."""
     from mimica.rig.drives import lid_opening
     sim = FaceSimulator(rig)
-    states = []
-    for sm in sim.systems:
-        A, B = sm.transition()
-        states.append(np.linalg.solve(np.eye(len(B)) - A, B))
+    states = [sm.steady_state() for sm in sim.systems]
     for e in ("eyeBlink_L", "eyeBlink_R"):
         a = act[expr.index(e)]
         for sm, x, ai in zip(sim.systems, states, sim.inputs(a)):
@@ -275,7 +272,7 @@ def blink_gaps(rig, mf, expr, act, rest):
         wide = o0 >= 0.5 * o0.max()
         print(f"{e} fitted: lid gap {o[wide].max() / o0.max():.3f} of the open gap (<= 0.05), smallest opening "
               f"{o.min() / o0.max():+.3f} (>= 0: never crossed); closing activation "
-              f"{a[mf.names.index(info and f'orbicularis_oculi_palpebral_{e[-1]}')]:.2f}")
+              f"{a[mf.names.index(f'orbicularis_oculi_palpebral_{e[-1]}')]:.2f}")
 
 
 def coverage(face, skin, whole, seeds=(1001, 1002, 1003)):

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel
-from mimica.physics.face import ActivationMap, FaceSimulator, drive_load, drive_springs, displacement_cosine
-from mimica.physics.fit import muscle_fields, static_fields
+from mimica.physics.face import ActivationMap, FaceSimulator, displacement_cosine
+from mimica.physics.fit import muscle_fields, skin_stiffness, static_field, static_fields
 from mimica.rig import Rig, build_rig
 from mimica.rig.drives import jaw_open_factors, jaw_open_parts, lid_opening
 
@@ -67,18 +67,10 @@ def test_the_skin_follows_the_turned_bone_not_its_chord(jaw):
     m = jaw.muscles[i]
     ms, mc, phi = jaw_open_parts(m.nodes, m.info)
     fs, fc = jaw_open_factors(0.5, phi)
-    import scipy.sparse as sp
-    from mimica.physics.face import _skin_system
-    from mimica.solver import SPDSolver
-    _, _, K, _ = _skin_system(jaw, rotation=False)
-    free = np.nonzero(m.roi)[0]
-    dof = (3 * free[:, None] + np.arange(3)).ravel()
+    K = skin_stiffness(jaw)
 
     def settle(motion):
-        A = (K + sp.diags(np.repeat(drive_springs(jaw, m), 3))).tocsr()[dof][:, dof]
-        out = np.zeros(3 * jaw.skin.n_vertices)
-        out[dof] = SPDSolver(A.tocsc()).solve(drive_load(jaw, m, motion).ravel()[dof])
-        return out.reshape(-1, 3)
+        return static_field(jaw, m, K, motion=motion)
     turned, chord = settle(fs * ms + fc * mc), settle(0.5 * (ms + mc))
     scale = np.abs(turned).max()
     assert np.abs(u - turned).max() < 1e-4 * scale
@@ -133,10 +125,7 @@ def test_lids_never_cross_at_any_activation(eye):
     sim = FaceSimulator(eye)
     info = eye.muscle("orbicularis_oculi_palpebral_R").info
     rest = eye.skin.vertices
-    states = []
-    for sm in sim.systems:                                # each system's steady state at input 1
-        A, B = sm.transition()
-        states.append(np.linalg.solve(np.eye(len(B)) - A, B))
+    states = [sm.steady_state() for sm in sim.systems]   # each system's steady state at input 1
     rng = np.random.default_rng(5)
     worst = np.inf
     for _ in range(60):

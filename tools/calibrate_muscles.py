@@ -25,7 +25,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
 from scipy.optimize import minimize
 from scipy.spatial import cKDTree
 
@@ -33,10 +32,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel  # noqa: E402
 from mimica.mesh.query import TriangleLocator  # noqa: E402
-from mimica.physics.face import _skin_system, displacement_cosine, spring_stiffness  # noqa: E402
+from mimica.physics.face import displacement_cosine  # noqa: E402
+from mimica.physics.fit import skin_stiffness, static_field  # noqa: E402
 from mimica.rig import build_rig, strip_muscle  # noqa: E402
 from mimica.rig.muscles import _RIGHT, _mirror  # noqa: E402
-from mimica.solver import SPDSolver  # noqa: E402
 
 TRAIN = (None, 11, 12)           # the generic face, then identity seeds (held-out: 1001-1003)
 TARGETS = {
@@ -68,25 +67,12 @@ class Face:
         self.skin = model.mesh.with_vertices(tv)
         self.lm = tv[ICT_LANDMARKS_68]
         self.near = (TriangleLocator(tv, self.skin.triangles), self.skin.vertex_normals(), cKDTree(tv))
-        rig = build_rig(self.skin, self.lm, muscles=["zygomaticus_major_R"], gravity=False)
-        _, _, self.K, _ = _skin_system(rig, rotation=False)
-        from mimica.physics.shell import ShellEnergy
-        e = ShellEnergy.default(self.skin)
-        rig.params.update(k_length=e.k_length)
-        self.k = spring_stiffness(rig, SPRING)
+        self.rig = build_rig(self.skin, self.lm, muscles=["zygomaticus_major_R"], gravity=False)
+        self.K = skin_stiffness(self.rig)
         self.model = model
 
     def field(self, mdef):
-        m = strip_muscle(mdef, self.skin, self.lm, self.near)
-        n = self.skin.n_vertices
-        ks = np.bincount(m.attach, minlength=n) * self.k
-        f = np.zeros((n, 3))
-        np.add.at(f, m.attach, self.k * m.stretch)
-        dof = (3 * np.nonzero(m.roi)[0][:, None] + np.arange(3)).ravel()
-        A = (self.K + sp.diags(np.repeat(ks, 3))).tocsr()[dof][:, dof]
-        u = np.zeros(3 * n)
-        u[dof] = SPDSolver(A.tocsc()).solve(f.reshape(-1)[dof])
-        return u.reshape(-1, 3)
+        return static_field(self.rig, strip_muscle(mdef, self.skin, self.lm, self.near), self.K, SPRING)
 
 
 # the drives' attachment shapes (rig.drives.PARAMS): (parameters, the drive, its ICT shape,
@@ -100,19 +86,8 @@ DRIVE_TARGETS = [
 
 
 def drive_field(face, name):
-    from mimica.physics.face import DRIVE_SPRING
     from mimica.rig import _drive_muscle
-    m = _drive_muscle(name, face.skin, face.lm, face.near[2], 40.0)
-    n = face.skin.n_vertices
-    ks = np.zeros(n)
-    np.add.at(ks, m.attach, DRIVE_SPRING * face.k * m.weight)
-    f = np.zeros((n, 3))
-    f[m.attach] = ks[m.attach, None] * m.stretch
-    dof = (3 * np.nonzero(m.roi)[0][:, None] + np.arange(3)).ravel()
-    A = (face.K + sp.diags(np.repeat(ks, 3))).tocsr()[dof][:, dof]
-    u = np.zeros(3 * n)
-    u[dof] = SPDSolver(A.tocsc()).solve(f.reshape(-1)[dof])
-    return u.reshape(-1, 3)
+    return static_field(face.rig, _drive_muscle(name, face.skin, face.lm, face.near[2], 40.0), face.K)
 
 
 def calibrate_drives(faces, model, evals=60):

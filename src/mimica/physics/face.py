@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import MimicaError
-from ..rig.drives import JAW_CLOSERS, LID_MARGIN, jaw_open_factors, jaw_open_parts, lid_opening
+from ..rig.drives import JAW_CLOSERS, LID_MARGIN, jaw_open_factors, jaw_open_parts, lid_pairs, margin_opening
 from .modal import ModalBasis, ModalWarpingSolver, rotation_operator, rotations
 from .shell import ShellEnergy, lumped_mass
 
@@ -113,6 +113,11 @@ class _MuscleSystem:
         if self.__dict__.get("_tr") is None:
             self._tr = self._transition()
         return self._tr
+
+    def steady_state(self) -> np.ndarray:
+        """The state the linear model settles to with its input held at 1: x* = A x* + B."""
+        A, B = self.transition()
+        return np.linalg.solve(np.eye(len(B)) - A, B)
 
     _linear = False                  # the jaw's exact rotation and R^T off: the linear model (transitions)
 
@@ -228,19 +233,20 @@ class _MuscleSystem:
 DRIVE_SPRING = 4.0               # a drive's attachments, as stiff as this many `spring`s (at weight 1)
 
 
-def drive_springs(rig, muscle, spring: float = 4.0) -> np.ndarray:
-    """(n,) a drive's attachment stiffness per skin node: DRIVE_SPRING springs x its weight."""
+def drive_springs(rig, muscle) -> np.ndarray:
+    """(n,) a drive's attachment stiffness per skin node: DRIVE_SPRING default springs x its
+    weight (part of its system's stiffness, so fixed at precompute)."""
     k = np.zeros(rig.skin.n_vertices)
     w = muscle.weight if muscle.weight is not None else np.ones(len(muscle.attach))
-    np.add.at(k, muscle.attach, DRIVE_SPRING * spring_stiffness(rig, spring) * w)
+    np.add.at(k, muscle.attach, DRIVE_SPRING * spring_stiffness(rig, 4.0) * w)
     return k
 
 
-def drive_load(rig, muscle, motion=None, spring: float = 4.0) -> np.ndarray:
+def drive_load(rig, muscle, motion=None) -> np.ndarray:
     """(n, 3) the force of a drive's anchors moved by `motion` (default: their motion at full
     activation), K_s u_part."""
     f = np.zeros((rig.skin.n_vertices, 3))
-    k = drive_springs(rig, muscle, spring)
+    k = drive_springs(rig, muscle)
     f[muscle.attach] = k[muscle.attach, None] * (muscle.stretch if motion is None else motion)
     return f
 
@@ -272,17 +278,15 @@ class ActivationMap:
         self.closers = [i for i, n in enumerate(names) if n.rsplit("_", 1)[0] in JAW_CLOSERS]
         self.jaw_open = [i for i, m in enumerate(muscles) if m.kind == "drive"
                          and m.info.get("part") == "jaw" and m.info.get("motion") == "open"]
-        self.lids = []
-        self.lid_close = [i for i, m in enumerate(muscles) if m.kind == "drive" and m.info.get("part") == "lid"
-                          and m.info.get("motion") == "close"]
-        for i, m in enumerate(muscles):
-            if m.kind == "drive" and m.info.get("part") == "lid" and m.info.get("motion") == "close":
-                same = {muscles[j].info.get("motion"): j for j in self.drives
-                        if muscles[j].info.get("eye") == m.info["eye"]}
-                w, r = same.get("wide"), same.get("raise")
-                ratio = (muscles[w].info["wide"] / max(float(m.info.get("gap_max", 1.0)), 1e-9)) if w is not None else 0
-                lift = muscles[r].info["raise"] if r is not None else 0.0
-                self.lids.append((i, r, w, ratio, lift))
+        self.lid_close = [i for i in self.drives if muscles[i].info.get("part") == "lid"
+                          and muscles[i].info.get("motion") == "close"]
+        self.lids = []                               # (close, raise, wide, wide/opening, raise part)
+        for i in self.lid_close:
+            m = muscles[i]
+            same = {muscles[j].info.get("motion"): j for j in self.drives if muscles[j].info.get("eye") == m.info["eye"]}
+            w, r = same.get("wide"), same.get("raise")
+            ratio = muscles[w].info["wide"] / max(float(m.info.get("gap_max", 1.0)), 1e-9) if w is not None else 0.0
+            self.lids.append((i, r, w, ratio, muscles[r].info["raise"] if r is not None else 0.0))
 
     def __call__(self, activations) -> np.ndarray:
         if not self.drives:
@@ -654,20 +658,26 @@ class FaceSimulator:
     def _lid_contact(self, u):
         """Lid contact: where the upper and lower margins of an eye would cross (the closing lid
         with the other muscles around the eye), the closing drive's field is backed off, by
-        bisection on its share, until they meet (rig.drives.lid_opening >= 0 at every pair)."""
+        bisection on its share, until they meet (rig.drives.margin_opening >= 0 at every pair;
+        only the margin nodes are looked at)."""
         rest = self.rig.skin.vertices
         for i in self.inputs.lid_close:
             info = self.rig.muscles[i].info
-            if not info.get("rims") or lid_opening(rest + u, info).min() >= 0:
+            p = lid_pairs(info)
+            if len(p) == 0 or self.systems[i].resting:
+                continue
+            xp = rest[p] + u[p]
+            if margin_opening(xp, info).min() >= 0:
                 continue
             uc = np.zeros_like(u)
             self.systems[i].solver.add_displacement(uc, self.warp)
+            ucp = uc[p]
             lo, hi = 0.0, 1.0                                      # the share of uc taken away
-            if lid_opening(rest + u - uc, info).min() < 0:
+            if margin_opening(xp - ucp, info).min() < 0:
                 lo = hi                                            # crossed without it: take it all
             for _ in range(20 if lo < hi else 0):
                 mid = 0.5 * (lo + hi)
-                lo, hi = (lo, mid) if lid_opening(rest + u - mid * uc, info).min() >= 0 else (mid, hi)
+                lo, hi = (lo, mid) if margin_opening(xp - mid * ucp, info).min() >= 0 else (mid, hi)
             u -= hi * uc
         return u
 

@@ -34,39 +34,50 @@ def muscle_fields(sim) -> np.ndarray:
     out = np.zeros((len(sim.systems), sim.rig.skin.n_vertices, 3))
     sim.reset()
     for i, sm in enumerate(sim.systems):
-        A, B = sm.transition()
-        sm.set_state(np.linalg.solve(np.eye(len(B)) - A, B))      # x* = A x* + B
+        sm.set_state(sm.steady_state())
         sm.solver.add_displacement(out[i], False)
-        sm.set_state(np.zeros_like(B))
+        sm.set_state(np.zeros_like(sm.state()))
     sim.reset()
     return out
 
 
-def static_fields(rig, spring: float = 4.0) -> np.ndarray:
-    """(m, n, 3): the same steady states as muscle_fields, each by one sparse solve in full
-    space, (K + K_s) u = K_s u_m over the muscle's region of interest (the modal system's
-    static shapes make its steady state exact, tests/test_drives.py) -- what calibration
-    (tools/calibrate_muscles.py) evaluates hundreds of times, without the modes."""
+def skin_stiffness(rig):
+    """The rig's skin stiffness with its tethers (sparse, 3n x 3n), the shell's stiffnesses
+    recorded in rig.params as precompute does (the springs are scaled by them)."""
+    from .face import _skin_system
+    energy, _, K, _ = _skin_system(rig, rotation=False)
+    rig.params.update(k_area=energy.k_area, k_length=energy.k_length, k_bend=energy.k_bend)
+    return K
+
+
+def static_field(rig, m, K, spring: float = 4.0, motion=None) -> np.ndarray:
+    """(n, 3): one muscle's (or drive's) steady state at activation 1 by one sparse solve in full
+    space, (K + K_s) u = K_s u_m over its region of interest -- what its modal system settles to
+    (its static load shapes make that exact, tests/test_drives.py), without the modes.  K from
+    skin_stiffness; motion: a drive's anchors moved otherwise than at full activation."""
     import scipy.sparse as sp
     from ..solver import SPDSolver
-    from .face import _skin_system, drive_load, drive_springs, spring_stiffness
-    energy, mass, K, _ = _skin_system(rig, rotation=False)
-    rig.params.update(k_area=energy.k_area, k_length=energy.k_length, k_bend=energy.k_bend)
+    from .face import drive_load, drive_springs, spring_stiffness
     n = rig.skin.n_vertices
-    out = np.zeros((len(rig.muscles), n, 3))
-    k = spring_stiffness(rig, spring)
-    for i, m in enumerate(rig.muscles):
-        if m.kind == "drive":
-            ks, f = drive_springs(rig, m), drive_load(rig, m)          # fixed at precompute
-        else:
-            ks = np.bincount(m.attach, minlength=n) * k
-            f = np.zeros((n, 3))
-            np.add.at(f, m.attach, k * m.stretch)
-        free = np.nonzero(m.roi)[0]
-        dof = (3 * free[:, None] + np.arange(3)).ravel()
-        A = (K + sp.diags(np.repeat(ks, 3))).tocsr()[dof][:, dof]
-        out[i].reshape(-1)[dof] = SPDSolver(A.tocsc()).solve(f.reshape(-1)[dof])
-    return out
+    if m.kind == "drive":
+        ks, f = drive_springs(rig, m), drive_load(rig, m, motion)     # fixed at precompute
+    else:
+        k = spring_stiffness(rig, spring)
+        ks = np.bincount(m.attach, minlength=n) * k
+        f = np.zeros((n, 3))
+        np.add.at(f, m.attach, k * m.stretch)
+    dof = (3 * np.nonzero(m.roi)[0][:, None] + np.arange(3)).ravel()
+    A = (K + sp.diags(np.repeat(ks, 3))).tocsr()[dof][:, dof]
+    u = np.zeros(3 * n)
+    u[dof] = SPDSolver(A.tocsc()).solve(f.reshape(-1)[dof])
+    return u.reshape(-1, 3)
+
+
+def static_fields(rig, spring: float = 4.0) -> np.ndarray:
+    """(m, n, 3): static_field of every muscle of the rig, the same steady states as
+    muscle_fields -- what calibration (tools/calibrate_muscles.py) evaluates hundreds of times."""
+    K = skin_stiffness(rig)
+    return np.stack([static_field(rig, m, K, spring) for m in rig.muscles])
 
 
 def _box_ls(M: np.ndarray, y: np.ndarray, upper: float) -> np.ndarray:

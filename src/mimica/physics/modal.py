@@ -85,9 +85,9 @@ def rotation_operator(rest: np.ndarray, triangles: np.ndarray, smooth: float = 0
         np.add.at(vn, t.ravel(), np.repeat(nrm, 3, axis=0))
         vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
         blocks = np.eye(3)[None] - vn[:, :, None] * vn[:, None, :]
-        r = (3 * np.arange(nv)[:, None, None] + np.arange(3)[None, :, None]) + 0 * np.arange(3)[None, None, :]
-        c = (3 * np.arange(nv)[:, None, None] + np.arange(3)[None, None, :]) + 0 * np.arange(3)[None, :, None]
-        P = sp.csr_matrix((blocks.ravel(), (r.ravel(), c.ravel())), shape=(3 * nv, 3 * nv))
+        i, j = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+        base = 3 * np.arange(nv)[:, None, None]
+        P = sp.csr_matrix((blocks.ravel(), ((base + i).ravel(), (base + j).ravel())), shape=(3 * nv, 3 * nv))
     if not smooth:
         return W if P is None else (P @ W).tocsr()
     # average the rotation field over `smooth` rings: a node's frame turns with its

@@ -29,13 +29,12 @@ past it; the simulator holds the closing activation where the lids meet
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from ..align import face_cylinder
+from .muscles import CALIBRATION
 
 JAW_OPEN_DEG = 25.0              # ICT jawOpen = 1: the lower teeth turn 25.3 degrees
 JAW_PIVOT = (-0.46, -0.235)      # (up, forward) of the TMJ axis from mid(lm 0, lm 16), eye widths
@@ -60,9 +59,7 @@ PARAMS = {
     "cheek_push": 0.08,          # outward at full activation, eye widths
     "cheek_cavity": 1.0,         # the air pushes out from a point this many eye widths behind the lips
 }
-_CAL = Path(__file__).with_name("calibration.json")
-if _CAL.exists():
-    PARAMS.update(json.loads(_CAL.read_text()).get("drives", {}))
+PARAMS.update(CALIBRATION.get("drives", {}))
 
 # name -> (part, motion); the jaw's muscles: the digastric opens it (masseter and temporalis
 # close it: the simulator subtracts their activations, jaw_closers), the lateral pterygoids
@@ -136,28 +133,35 @@ def jaw_weights(x, lm):
     below = _smooth((line - yu) / (P["jaw_below"] * chin))          # 0 above the line, 1 below
     under = 1.0 - _smooth((-yu - P["jaw_under"] * chin) / (P["jaw_under_fade"] * chin))   # not under the chin
     side = np.exp(-(xr / (P["jaw_side"] * mw)) ** 2)
-    pivot_f = (0.5 * (lm[0] + lm[16]) @ fwd) + JAW_PIVOT[1] * float(np.linalg.norm(lm[45] - lm[36]))
-    front = (x @ fwd) > pivot_f
+    front = (x - jaw_frame(lm)["pivot"]) @ fwd > 0                  # in front of the TMJ axis
     return below * under * side * front
+
+
+def jaw_frame(lm) -> dict:
+    """The jaw's frame from the landmarks: its TMJ pivot, the face's axes, its full opening angle."""
+    right, up, fwd = _frame(lm)
+    ew = float(np.linalg.norm(lm[45] - lm[36]))
+    pivot = 0.5 * (lm[0] + lm[16]) + ew * (JAW_PIVOT[0] * up + JAW_PIVOT[1] * fwd)
+    return {"pivot": pivot.tolist(), "right": right.tolist(), "up": up.tolist(), "fwd": fwd.tolist(),
+            "angle": JAW_OPEN_DEG, "ew": ew}
 
 
 def jaw_motion(x, lm, what: str):
     """(n, 3) the mandible's displacement at the points x for one of its motions at full
     activation: 'open' (turned about the TMJ axis), 'forward', 'left', 'right' (slides)."""
-    right, up, fwd = _frame(lm)
-    ew = float(np.linalg.norm(lm[45] - lm[36]))
-    pivot = 0.5 * (lm[0] + lm[16]) + ew * (JAW_PIVOT[0] * up + JAW_PIVOT[1] * fwd)
-    a = x - pivot
+    j = jaw_frame(lm)
     if what == "open":
-        return _turn(a, up, fwd, np.full(len(x), -np.radians(JAW_OPEN_DEG))) - a
+        m_s, m_c, _ = jaw_open_parts(x, j)
+        return m_s + m_c
+    right, fwd, ew = np.array(j["right"]), np.array(j["fwd"]), j["ew"]
     if what == "forward":
         return np.broadcast_to(JAW_FORWARD * ew * fwd, x.shape).copy()
+    a = x - np.array(j["pivot"])
     sign = 1.0 if what == "left" else -1.0                          # the subject's left is +x
     yaw = sign * np.radians(JAW_YAW_DEG)                            # the chin swings to that side
     c, s = np.cos(yaw), np.sin(yaw)
     r, f = a @ right, a @ fwd
-    turned = a + ((r * c + f * s) - r)[:, None] * right + ((-r * s + f * c) - f)[:, None] * fwd
-    return turned - a + sign * JAW_SLIDE * ew * right
+    return ((r * c + f * s) - r)[:, None] * right + ((-r * s + f * c) - f)[:, None] * fwd + sign * JAW_SLIDE * ew * right
 
 
 def jaw_open_parts(x, info):
@@ -268,14 +272,23 @@ def lid_drive(x, lm, side: str, what: str):
     return w, motion, info
 
 
-def lid_opening(x, info) -> np.ndarray:
-    """The lid opening at each pair of facing margin nodes (radians about the eyeball's centre,
-    upper minus lower: negative where the lids cross) of skin positions x (n, 3) or (F, n, 3)."""
-    pairs = np.asarray(info["rims"], int).reshape(-1, 2)
+def lid_pairs(info) -> np.ndarray:
+    """(k, 2) the facing (upper, lower) margin nodes of a closing lid drive."""
+    return np.asarray(info.get("rims", []), int).reshape(-1, 2)
+
+
+def margin_opening(xp, info) -> np.ndarray:
+    """The lid opening at each pair of facing margin nodes, from their positions xp (..., k, 2, 3)
+    (radians about the eyeball's centre, upper minus lower: negative where the lids cross)."""
     c, up, fwd = (np.asarray(info[k], float) for k in ("centre", "up", "fwd"))
-    a = np.asarray(x, float)[..., pairs, :] - c                   # (..., k, 2, 3)
+    a = np.asarray(xp, float) - c
     psi = np.arctan2(a @ up, a @ fwd)
     return psi[..., 0] - psi[..., 1]
+
+
+def lid_opening(x, info) -> np.ndarray:
+    """margin_opening of skin positions x (n, 3) or (F, n, 3)."""
+    return margin_opening(np.asarray(x, float)[..., lid_pairs(info), :], info)
 
 
 def cheek_drive(x, lm, side: str):
@@ -308,11 +321,7 @@ def place_drive(name: str, x, lm, min_weight: float = 0.02) -> Drive:
         at = np.nonzero(w > min_weight)[0]
         info = {"part": "jaw", "motion": what}
         if what == "open":                     # the bone's pose, for an exact rotation at any angle
-            right, up, fwd = _frame(lm)
-            ew = float(np.linalg.norm(lm[45] - lm[36]))
-            pivot = 0.5 * (lm[0] + lm[16]) + ew * (JAW_PIVOT[0] * up + JAW_PIVOT[1] * fwd)
-            info.update(pivot=pivot.tolist(), right=right.tolist(), up=up.tolist(), fwd=fwd.tolist(),
-                        angle=JAW_OPEN_DEG)
+            info.update(jaw_frame(lm))
         return Drive(name, at, w[at], jaw_motion(x[at], lm, what), info)
     # a lid's skin folds into its crease: the anchors' motion fades with the weight (the plate
     # turns, the fold above it less), and every anchor holds as firmly (the crease is tied to

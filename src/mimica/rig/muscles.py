@@ -102,9 +102,10 @@ _RIGHT = [
 # The placements above are anatomical first guesses; tools/calibrate_muscles.py refines each
 # one's offsets, width, depths and reach against its ICT-FaceKit shape on training identities
 # (never the held-out ones bench/simulate.py measures) and writes them here:
-CALIBRATION = Path(__file__).with_name("calibration.json")
-CALIBRATED: dict = json.loads(CALIBRATION.read_text())["muscles"] if CALIBRATION.exists() else {}
-_RIGHT = [replace(d, **CALIBRATED.get(d.name, {})) for d in _RIGHT]
+# (rig/drives.py takes its attachments' numbers from the same file)
+_CALIBRATION_FILE = Path(__file__).with_name("calibration.json")
+CALIBRATION: dict = json.loads(_CALIBRATION_FILE.read_text()) if _CALIBRATION_FILE.exists() else {}
+_RIGHT = [replace(d, **CALIBRATION.get("muscles", {}).get(d.name, {})) for d in _RIGHT]
 
 MUSCLES: dict[str, MuscleDef] = {}
 for _d in _RIGHT:
