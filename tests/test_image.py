@@ -36,17 +36,20 @@ def test_unchanged_source_gives_the_target_back(photos):
 
 
 def test_self_transfer_reproduces_the_expression(photos):
-    """S' onto S: within 33 dB of S' on the face (rendered ICT, exact truth; bench: median
-    over 18 pairs), and much closer than warping alone."""
+    """S' onto S with Song's eq. 4 (vtc): within 33 dB of S' on the face (rendered ICT, exact
+    truth; bench: median over 18 pairs), and much closer than warping alone.  The default (the
+    shading of a generic face under S's light) is not exact on S itself (30.3 dB here) but still
+    closer than the warp."""
     s, sp = photos.photo("identity009")
     x, xp = photos.photo("identity009", "happiness")
     an = ImageAnalogy(s, sp)
     truth = align_to(x, xp, sp)
-    r = an.transfer(s, sp, x, xp)
+    r = an.transfer(s, sp, x, xp, method="vtc")
     w = an.transfer(s, sp, x, xp, method="warp")
     m = r.mask > 0.5
     assert psnr(r.image, truth, m) > 33.0
     assert psnr(r.image, truth, m) > psnr(w.image, truth, m) + 5
+    assert psnr(an.transfer(s, sp, x, xp).image, truth, m) > psnr(w.image, truth, m) + 1
 
 
 def test_strength_scales_the_expression(photos):
@@ -58,7 +61,7 @@ def test_strength_scales_the_expression(photos):
     h, hp = photos.photo("identity004", "surprise", amount=0.5)
     an = ImageAnalogy(s, sp)
     truth = align_to(h, hp, sp)
-    for method, floor in (("vtc", 35.0), ("eri", 35.0), ("warp", 32.0)):
+    for method, floor in (("shading", 32.0), ("vtc", 35.0), ("eri", 35.0), ("warp", 32.0)):
         r = an.transfer(s, sp, x, xp, method=method, strength=0.5)
         m = r.mask > 0.5
         assert np.abs(r.points - hp).max() < 1.5                     # points where the half expression has them

@@ -30,7 +30,7 @@ def _box(pts, idx, pad=4):
     return (int(p[:, 0].min()) - pad, int(p[:, 1].min()) - pad, int(p[:, 0].max()) + pad, int(p[:, 1].max()) + pad)
 
 
-@pytest.mark.parametrize("method", ["vtc", "warp", "eri"])
+@pytest.mark.parametrize("method", ["shading", "vtc", "warp", "eri"])
 def test_a_region_at_zero_keeps_its_pixels(pair, method):
     s, sp, x, xp, t, tp = pair
     an = ImageAnalogy(t, tp)

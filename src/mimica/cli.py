@@ -668,7 +668,7 @@ def cmd_transfer_image(a):
     tgt = read_image(a.target)
     sp = _image_points(src, a.source_neutral, "source neutral", a.source_face, a.detector)
     tp = _image_points(tgt, a.target, "target", a.face, a.detector)
-    an = ImageAnalogy(tgt, tp, mouth=not a.no_mouth)
+    an = ImageAnalogy(tgt, tp, mouth=not a.no_mouth).setup(a.method)
     from .image.io import luminance
     src_y = luminance(src)                             # the same source for every expression / frame
     out = Path(a.out)
@@ -1265,9 +1265,10 @@ def build_parser():
     ti.add_argument("source_expr", nargs="*", help="photos of the same person with expressions")
     ti.add_argument("--driving", metavar="VIDEO", help="a video (MP4) or folder of frames of the source person")
     ti.add_argument("--target", required=True, help="photo of the target person, neutral")
-    ti.add_argument("--method", choices=["vtc", "eri", "warp"], default="vtc",
-                    help="vtc: vertex-tent luminance transfer (Song); eri: expression ratio images (Liu 2001); "
-                         "warp: feature-point warp only")
+    ti.add_argument("--method", choices=["shading", "vtc", "eri", "warp"], default="shading",
+                    help="shading (default): the expression's shading on a 3D face under the target's own light; "
+                         "vtc: Song's vertex-tent luminance transfer (eq. 4); eri: expression ratio images "
+                         "(Liu 2001); warp: feature-point warp only")
     ti.add_argument("--strength", default="1", metavar="A",
                     help="how much of the expression: 0 none, 1 the source's (default), up to 2 exaggerated; "
                          "or per region, e.g. brows=0.5,mouth=1.2 (regions: brows, eyes, nose, mouth, jaw; "

@@ -16,6 +16,12 @@ same correspondence (material points) with a domain that does not change from on
 expression to the next, so the sparse system is factored once per target photo (§VI.D: "only
 the luminance is solved", one factorization reused for every expression and video frame).
 Only a box around the target's face is processed; the rest of the photo is kept.
+
+Step 4 is the paper's appearance step (method "vtc").  The default (method "shading",
+image.shading) departs from it: eq. 4 carries the source's shading under the source's light,
+which lost to the warp alone on faces lit otherwise (rendered ICT pairs 24.84 vs 25.30 dB); the
+expression's shading change is made on a generic 3D face under the target's own fitted light
+instead (26.27 dB; docs/benchmarks.md, issue 20).
 """
 
 from __future__ import annotations
@@ -295,22 +301,46 @@ class ImageAnalogy:
             rr = rr ** np.asarray(strength, np.float32)
         return (mask * rr + (1 - mask)).astype(np.float32)
 
-    def transfer(self, source, s_pts, expressive, x_pts, method="vtc", strength=1.0, head="still") -> Result:
+    def setup(self, method: str = "shading") -> "ImageAnalogy":
+        """Build now what `method` needs of the target once (for "shading": the generic face and
+        the target's light) rather than inside the first transfer."""
+        if method == "shading":
+            self._shading
+        return self
+
+    @cached_property
+    def _shading(self):
+        from .shading import TargetShading
+        return TargetShading(self.crop_yuv[..., 0], self.points - np.array(self.box[:2], float), self.mask_t > 0.5)
+
+    def shading_ratio(self, s_pts, x_pts, strength=1.0) -> np.ndarray:
+        """The expression's shading change under the target's light (image.shading), per pixel of
+        the crop: 1 outside the face, to the power `strength` (a number or per region)."""
+        from .shading import face_model
+        r = self._shading.ratio(face_model().fit_expression(s_pts, x_pts))
+        strength = self._strength_map(strength)
+        if not (np.isscalar(strength) and strength == 1):
+            r = r ** np.asarray(strength, np.float32)
+        return (self.mask_t * r + (1 - self.mask_t)).astype(np.float32)
+
+    def transfer(self, source, s_pts, expressive, x_pts, method="shading", strength=1.0, head="still") -> Result:
         """The target with the expression of (source -> expressive).  Images in [0, 1]: RGB, or
         for the sources their luminance (only Y is read from them; a video's fixed source neutral
         can be converted once).  `strength` scales the expression: 0 gives the target back,
         1 the source's expression, up to 2 exaggerates it (the feature motion times strength;
         per pixel the transformation interpolated from the identity, (1 - a) I + a Q, or for
-        ERI the ratio to the power a)."""
-        if method not in ("vtc", "eri", "warp"):
-            raise MimicaError(f"unknown method {method!r}; use vtc, eri or warp")
+        the shading and ERI the ratio to the power a).  `method`: one of METHODS."""
+        if method not in METHODS:
+            raise MimicaError(f"unknown method {method!r}; use {', '.join(METHODS)}")
         if head not in ("still", "follow"):
             raise MimicaError(f"head {head!r}: still (the target's head stays) or follow (it moves as the source's)")
         per = point_strengths(strength)                       # a number, or {region: a}
         strength = float(per[0]) if np.all(per == per[0]) else per
         s_r, x_r, look, pts = self.prepare(source, s_pts, expressive, x_pts, strength)
         yuv = self.crop_yuv
-        if method == "vtc":
+        if method == "shading":
+            yuv = yuv * self.shading_ratio(s_pts, x_pts, strength)[..., None]
+        elif method == "vtc":
             yuv = yuv.copy()
             yuv[..., 0] = self.vtc_luminance(s_r, x_r, strength)
         elif method == "eri":
@@ -343,6 +373,10 @@ class ImageAnalogy:
     def _target_lightness(self) -> float:
         return _lightness(self.target, self.points)
 
+
+# the appearance steps: the expression's shading under the target's light (image.shading, the
+# default), Song's eq. 4 (vtc, the paper's), expression ratio images (eri), none (warp)
+METHODS = ("shading", "vtc", "eri", "warp")
 
 # the face's regions by their feature points, for per-region strengths (issue 20, part 2)
 REGIONS = {"brows": np.arange(17, 27), "eyes": np.arange(36, 48), "nose": np.arange(27, 36),
