@@ -193,12 +193,76 @@ def main():
     lib_steps = library_steps(whole)
     lib_pre = library_precompute()
     warp_dev, lin_dev = smile_deviations(skin, lm)
+    spring_laws(face, skin, lm)
+    stretch_modes(face)
     cov, fit_fps = coverage(face, skin, whole)
     print(f"steps_per_s={lib_steps:.0f} precompute_s={lib_pre:.2f} full_solver_steps_per_s={full_steps:.2f} "
           f"modal_deviation={dev:.3f} anatomy_cosine_min={min(cos_all):.3f} "
           f"coverage_cosine_min={min(cov.values()):.3f} coverage_cosine_median={np.median(list(cov.values())):.3f} "
           f"fit_frames_per_s={fit_fps:.0f} warp_deviation={warp_dev:.3f} linear_deviation={lin_dev:.3f}")
     print(f"(Kim's 8 muscles alone: {steps:.0f} steps/s, rig precompute {pre:.2f} s on the face area)")
+
+
+def spring_laws(face, skin, lm, hold=1.5, fps=60.0):
+    """Kim's eq. 15 springs (FaceSimulator(springs="kim")) against the linear ones: each calibrated
+    muscle (tools/calibrate_muscles.py's targets, right side) held at 0.8 for `hold` seconds,
+    warped, its field's cosine with its ICT shape and its size against the shape's; steps/s with
+    one muscle active."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+    from calibrate_muscles import TARGETS
+    names = list(TARGETS)
+    rig = precompute(build_rig(skin, lm, muscles=names, gravity=False))
+    res, speed = {}, {}
+    for law in ("linear", "kim"):
+        sim = FaceSimulator(rig, fps=fps, springs=law)
+        steps, took = 0, 0.0
+        for i, name in enumerate(names):
+            a = np.zeros(len(rig.muscles))
+            a[i] = 0.8
+            sim.reset()
+            t = time.perf_counter()
+            for _ in range(int(hold * fps)):
+                sim.advance(a)
+            took += time.perf_counter() - t
+            steps += int(hold * fps) * sim.substeps
+            u, ref = sim.displacement(), face.shape(TARGETS[name]) - face.neutral
+            res[law, name] = (displacement_cosine(u, ref),
+                              np.linalg.norm(u, axis=1).max() / np.linalg.norm(ref, axis=1).max())
+        speed[law] = steps / took
+    for name in names:
+        print(f"  springs {name:40s} {TARGETS[name]:16s} linear cos {res['linear', name][0]:.3f} size "
+              f"{res['linear', name][1]:.2f} | eq. 15 cos {res['kim', name][0]:.3f} size {res['kim', name][1]:.2f}")
+    for law in ("linear", "kim"):
+        c = [res[law, n][0] for n in names]
+        print(f"springs {law}: {len(names)} calibrated muscles against their ICT shapes, cosine mean {np.mean(c):.3f} "
+              f"min {np.min(c):.3f}; {speed[law]:.0f} steps/s with one muscle active")
+
+
+def stretch_modes(face, seeds=(1001, 1002, 1003)):
+    """The muscles' stretch from their own shell eigenproblem (Kim eqs. 11-12, `rig --stretch
+    shell`) against the bar's (what the library is calibrated with): each calibrated muscle's
+    rest field (one sparse solve, physics.fit.static_field) against its ICT shape, on the
+    held-out identities."""
+    from calibrate_muscles import TARGETS                      # (tools/ on the path: spring_laws)
+    from mimica.physics.face import shell_stretch_modes
+    from mimica.physics.fit import skin_stiffness, static_field
+    names = list(TARGETS)
+    cos = {"bar": [], "shell": []}
+    aligns = []
+    for seed in seeds:
+        tv = face.identity(np.random.default_rng(seed).normal(0, 0.8, 20))
+        skin = face.mesh.with_vertices(tv)
+        for kind in cos:
+            rig = build_rig(skin, tv[ICT_LANDMARKS_68], muscles=names, gravity=False)
+            if kind == "shell":
+                aligns += [a for _, a, _ in shell_stretch_modes(rig)]
+            K = skin_stiffness(rig)
+            cos[kind] += [displacement_cosine(static_field(rig, m, K), face.shape(TARGETS[m.name]) - face.neutral)
+                          for m in rig.muscles]
+    print(f"stretch modes: shell modes aligned with the bars by {np.median(aligns):.2f} (median; "
+          f"{np.min(aligns):.2f}-{np.max(aligns):.2f}); {len(names)} calibrated muscles on {len(seeds)} held-out "
+          f"identities, cosine with their ICT shapes: bar mean {np.mean(cos['bar']):.3f} min {np.min(cos['bar']):.3f}, "
+          f"shell mean {np.mean(cos['shell']):.3f} min {np.min(cos['shell']):.3f}")
 
 
 def library_steps(whole, active=8):

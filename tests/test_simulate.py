@@ -231,6 +231,16 @@ def test_cli_rig_and_simulate(tmp_path, face, capsys):
     assert main(["simulate", str(rig_path), "--solver", "full", "--duration", "0.05", "--fps", "40",
                  "--out", str(tmp_path / "s4")]) == 0
     assert len(list((tmp_path / "s4").glob("frame_*.obj"))) == 3
+    assert main(["simulate", str(rig_path), "--springs", "kim", "--expression", "happiness", "--duration", "0.1",
+                 "--out", str(tmp_path / "s5")]) == 0
+    assert len(list((tmp_path / "s5").glob("frame_*.obj"))) == 7
+    assert main(["simulate", str(rig_path), "--springs", "kim", "--solver", "full", "--out", str(tmp_path / "s6")]) == 2
+    assert "--springs" in capsys.readouterr().err and not (tmp_path / "s6").exists()
+    assert main(["rig", str(obj), "--muscles", "zygomaticus_major_R", "--stretch", "shell",
+                 "--out", str(tmp_path / "shell.rig")]) == 0
+    shell = Rig.load(tmp_path / "shell.rig")
+    assert shell.params["stretch"] == "shell"
+    assert not np.allclose(shell.muscles[0].stretch, Rig.load(rig_path).muscles[0].stretch)
 
 
 def test_sprung_engine_rests_moves_and_returns(rig, face):
@@ -447,3 +457,89 @@ def test_every_engine_refuses_non_finite_or_exploded_frames(rig, engine):
         assert engine == "full"
         assert np.isfinite(frames).all()
         assert np.abs(frames - rig.skin.vertices).max() <= explosion_limit(rig.skin.vertices)
+
+
+def test_kim_eq15_spring_gradients_match_finite_differences():
+    """Kim's eqs. 14-16 (physics.face.kim_spring): both Jacobians against central differences on
+    random springs, stretched and compressed, and the force along the spring's deformation with
+    the magnitude of eq. 15 (k times the relative elongation)."""
+    from mimica.physics.face import kim_spring
+    rng = np.random.default_rng(7)
+    m = 64
+    s0 = rng.normal(size=(m, 3))
+    um, us = 0.6 * rng.normal(size=(m, 3)), 0.6 * rng.normal(size=(m, 3))
+    k = rng.uniform(0.5, 3.0, m)
+    f, d_us, d_um = kim_spring(s0, um, us, k)
+    l0, ld = np.linalg.norm(s0, axis=1), np.linalg.norm(s0 + um - us, axis=1)
+    assert (ld > l0).any() and (ld < l0).any()                   # both sides of the kink
+    np.testing.assert_allclose(np.linalg.norm(f, axis=1), k * np.abs(ld - l0) / l0, rtol=1e-12)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", f, um - us),
+                               np.linalg.norm(f, axis=1) * np.linalg.norm(um - us, axis=1), rtol=1e-10)
+    eps = 1e-6
+    for which, jac in (("s", d_us), ("m", d_um)):
+        fd = np.zeros((m, 3, 3))
+        for c in range(3):
+            e = np.zeros((m, 3))
+            e[:, c] = eps
+            if which == "s":
+                fp, fm = kim_spring(s0, um, us + e, k)[0], kim_spring(s0, um, us - e, k)[0]
+            else:
+                fp, fm = kim_spring(s0, um + e, us, k)[0], kim_spring(s0, um - e, us, k)[0]
+            fd[:, :, c] = (fp - fm) / (2 * eps)
+        np.testing.assert_allclose(jac, fd, atol=1e-7 * np.abs(jac).max())
+    f0, j0, _ = kim_spring(s0, um, um, k)                        # undeformed: no force
+    assert np.abs(f0).max() == 0.0 and np.isfinite(j0).all()
+
+
+@pytest.mark.parametrize("fps", [24.0, 60.0])
+def test_kim_springs_rest_stay_stable_and_move_like_the_linear_ones(rig, face, fps):
+    """With eq. 15's springs (FaceSimulator(springs="kim")): a face at rest stays exactly at rest;
+    a smile held for a second at the presets' frame rates settles, finite, moving the skin like
+    the linear springs do (cosine > 0.95; 19 calibrated muscles: mean 0.759 vs 0.761 against
+    their ICT shapes, docs/benchmarks.md); no linear model is offered with them."""
+    kim = FaceSimulator(rig, fps=fps, springs="kim")
+    for sm in kim.systems:
+        sm.resting = False
+    for _ in range(20):
+        kim.step(np.zeros(len(rig.muscles)))
+    assert np.abs(kim.displacement()).max() == 0.0
+    a = np.zeros(len(rig.muscles))
+    a[rig.muscles.index(next(m for m in rig.muscles if m.name == "zygomaticus_major_L"))] = 0.8
+    frames = kim.reset().run(lambda t: a, 1.0)
+    u = frames[-1] - face.neutral
+    lin = FaceSimulator(rig, fps=fps).run(lambda t: a, 1.0)[-1] - face.neutral
+    assert np.isfinite(frames).all()
+    assert displacement_cosine(u, lin) > 0.95
+    assert np.abs(frames[-1] - frames[-2]).max() < 0.02 * np.abs(u).max()      # settled
+    with pytest.raises(MimicaError, match="linear"):
+        FaceSimulator(rig, springs="kim", reduced=1e-4)
+    with pytest.raises(MimicaError, match="linear"):
+        kim.systems[0].transition()
+    with pytest.raises(MimicaError, match="springs"):
+        FaceSimulator(rig, springs="cubic")
+
+
+def test_shell_stretch_mode_of_a_straight_strip_is_its_stretch(face):
+    """Kim eqs. 11-12: on a flat straight strip the mode of its own shell eigenproblem most
+    aligned with the bar's stretch is that stretch (alignment > 0.9: measured 0.96, the 7th of
+    8), the origin row held, the insertion drawn toward the origin.  On a rig, every strip muscle
+    takes its shell mode before its system is made, and not after."""
+    from mimica.physics.face import shell_stretch_mode, shell_stretch_modes
+    from mimica.physics import precompute
+    from mimica.rig import COLS, ROWS, stretch_mode
+    s = np.linspace(0, 1, ROWS)[:, None]
+    nodes = np.stack([np.broadcast_to(4 * s, (ROWS, COLS)), np.broadcast_to(np.linspace(-0.5, 0.5, COLS), (ROWS, COLS)),
+                      np.zeros((ROWS, COLS))], -1).reshape(-1, 3)
+    bar = 0.25 * stretch_mode(nodes)
+    mode, align, _ = shell_stretch_mode(nodes, bar)
+    assert align > 0.9
+    assert np.abs(mode[:COLS]).max() == 0.0
+    assert (mode[-COLS:, 0] < 0.5 * bar[-COLS:, 0]).all()          # toward the origin, most of the bar's way
+    r = build_rig(face.mesh, face.neutral[ICT_LANDMARKS_68], muscles=["zygomaticus_major_L", "digastric"], gravity=False)
+    before = [m.stretch.copy() for m in r.muscles]
+    got = shell_stretch_modes(r)
+    assert [g[0] for g in got] == ["zygomaticus_major_L"] and r.params["stretch"] == "shell"
+    assert not np.allclose(r.muscles[0].stretch, before[0]) and np.array_equal(r.muscles[1].stretch, before[1])
+    precompute(r)
+    with pytest.raises(MimicaError, match="already made"):
+        shell_stretch_modes(r)

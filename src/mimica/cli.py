@@ -304,6 +304,9 @@ def cmd_rig(a):
     skin = read_mesh(a.face)
     lm = _landmarks(skin, a.landmarks, "--landmarks", str(a.face)).positions(skin)
     rig = build_rig(skin, lm, muscles=a.muscles, alpha=a.alpha, modes=a.modes)
+    if a.stretch == "shell":
+        from .physics.face import shell_stretch_modes
+        shell_stretch_modes(rig)
     with _muscle_bar("muscles") as progress:
         precompute(rig, progress=progress)
     rig.save(a.out)
@@ -432,16 +435,16 @@ def cmd_simulate(a):
     if a.engine == "sprung":
         from .physics.sprung import SprungFace
         sim = SprungFace(rig, fps=a.fps)
-        if a.gravity or a.pull or a.solver == "full":
-            raise MimicaError("--gravity, --pull and --solver full work with --engine shell only")
+        if a.gravity or a.pull or a.solver == "full" or a.springs != "linear":
+            raise MimicaError("--gravity, --pull, --springs and --solver full work with --engine shell only")
     elif a.solver == "full":
         from .physics.fullface import FullFaceSimulator
-        if a.gravity or a.pull or a.warp is not None or {"gravity", "pull"} & set(tl.channels):
-            raise MimicaError("--solver full simulates the muscles only; --gravity, --pull and --warp "
-                              "work with the modal solver")
+        if a.gravity or a.pull or a.warp is not None or a.springs != "linear" or {"gravity", "pull"} & set(tl.channels):
+            raise MimicaError("--solver full simulates the muscles only; --gravity, --pull, --warp and "
+                              "--springs work with the modal solver")
         sim = FullFaceSimulator(rig, fps=a.fps)
     else:
-        sim = FaceSimulator(rig, fps=a.fps, warp=a.warp)
+        sim = FaceSimulator(rig, fps=a.fps, warp=a.warp, springs=a.springs)
         if a.gravity or "gravity" in tl.channels:
             sim.set_gravity(np.array([0.0, -(a.gravity or 1.0), 0.0]))
         for spec in a.pull or []:
@@ -1195,6 +1198,10 @@ def build_parser():
                         "about 30 s on an 11k-vertex head), kim (Kim's 8), or a comma list of names")
     r.add_argument("--alpha", type=float, default=10.0, help="ROI range (Kim eq. 19) where a muscle has none of its own")
     r.add_argument("--modes", type=int, default=8, help="skin modes per force type")
+    r.add_argument("--stretch", choices=["bar", "shell"], default="bar",
+                   help="each muscle's stretch: bar (default), its nodes sliding toward the origin by arc "
+                        "length, what the library was calibrated with; shell: the stretch mode of the strip's "
+                        "own shell eigenproblem (Kim eqs. 11-12), docs/benchmarks.md")
     r.add_argument("--out", required=True, help="rig file to write")
     r.set_defaults(func=cmd_rig)
 
@@ -1222,6 +1229,10 @@ def build_parser():
                    help="modal warping (Kim eq. 10: forces into each node's frame, displacements out of "
                         "it), on by default with the modal solver; --no-warp: the linear modal face, "
                         "twice the output rate")
+    s.add_argument("--springs", choices=["linear", "kim"], default="linear",
+                   help="the muscle-to-skin springs: linear, k (u_m - u_s) (default); kim: Kim's eq. 15 "
+                        "(relative elongation) along the spring's deformation, linearized each step "
+                        "(about 7x slower, docs/benchmarks.md)")
     s.add_argument("--wrinkles", metavar="MASK", help="wrinkle mask of this face (`mimica wrinkle-mask`): "
                    "bulges follow the skin's compression and the age")
     s.add_argument("--age", type=float, default=50.0, help="age in years for the wrinkles (a timeline's "

@@ -5,7 +5,9 @@ Per step and per muscle i (all vectorized over the muscle's spring nodes):
   muscle:  q_m'' + 2 w q_m' + w^2 q_m = w^2 a_i(t)     (the stretch mode, Kim eqs. 11-13)
   springs: F = k (u_m - u_s), implicit in the skin's modes: Kim's eq. 15 (relative elongation)
            in the limit of motions large against the layer's thickness, along u_m - u_s (eq. 16's
-           S_d - S_ud with the skin's end moving too).  Eq. 15 itself is not used (issue 18).
+           S_d - S_ud with the skin's end moving too).  springs="kim": eqs. 15-16 as written
+           (kim_spring), linearized at every step; measured against the linear law in
+           docs/benchmarks.md (issue 18), the linear one stays the default.
   skin:    the muscle's ROI system driven by R^T F, its displacement warped by the integrated
            rotation (modal warping, eqs. 10, 17-19; warp=False: linear)
   drives:  the jaw, the lids and the cheeks' pressure (rig.drives): anchors moving with their
@@ -44,6 +46,45 @@ def _dlyap(M, Q):
     raise MimicaError("simulation: a muscle system is not stable at this time step")
 
 
+SPRING_LAWS = ("linear", "kim")
+
+
+def kim_spring(s_init: np.ndarray, u_m: np.ndarray, u_s: np.ndarray, k) -> tuple:
+    """The subcutaneous springs of Kim 2020 §V.B, eqs. 14-16, on the skin's end, vectorized over
+    springs: s_init (m, 3) the initial spring vector (skin node -> muscle node), u_m and u_s (m, 3)
+    the muscle node's and the skin node's displacements, k (m,) or a number.
+
+      S_d = s_init + u_m - u_s                                  (the deformed spring)
+      |F| = k | |S_d| - |s_init| | / |s_init|                   (eqs. 14-15: relative elongation)
+      F / |F| = (S_d - s_init) / |S_d - s_init|                 (eq. 16, S_ud read as the spring at rest)
+
+    Eq. 16 as printed takes S_ud with the skin's end moved and the muscle's not, so S_d - S_ud =
+    u_m: the force keeps pushing along the muscle's motion once the skin has passed it, and the
+    magnitude grows again there (the springs stand nearly across the muscles' motion: |cos|
+    0.07-0.22 on ICT's face), so nothing restores it -- measured, every calibrated muscle's skin
+    diverged within a second at 60 fps.  Along the spring's own deformation u_m - u_s it restores.
+
+    Returns (F, dF/du_s, dF/du_m), (m, 3) and (m, 3, 3) twice (F depends on u_m - u_s only, so
+    dF/du_m = -dF/du_s); F = 0 where the spring is undeformed.  The magnitude's kink at
+    |S_d| = |s_init| takes the derivative of the side the spring is on."""
+    s_init, u_m, u_s = (np.asarray(x, float) for x in (s_init, u_m, u_s))
+    k = np.broadcast_to(np.asarray(k, float), len(s_init))
+    l0 = np.linalg.norm(s_init, axis=1)
+    w = u_m - u_s
+    sd = s_init + w
+    ld = np.linalg.norm(sd, axis=1)
+    e = (ld - l0) / l0                                            # eq. 15's relative elongation
+    lw = np.linalg.norm(w, axis=1)
+    moved = lw > 1e-12 * np.maximum(l0, 1e-300)
+    d = np.where(moved[:, None], w / np.where(moved, lw, 1.0)[:, None], 0.0)        # eq. 16
+    sd_hat = sd / np.maximum(ld, 1e-300)[:, None]
+    f = (k * np.abs(e))[:, None] * d
+    g = (k * np.sign(e) / l0)[:, None, None] * d[:, :, None] * sd_hat[:, None, :]   # d |F| along d
+    g += np.where(moved, k * np.abs(e) / np.where(moved, lw, 1.0), 0.0)[:, None, None] * \
+        (np.eye(3)[None] - d[:, :, None] * d[:, None, :])                            # d direction
+    return f, -g, g
+
+
 class _MuscleSystem:
     """One muscle's skin system: its ROI's modes, coupled to the muscle by springs.
 
@@ -56,7 +97,7 @@ class _MuscleSystem:
     k u_m is linear in the muscle's stretch amplitude, so its modal force is precomputed.
     """
 
-    def __init__(self, rig, muscle, h, spring, xi, zeta, rho, warp=False):
+    def __init__(self, rig, muscle, h, spring, xi, zeta, rho, warp=False, springs="linear"):
         b = muscle.basis
         self.solver = sv = ModalWarpingSolver(b, h, xi=xi, zeta=zeta, density=rho)
         self.h, self.w, self.warp = h, muscle.omega, warp
@@ -72,6 +113,15 @@ class _MuscleSystem:
             loads = [drive_load(rig, muscle, mo)[uniq] / rho for mo in _drive_motions(muscle)]
             if len(loads) == 2:                      # the jaw: exact rotation of its anchors at any angle
                 self.phi = float(np.radians(muscle.info["angle"]))
+        elif springs == "kim":
+            # eqs. 15-16 as written: nonlinear in the skin's displacement, so the springs'
+            # stiffness is not in the system's; it is linearized at every step (step_kim).  Each
+            # spring as stiff as the linear one for a stretch along it: k_15 = k |s_init|
+            s_init = muscle.nodes - rig.skin.vertices[muscle.attach]
+            l0 = np.maximum(np.linalg.norm(s_init, axis=1), 1e-9 * rig.params["mean_edge"])
+            self.stiff = np.diag(sv.lam)
+            self._kim = (s_init, spring_stiffness(rig, spring) * l0, phi[inv], np.asarray(muscle.stretch, float))
+            loads = [np.zeros((len(uniq), 3))]
         else:
             k = spring_stiffness(rig, spring)
             springs_at = np.bincount(inv, minlength=len(uniq)).astype(float)
@@ -81,12 +131,20 @@ class _MuscleSystem:
             pull = np.zeros((len(uniq), 3))
             np.add.at(pull, inv, k * muscle.stretch / rho)               # K_s u_m per unit stretch
             loads = [pull]
+        self.rho = rho
         self.step_inv = np.linalg.inv(np.eye(len(b.lam)) + h * np.diag(sv.c) + h * h * self.stiff)
         parts = [np.einsum("kcr,kc->r", phi, f) for f in loads]
         self.fq_unit = sum(parts)                     # at full activation (the linear model: chord)
         if len(parts) == 2:
             self.fq_parts = parts
-        if warp:                                      # Kim eq. 10: the pulls in the nodes' frames, R^T F
+        if warp and self._kim is not None:
+            pos = np.full(b.n, -1)
+            pos[b.free] = np.arange(len(b.free))
+            pk = pos[muscle.attach]
+            self._kim_free = pk >= 0                  # (a held node's rows are zero: any frame does)
+            self._kim_rows = (3 * pk[self._kim_free][:, None] + np.arange(3)).ravel()
+            self._psi_k = None
+        elif warp:                                    # Kim eq. 10: the pulls in the nodes' frames, R^T F
             pos = np.full(b.n, -1)
             pos[b.free] = np.arange(len(b.free))
             p = pos[uniq]
@@ -107,9 +165,14 @@ class _MuscleSystem:
         sv.q, sv.v = np.array(x[2:2 + r]), np.array(x[2 + r:])
         self.resting = not np.any(x)
 
+    _kim = None                      # eqs. 15-16's springs: (s_init, k, Phi rows per spring, stretch)
+
     def transition(self):
         """The step is linear in (state, activation): x' = A x + B a; A and B, column by column
         (computed once)."""
+        if self._kim is not None:
+            raise MimicaError("Kim's eq. 15 springs are not linear in the skin's motion: no linear model "
+                              "(fields, fit, reduced frames) with them; use the linear springs")
         if self.__dict__.get("_tr") is None:
             self._tr = self._transition()
         return self._tr
@@ -226,7 +289,32 @@ class _MuscleSystem:
         h, w = self.h, self.w
         self.q, self.v = follow_activation(self.q, self.v, a, h, w)
         sv = self.solver
+        if self._kim is not None:
+            self._step_kim()
+            return
         sv.v = self.step_inv @ (sv.v + h * (self._pull() - self.stiff @ sv.q))
+        sv.q = sv.q + h * sv.v
+
+    def _step_kim(self):
+        """One step of the skin under eqs. 15-16's springs, linearized at the present state
+        (one Newton step of implicit Euler): (I + hC + h^2 (Lambda - Phi^T J Phi)) v' = v +
+        h (Phi^T F - Lambda q), J = dF/du_s per spring; with warping each pull enters its node's
+        frame by R^T (the linearization stays in the rest frame)."""
+        sv, h = self.solver, self.h
+        s_init, k, phi, stretch = self._kim
+        u_s = np.einsum("kcr,r->kc", phi, sv.q)
+        f, jac, _ = kim_spring(s_init, self.q * stretch, u_s, k)
+        if self.warp:
+            if self._psi_k is None:
+                self._psi_k = self.solver.b.psi[self._kim_rows]
+            R, _ = rotations((self._psi_k @ sv.q).reshape(-1, 3))
+            f = f.copy()
+            f[self._kim_free] = np.einsum("kji,kj->ki", R, f[self._kim_free])
+        fq = np.einsum("kcr,kc->r", phi, f) / self.rho
+        pr = phi.reshape(-1, phi.shape[2])                                   # (3k, r)
+        jq = pr.T @ np.einsum("kab,kbs->kas", jac, phi).reshape(pr.shape) / self.rho
+        a = np.eye(len(sv.q)) + h * np.diag(sv.c) + h * h * (np.diag(sv.lam) - jq)
+        sv.v = np.linalg.solve(a, sv.v + h * (fq - sv.lam * sv.q))
         sv.q = sv.q + h * sv.v
 
 
@@ -360,6 +448,62 @@ def precompute(rig, progress=None):
     return rig
 
 
+def shell_stretch_mode(nodes: np.ndarray, bar: np.ndarray, modes: int = 8) -> tuple:
+    """Kim eqs. 11-12: a muscle's stretch mode from its own shell eigenproblem.  The strip (its
+    ROWS x COLS nodes, rig.strip_triangles) as a shell (Kim eq. 4, ShellEnergy.default), its
+    origin row held by the skull; K e = lambda M e (eq. 8, lumped masses) for the lowest `modes`;
+    the stretch mode is the one most aligned (mass inner product) with the bar's stretch `bar`
+    (k, 3) -- Kim takes the 3rd of 4 on his strips -- signed and scaled to its least-squares fit
+    of the bar, so that activation 1 still shortens the muscle by its contraction.  Returns
+    (mode (k, 3), alignment in [0, 1], its index among the modes)."""
+    from scipy.linalg import eigh
+    from ..mesh import Mesh
+    from ..rig import COLS, strip_triangles
+    nodes = np.asarray(nodes, float)
+    tris = strip_triangles()
+    p = nodes[tris]
+    area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    # a strip draped over a crease can fold cells flat (nodes on one skin point): those cells
+    # are left out, and nodes in none of the rest keep the bar's motion
+    tris = tris[area > 1e-6 * area.max()]
+    strip = Mesh.from_faces(nodes, tris)
+    energy = ShellEnergy.default(strip)
+    mass = np.repeat(lumped_mass(strip), 3)
+    used = np.zeros(len(nodes), bool)
+    used[tris.ravel()] = True
+    used[:COLS] = False                                                   # the origin row is held
+    free = (3 * np.nonzero(used)[0][:, None] + np.arange(3)).ravel()
+    K = energy.hessian(energy.rest).toarray()[np.ix_(free, free)]
+    lam, e = eigh(K, np.diag(mass[free]), subset_by_index=[0, min(modes, len(free)) - 1])
+    b = np.asarray(bar, float).ravel()[free]
+    m = mass[free]
+    dots = (e * (m * b)[:, None]).sum(0)
+    norms = np.sqrt((e * e * m[:, None]).sum(0) * (b * b * m).sum())
+    align = np.abs(dots) / np.maximum(norms, 1e-300)
+    i = int(np.argmax(align))
+    scale = dots[i] / max(float((e[:, i] ** 2 * m).sum()), 1e-300)
+    mode = np.asarray(bar, float).copy()
+    mode[:COLS] = 0.0
+    mode.reshape(-1)[free] = scale * e[:, i]
+    return mode, float(align[i]), i
+
+
+def shell_stretch_modes(rig) -> list:
+    """Every strip muscle's stretch (Muscle.stretch, the bar's) replaced by its shell stretch mode
+    (shell_stretch_mode; `mimica rig --stretch shell`), before its modal system is made; the rig
+    records it (params "stretch").  Returns [(name, alignment, mode index)]."""
+    if any(isinstance(m.basis, ModalBasis) or isinstance(m.basis, dict) for m in rig.muscles if m.kind != "drive"):
+        raise MimicaError("rig: its muscles' systems are already made; choose the stretch modes when building it")
+    out = []
+    for m in rig.muscles:
+        if m.kind == "drive":
+            continue
+        m.stretch, a, i = shell_stretch_mode(m.nodes, m.stretch)
+        out.append((m.name, a, i))
+    rig.params["stretch"] = "shell"
+    return out
+
+
 def region_system(rig, center: np.ndarray, radius: float, reach: float = 3.0):
     """A modal system for a force on the skin within `radius` of `center` (a user pull):
     its ROI is the skin within reach x radius; returns (basis, loaded nodes, weights)."""
@@ -448,7 +592,7 @@ class FaceSimulator:
 
     def __init__(self, rig, fps: float = 60.0, substeps: int = 4, spring: float = 4.0,
                  frequency: float = 4.0, damping: float = 1.6, zeta: float = 0.0005, warp: bool | None = None,
-                 reduced: float | None = None):
+                 reduced: float | None = None, springs: str = "linear"):
         """warp: modal warping (Kim eq. 10, Choi & Ko's integrated rotation), on by default
         (None: on unless `reduced`).  Each node's frame turns with the tangent rotation of its
         system's displacement (rotation_operator(tangent=True): the spin of a muscle sliding the
@@ -463,7 +607,16 @@ class FaceSimulator:
         drawn from a few shapes per muscle (output_subspace, about 12 each instead of ~116
         modes): one small matrix product per frame instead of one per muscle; advance()
         then steps each muscle's balanced truncation at the same tolerance.  step() and
-        `fields()` stay exact.  The reduced model is linear: with it, warp defaults to off."""
+        `fields()` stay exact.  The reduced model is linear: with it, warp defaults to off.
+
+        springs: "linear" (default), k (u_m - u_s) in the system's stiffness; "kim", Kim's eqs.
+        15-16 as written (kim_spring), linearized at each step: no linear model then (no
+        `reduced`, no fit), every frame stepped."""
+        if springs not in SPRING_LAWS:
+            raise MimicaError(f"springs {springs!r}: one of {', '.join(SPRING_LAWS)}")
+        if springs == "kim" and reduced:
+            raise MimicaError("the reduced model is linear: it needs the linear springs, not Kim's eq. 15")
+        self.springs = springs
         warp = (reduced is None) if warp is None else bool(warp)
         self.warp = warp
         self.reduced = reduced
@@ -477,7 +630,7 @@ class FaceSimulator:
         self.pulls = []
         self.pull_scale = 1.0          # scales every user pull (a timeline's "pull" channel)
         self.gravity_scale = 1.0       # scales gravity (a timeline's "gravity" channel)
-        self.systems = [_MuscleSystem(rig, m, self.h, spring, xi, zeta, rho, warp) for m in rig.muscles]
+        self.systems = [_MuscleSystem(rig, m, self.h, spring, xi, zeta, rho, warp, springs) for m in rig.muscles]
         self.names = [m.name for m in rig.muscles]
         self.inputs = ActivationMap(rig.muscles)
         self.gravity = None
@@ -544,7 +697,7 @@ class FaceSimulator:
         or the exact frame transitions) now rather than inside the first frames."""
         if self.reduced and not self.warp:
             self._frame_model()
-        else:
+        elif self.springs == "linear":
             self._frame_transitions()
         return self
 
@@ -590,7 +743,7 @@ class FaceSimulator:
         (`_MuscleSystem.frame_model`): a few states each, all in one small product; their
         full states come back (x = Ti xr) when step() or fields() needs them."""
         a = np.asarray(activations, float)[:len(self.systems)]
-        if self.warp:                                  # warping is not linear: step by step
+        if self.warp or self.springs != "linear":      # warping, eq. 15: not linear, step by step
             for _ in range(self.substeps):
                 self.step(a)
             return

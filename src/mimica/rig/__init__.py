@@ -167,10 +167,14 @@ def place_strip(mdef: MuscleDef, skin: Mesh, lm: np.ndarray, locator: TriangleLo
     on_skin, nn = _normal_at(locator, skin, normals, pts)
     depth = (mdef.origin_depth + (mdef.insertion_depth - mdef.origin_depth) * np.repeat(s.ravel(), COLS)) * ew
     nodes = on_skin - nn * depth[:, None]
+    return nodes, strip_triangles()
+
+
+def strip_triangles() -> np.ndarray:
+    """The triangles of a muscle strip's ROWS x COLS grid of nodes (two a cell), origin row first."""
     g = np.arange(ROWS * COLS).reshape(ROWS, COLS)
     a, b, c, d = g[:-1, :-1].ravel(), g[:-1, 1:].ravel(), g[1:, 1:].ravel(), g[1:, :-1].ravel()
-    tris = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
-    return nodes, tris
+    return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
 
 
 def _normal_at(locator, skin, normals, points):
