@@ -180,12 +180,13 @@ class ImageAnalogy:
         inside = (self.face_tri[pa.tri_id] & pa.covered).reshape(self.h, self.w)
         return np.clip(distance_transform_edt(inside) / self.feather, 0, 1).astype(np.float32)
 
-    def prepare(self, source, s_pts, expressive, x_pts, strength=1.0):
-        """Steps 2-3: both sources resampled onto the target's grid (crop), and the warp of step 5."""
+    def prepare(self, source, s_pts, expressive, x_pts, strength=1.0, resample=True):
+        """Steps 2-3: both sources resampled onto the target's grid (crop; None without
+        `resample`, for the appearance steps that do not read them), and the warp of step 5."""
         p_s, p_x, p_tw = self._controls(s_pts, x_pts, strength)
         hw = (self.h, self.w)
-        s_r = sample(luminance(source), *self.grid.map(p_s)).reshape(hw)
-        x_r = sample(luminance(expressive), *self.grid.map(p_x)).reshape(hw)
+        s_r = sample(luminance(source), *self.grid.map(p_s)).reshape(hw) if resample else None
+        x_r = sample(luminance(expressive), *self.grid.map(p_x)).reshape(hw) if resample else None
         warp = Bilinear(*PiecewiseAffine(p_tw, self.tris, self.w, self.h).map(self.ctrl_t), self.h, self.w)
         off = np.array(self.box[:2], float)
         return s_r, x_r, warp, p_tw[:68] + off
@@ -336,7 +337,8 @@ class ImageAnalogy:
             raise MimicaError(f"head {head!r}: still (the target's head stays) or follow (it moves as the source's)")
         per = point_strengths(strength)                       # a number, or {region: a}
         strength = float(per[0]) if np.all(per == per[0]) else per
-        s_r, x_r, look, pts = self.prepare(source, s_pts, expressive, x_pts, strength)
+        s_r, x_r, look, pts = self.prepare(source, s_pts, expressive, x_pts, strength,
+                                           resample=method in ("vtc", "eri"))
         yuv = self.crop_yuv
         if method == "shading":
             yuv = yuv * self.shading_ratio(s_pts, x_pts, strength)[..., None]
