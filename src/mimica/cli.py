@@ -1232,7 +1232,7 @@ def build_parser():
     s.add_argument("--springs", choices=["linear", "kim"], default="linear",
                    help="the muscle-to-skin springs: linear, k (u_m - u_s) (default); kim: Kim's eq. 15 "
                         "(relative elongation) along the spring's deformation, linearized each step "
-                        "(about 7x slower, docs/benchmarks.md)")
+                        "(docs/benchmarks.md)")
     s.add_argument("--wrinkles", metavar="MASK", help="wrinkle mask of this face (`mimica wrinkle-mask`): "
                    "bulges follow the skin's compression and the age")
     s.add_argument("--age", type=float, default=50.0, help="age in years for the wrinkles (a timeline's "

@@ -5,9 +5,10 @@ Per step and per muscle i (all vectorized over the muscle's spring nodes):
   muscle:  q_m'' + 2 w q_m' + w^2 q_m = w^2 a_i(t)     (the stretch mode, Kim eqs. 11-13)
   springs: F = k (u_m - u_s), implicit in the skin's modes: Kim's eq. 15 (relative elongation)
            in the limit of motions large against the layer's thickness, along u_m - u_s (eq. 16's
-           S_d - S_ud with the skin's end moving too).  springs="kim": eqs. 15-16 as written
-           (kim_spring), linearized at every step; measured against the linear law in
-           docs/benchmarks.md (issue 18), the linear one stays the default.
+           S_d - S_ud with the skin's end moving too).  springs="kim": eq. 15's relative elongation
+           along the spring's deformation (kim_spring; eq. 16 as printed diverges), linearized
+           at every step; measured against the linear law in docs/benchmarks.md (issue 18), the
+           linear one stays the default.
   skin:    the muscle's ROI system driven by R^T F, its displacement warped by the integrated
            rotation (modal warping, eqs. 10, 17-19; warp=False: linear)
   drives:  the jaw, the lids and the cheeks' pressure (rig.drives): anchors moving with their
@@ -114,8 +115,8 @@ class _MuscleSystem:
             if len(loads) == 2:                      # the jaw: exact rotation of its anchors at any angle
                 self.phi = float(np.radians(muscle.info["angle"]))
         elif springs == "kim":
-            # eqs. 15-16 as written: nonlinear in the skin's displacement, so the springs'
-            # stiffness is not in the system's; it is linearized at every step (step_kim).  Each
+            # eq. 15 (kim_spring): nonlinear in the skin's displacement, so the springs'
+            # stiffness is not in the system's; it is linearized at every step (_step_kim).  Each
             # spring as stiff as the linear one for a stretch along it: k_15 = k |s_init|
             s_init = muscle.nodes - rig.skin.vertices[muscle.attach]
             l0 = np.maximum(np.linalg.norm(s_init, axis=1), 1e-9 * rig.params["mean_edge"])
@@ -165,7 +166,7 @@ class _MuscleSystem:
         sv.q, sv.v = np.array(x[2:2 + r]), np.array(x[2 + r:])
         self.resting = not np.any(x)
 
-    _kim = None                      # eqs. 15-16's springs: (s_init, k, Phi rows per spring, stretch)
+    _kim = None                      # eq. 15's springs: (s_init, k, Phi rows per spring, stretch)
 
     def transition(self):
         """The step is linear in (state, activation): x' = A x + B a; A and B, column by column
@@ -296,7 +297,7 @@ class _MuscleSystem:
         sv.q = sv.q + h * sv.v
 
     def _step_kim(self):
-        """One step of the skin under eqs. 15-16's springs, linearized at the present state
+        """One step of the skin under eq. 15's springs (kim_spring), linearized at the present state
         (one Newton step of implicit Euler): (I + hC + h^2 (Lambda - Phi^T J Phi)) v' = v +
         h (Phi^T F - Lambda q), J = dF/du_s per spring; with warping each pull enters its node's
         frame by R^T (the linearization stays in the rest frame)."""
@@ -492,7 +493,7 @@ def shell_stretch_modes(rig) -> list:
     """Every strip muscle's stretch (Muscle.stretch, the bar's) replaced by its shell stretch mode
     (shell_stretch_mode; `mimica rig --stretch shell`), before its modal system is made; the rig
     records it (params "stretch").  Returns [(name, alignment, mode index)]."""
-    if any(isinstance(m.basis, ModalBasis) or isinstance(m.basis, dict) for m in rig.muscles if m.kind != "drive"):
+    if any(m.basis is not None for m in rig.muscles if m.kind != "drive"):
         raise MimicaError("rig: its muscles' systems are already made; choose the stretch modes when building it")
     out = []
     for m in rig.muscles:
@@ -609,9 +610,9 @@ class FaceSimulator:
         then steps each muscle's balanced truncation at the same tolerance.  step() and
         `fields()` stay exact.  The reduced model is linear: with it, warp defaults to off.
 
-        springs: "linear" (default), k (u_m - u_s) in the system's stiffness; "kim", Kim's eqs.
-        15-16 as written (kim_spring), linearized at each step: no linear model then (no
-        `reduced`, no fit), every frame stepped."""
+        springs: "linear" (default), k (u_m - u_s) in the system's stiffness; "kim", Kim's eq.
+        15 along the spring's deformation (kim_spring), linearized at each step: no linear model
+        then (no `reduced`, no fit), every frame stepped."""
         if springs not in SPRING_LAWS:
             raise MimicaError(f"springs {springs!r}: one of {', '.join(SPRING_LAWS)}")
         if springs == "kim" and reduced:
