@@ -24,7 +24,8 @@ target's light is:
 The clip and smoothing keep the generic face's misfit on real faces (lips, nostrils, the chin of an
 open jaw) from showing: on the Yale pairs, happy and surprised, unclipped and unsmoothed 20.51 /
 18.42 dB, clipped 20.78 / 19.11, smoothed 21.0 / 19.6-19.7 against the warp's 20.00 / 19.62; on the
-rendered ICT pairs the same costs 26.57 (true shading) -> 26.3 dB (bench/transfer_image.py).
+rendered ICT pairs this step gives 26.27 dB against the true shading's 26.57 (bench/transfer_image.py,
+docs/benchmarks.md).
 Song's eq. 4 stays as method "vtc", the reference.
 """
 
