@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 
 from mimica.anim import PRESETS, Timeline  # noqa: E402
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel  # noqa: E402
@@ -38,6 +39,7 @@ from mimica.mesh import plane_grid  # noqa: E402
 from mimica.physics.modal import against_full  # noqa: E402
 from mimica.render import contact_sheet, render_mesh, save_png, shared_frame  # noqa: E402
 from mimica.physics import precompute  # noqa: E402
+from calibrate_muscles import TARGETS  # noqa: E402  (the calibrated muscles and their ICT shapes)
 from mimica.rig import build_rig  # noqa: E402
 import mimica  # noqa: E402
 mimica.keep_memory()                   # as the command line does (mimica/_memory.py)
@@ -208,8 +210,6 @@ def spring_laws(face, skin, lm, hold=1.5, fps=60.0):
     muscle (tools/calibrate_muscles.py's targets, right side) held at 0.8 for `hold` seconds,
     warped, its field's cosine with its ICT shape and its size against the shape's; steps/s with
     one muscle active."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
-    from calibrate_muscles import TARGETS
     names = list(TARGETS)
     rig = precompute(build_rig(skin, lm, muscles=names, gravity=False))
     res, speed = {}, {}
@@ -243,7 +243,6 @@ def stretch_modes(face, seeds=(1001, 1002, 1003)):
     shell`) against the bar's (what the library is calibrated with): each calibrated muscle's
     rest field (one sparse solve, physics.fit.static_field) against its ICT shape, on the
     held-out identities."""
-    from calibrate_muscles import TARGETS                      # (tools/ on the path: spring_laws)
     from mimica.physics.face import shell_stretch_modes
     from mimica.physics.fit import skin_stiffness, static_field
     names = list(TARGETS)

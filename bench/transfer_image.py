@@ -113,9 +113,9 @@ def self_transfer(yale, quick):
         an = ImageAnalogy(s, sp)
         for e in ("happiness", "surprise", "disgust", "anger", "sadness", "fear"):
             x, xp = ph.photo(ident, e)
-            r = an.transfer(s, sp, x, xp)
-            ict.append(psnr(r.image, align_to(x, xp, sp), r.mask > 0.5))
-            ict_vtc.append(psnr(an.transfer(s, sp, x, xp, method="vtc").image, align_to(x, xp, sp), r.mask > 0.5))
+            r, truth = an.transfer(s, sp, x, xp), align_to(x, xp, sp)
+            ict.append(psnr(r.image, truth, r.mask > 0.5))
+            ict_vtc.append(psnr(an.transfer(s, sp, x, xp, method="vtc").image, truth, r.mask > 0.5))
     vals = []
     for i in range(1, 11 if not quick else 4):
         s, sp = yale(f"subject{i:02d}.normal")

@@ -102,15 +102,9 @@ def landmark_basis(head_glb) -> LandmarkBasis:
 
 def _pose(model: np.ndarray, image: np.ndarray, rows=RIGID):
     """Scaled orthographic pose (s, R (3x3), t (2,)) taking 3D points to image points (y up),
-    by Procrustes on `rows`."""
-    X, x = model[rows], image[rows]
-    mx, mi = X.mean(0), x.mean(0)
-    M = np.linalg.lstsq(X - mx, x - mi, rcond=None)[0].T        # (2, 3)
-    u, sv, vt = np.linalg.svd(M, full_matrices=False)
-    r2 = u @ vt
-    R = np.vstack([r2, np.cross(r2[0], r2[1])])
-    s = float(sv.mean())
-    return s, R, mi - s * r2 @ mx
+    fitted on `rows` (image.warp.orthographic_pose)."""
+    from ..image.warp import orthographic_pose
+    return orthographic_pose(model[rows], image[rows])
 
 
 def _cross_matrices(v: np.ndarray) -> np.ndarray:

@@ -296,11 +296,15 @@ class ImageAnalogy:
         r_s, r_l = gaussian_filter(r, small), gaussian_filter(r, large)
         detail = gaussian_filter(np.abs(r_s - r_l), large)
         wgt = np.clip(detail / 0.03, 0, 1)
-        rr = wgt * r_s + (1 - wgt) * r_l
+        return self._apply_ratio(wgt * r_s + (1 - wgt) * r_l, mask, strength)
+
+    def _apply_ratio(self, ratio, mask, strength) -> np.ndarray:
+        """A ratio image to the power of the strength (a number or per region), 1 outside the
+        mask: what ERI and the shading step multiply the target by."""
         strength = self._strength_map(strength)
         if not (np.isscalar(strength) and strength == 1):
-            rr = rr ** np.asarray(strength, np.float32)
-        return (mask * rr + (1 - mask)).astype(np.float32)
+            ratio = ratio ** np.asarray(strength, np.float32)
+        return (mask * ratio + (1 - mask)).astype(np.float32)
 
     def setup(self, method: str = "shading") -> "ImageAnalogy":
         """Build now what `method` needs of the target once (for "shading": the generic face and
@@ -312,17 +316,13 @@ class ImageAnalogy:
     @cached_property
     def _shading(self):
         from .shading import TargetShading
-        return TargetShading(self.crop_yuv[..., 0], self.points - np.array(self.box[:2], float), self.mask_t > 0.5)
+        return TargetShading(self.crop_yuv[..., 0], self.ctrl_t[:68], self.mask_t > 0.5)
 
     def shading_ratio(self, s_pts, x_pts, strength=1.0) -> np.ndarray:
         """The expression's shading change under the target's light (image.shading), per pixel of
         the crop: 1 outside the face, to the power `strength` (a number or per region)."""
         from .shading import face_model
-        r = self._shading.ratio(face_model().fit_expression(s_pts, x_pts))
-        strength = self._strength_map(strength)
-        if not (np.isscalar(strength) and strength == 1):
-            r = r ** np.asarray(strength, np.float32)
-        return (self.mask_t * r + (1 - self.mask_t)).astype(np.float32)
+        return self._apply_ratio(self._shading.ratio(face_model().fit_expression(s_pts, x_pts)), self.mask_t, strength)
 
     def transfer(self, source, s_pts, expressive, x_pts, method="shading", strength=1.0, head="still") -> Result:
         """The target with the expression of (source -> expressive).  Images in [0, 1]: RGB, or

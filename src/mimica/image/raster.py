@@ -112,6 +112,14 @@ def rasterize(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, width: int, heigh
     return tri_id.reshape(height, width), bary.reshape(height, width, 3)
 
 
+def facing(xy: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """(T,) bool: the triangles of an outward mesh that face the viewer, from their projected
+    corners (pixel coordinates, y down: a counter-clockwise triangle on screen has negative area)."""
+    q = xy[tris]
+    return ((q[:, 1, 0] - q[:, 0, 0]) * (q[:, 2, 1] - q[:, 0, 1])
+            - (q[:, 2, 0] - q[:, 0, 0]) * (q[:, 1, 1] - q[:, 0, 1])) < 0
+
+
 def render_mesh(mesh: Mesh, vertices=None, size=(512, 512), yaw=0.0, pitch=0.0, colors=None,
                 background=(255, 255, 255), frame=None, base_color=(0.82, 0.72, 0.64), light=None,
                 cull=None) -> np.ndarray:
@@ -131,10 +139,7 @@ def render_mesh(mesh: Mesh, vertices=None, size=(512, 512), yaw=0.0, pitch=0.0, 
     xy, cam = project(v, frame, size, yaw, pitch)
     tris = mesh.triangles
     if mesh.outward_oriented if cull is None else cull:
-        q = xy[tris]
-        area = ((q[:, 1, 0] - q[:, 0, 0]) * (q[:, 2, 1] - q[:, 0, 1])
-                - (q[:, 2, 0] - q[:, 0, 0]) * (q[:, 1, 1] - q[:, 0, 1]))
-        tris = tris[area < 0]
+        tris = tris[facing(xy, tris)]
     pix, tri, l0, l1 = rasterize_pixels(xy, cam[:, 2], tris, w, h)
     t = tris[tri]
     b = np.stack([l0, l1, 1 - l0 - l1], 1)

@@ -40,6 +40,20 @@ class Similarity2D:
         return cls(s, r, cb - s * r @ ca)
 
 
+def orthographic_pose(points3d, points2d):
+    """Scaled orthographic pose (s, R (3x3), t (2,)) with points2d ~ s R[:2] points3d + t: the affine
+    camera by least squares, its rows made orthonormal (Procrustes), R's third row their cross
+    product.  2D axes as given (flip y first for image rows that grow downward)."""
+    X, x = np.asarray(points3d, float), np.asarray(points2d, float)
+    mx, mi = X.mean(0), x.mean(0)
+    M = np.linalg.lstsq(X - mx, x - mi, rcond=None)[0].T        # (2, 3)
+    u, sv, vt = np.linalg.svd(M, full_matrices=False)
+    r2 = u @ vt
+    R = np.vstack([r2, np.cross(r2[0], r2[1])])
+    s = float(sv.mean())
+    return s, R, mi - s * r2 @ mx
+
+
 def head_motion(pts, ref_pts) -> Similarity2D:
     """The similarity on the stable points (eye corners, nose) taking pts into ref_pts' frame:
     how the analogy removes the head motion between a neutral and an expressive photo."""

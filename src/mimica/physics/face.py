@@ -86,6 +86,15 @@ def kim_spring(s_init: np.ndarray, u_m: np.ndarray, u_s: np.ndarray, k) -> tuple
     return f, -g, g
 
 
+def _free_rows(basis, nodes) -> tuple:
+    """Which of `nodes` the system moves ((k,) bool) and their rows in its free DOFs (3 a node)."""
+    pos = np.full(basis.n, -1)
+    pos[basis.free] = np.arange(len(basis.free))
+    p = pos[np.asarray(nodes)]
+    ok = p >= 0
+    return ok, (3 * p[ok][:, None] + np.arange(3)).ravel()
+
+
 class _MuscleSystem:
     """One muscle's skin system: its ROI's modes, coupled to the muscle by springs.
 
@@ -138,19 +147,11 @@ class _MuscleSystem:
         self.fq_unit = sum(parts)                     # at full activation (the linear model: chord)
         if len(parts) == 2:
             self.fq_parts = parts
-        if warp and self._kim is not None:
-            pos = np.full(b.n, -1)
-            pos[b.free] = np.arange(len(b.free))
-            pk = pos[muscle.attach]
-            self._kim_free = pk >= 0                  # (a held node's rows are zero: any frame does)
-            self._kim_rows = (3 * pk[self._kim_free][:, None] + np.arange(3)).ravel()
+        if warp and self._kim is not None:            # each spring's node (a held node's rows are zero)
+            self._kim_free, self._kim_rows = _free_rows(b, muscle.attach)
             self._psi_k = None
         elif warp:                                    # Kim eq. 10: the pulls in the nodes' frames, R^T F
-            pos = np.full(b.n, -1)
-            pos[b.free] = np.arange(len(b.free))
-            p = pos[uniq]
-            ok = p >= 0
-            self._rows = (3 * p[ok][:, None] + np.arange(3)).ravel()
+            ok, self._rows = _free_rows(b, uniq)
             self._psi_a = None                        # the rotation field there, when first needed
             self._phi_a = phi[ok]
             self._loads = [f[ok] for f in loads]

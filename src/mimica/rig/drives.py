@@ -272,8 +272,7 @@ def lid_drive(x, lm, side: str, what: str):
         # up, 0.12 inward on average); lid_raise_in chosen by the whole library's fit of eyeSquint
         # on the training faces (generic, seeds 11, 12: 0.754-0.765 without, 0.856-0.871 at 0.75,
         # 0.5 and 1.0 a little lower), docs/benchmarks.md
-        outer, inner = (36, 39) if side == "R" else (45, 42)
-        inward = np.sign(right @ (lm[inner] - lm[outer])) * right
+        inward = np.sign(s1 - s0) * right                   # s0, s1: the outer and inner corners
         motion = motion + PARAMS["lid_raise_in"] * np.linalg.norm(motion, axis=1)[:, None] * inward[None]
     info = {"eye": side, "centre": c.tolist(), "width": width, "up": up.tolist(), "fwd": fwd.tolist(),
             "raise": PARAMS["lid_raise"], "wide": float(np.radians(PARAMS["lid_wide_deg"])),
