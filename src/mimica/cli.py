@@ -204,7 +204,7 @@ def read_frames(paths, source):
 
 def cmd_transfer(a):
     from .mesh import read_mesh, write_mesh
-    from .transfer import ExpressionTransfer, static_vertices
+    from .transfer import BASIS_FRAMES, ExpressionTransfer, static_vertices
 
     t0 = time.perf_counter()
     source = read_mesh(a.source_neutral)
@@ -231,10 +231,17 @@ def cmd_transfer(a):
              f"{len(xfer.mouth.copies_of)} added after the target's own (--cut-mouth off to keep them sealed)")
     _warn_sealed_eyes(target, lt, a.target)
     target = xfer.output_mesh
-    out = np.empty((len(frames), target.n_vertices, 3))
-    step = 32
-    for i in _progress(range(0, len(frames), step), (len(frames) + step - 1) // step, "transferring"):
-        out[i:i + step] = xfer.apply(frames[i:i + step])
+    if len(frames) >= BASIS_FRAMES:                    # a long sequence: through its basis, if it holds
+        out = xfer.apply(frames, basis=True)
+        r = xfer.basis_report
+        _say(f"{len(frames)} frames through a basis of their motion ({r['deviation']:.1e} of the motion "
+             f"off on {r['checked']} frames solved one by one)" if r["used"] else
+             f"{len(frames)} frames one by one: {r['why']}")
+    else:
+        out = np.empty((len(frames), target.n_vertices, 3))
+        step = 32
+        for i in _progress(range(0, len(frames), step), (len(frames) + step - 1) // step, "transferring"):
+            out[i:i + step] = xfer.apply(frames[i:i + step])
     t3 = time.perf_counter()
     outdir = Path(a.out)
     from .outputs import staged_dir

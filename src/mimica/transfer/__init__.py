@@ -25,10 +25,14 @@ from ..mesh import Mesh
 from .core import DT_STABILIZER, METHODS, TransferSolver, static_vertices
 from .metrics import relative_error, song_vertex_error
 
-BASIS_CHECK = 4           # frames solved one by one to check it
-BASIS_DEVIATION = 1e-3    # ... which must agree within this share of their largest motion
+BASIS_FRAMES = 128        # sequences this long go through their basis by default
+BASIS_CHECK = 4           # frames solved one by one to check it (between its training frames)
+# ... which must agree within this share of their largest motion: a quarter of the 1e-3 promised,
+# since the largest deviation over a whole sequence measured 1.4-3.6x the checked frames'
+# (bench/batch.py's sequence and a 6k remesh, 96-300 frames)
+BASIS_DEVIATION = 2.5e-4
 
-__all__ = ["ExpressionTransfer", "TransferSolver", "static_vertices", "relative_error",
+__all__ = ["ExpressionTransfer", "TransferSolver", "static_vertices", "relative_error", "BASIS_FRAMES",
            "song_vertex_error", "METHODS"]
 
 
@@ -155,7 +159,7 @@ class ExpressionTransfer:
         self._parts = PartMotion(self.source, ps, self.target, pt, t_skin, t_idx, self.similarity, ls_pos)
 
     def apply(self, frames: np.ndarray, batch: int = 32, workers: int | None = None,
-              basis: bool = False) -> np.ndarray:
+              basis: bool | None = None) -> np.ndarray:
         """Source frames (F, n_S, 3) or (n_S, 3) -> target frames (F, n_T, 3) or (n_T, 3).
 
         Frames go through in batches (one back-substitution with 3 x batch right-hand
@@ -164,14 +168,16 @@ class ExpressionTransfer:
 
         basis: a sequence whose motion lies in a few shapes goes through their basis
         (TransferSolver.apply_basis: one back-substitution per basis shape), kept only when a
-        few frames spread over the sequence, solved one by one, agree within BASIS_DEVIATION of
-        their motion; `basis_report` says what happened.  Off by default: on this machine it
-        measured 503 against 256 frames/s in one run and 452-544 against 480-488 in later ones
-        (bench/batch.py), no steady gain for its 2.7e-4 of the motion.
+        few frames between its training frames, solved one by one, agree within
+        BASIS_DEVIATION of their motion; `basis_report` says what happened.  Default (None):
+        sequences of BASIS_FRAMES frames or more (bench/batch.py's 300 frames: 1,700 against
+        450 frames/s, 2.8e-4 of the motion off; 96 frames: 650 against 380; 64: slower).
         """
         frames = np.asarray(frames, dtype=np.float64)
         single = frames.ndim == 2
         f = frames[None] if single else frames
+        if basis is None:
+            basis = len(f) >= BASIS_FRAMES
         if self._parts is not None:
             skin = self._skin.apply(f[:, self._source_skin], batch, workers, basis)
             self.basis_report = self._skin.basis_report
@@ -207,9 +213,13 @@ class ExpressionTransfer:
         BASIS_DEVIATION on the frames checked one by one)."""
         out = self.solver.apply_basis(f, similarity=self._back)
         if out is None:
-            self.basis_report = {"used": False, "why": "the motion does not lie in few shapes"}
+            self.basis_report = {"used": False, "why": self.solver.basis_stats["why"]}
             return None
-        pick = np.unique(np.linspace(0, len(f) - 1, BASIS_CHECK).round().astype(int))
+        # checked where the tips were interpolated: frames between the training ones
+        others = np.setdiff1d(np.arange(len(f)), self.solver.basis_stats["trained"])
+        if len(others) == 0:
+            others = np.arange(len(f))
+        pick = others[np.unique(np.linspace(0, len(others) - 1, BASIS_CHECK).round().astype(int))]
         exact = self.solver.apply(f[pick], self._back)
         # against the frames' largest motion, and no less than 1e-6 of the face's size (frames at
         # rest move by rounding alone)

@@ -43,6 +43,9 @@ DT_STABILIZER = 0.5
 BASIS_TOL = 1e-5          # a sequence's basis keeps all but this share of its motion (RMS)
 BASIS_TOL_TIPS = 1e-4     # ... and of the motion in its tips' nonlinear part
 BASIS_MAX = 0.4           # ... and is used only when it has at most this share of the frames' count
+BASIS_TIPS_MAX = 0.6      # ... (the tips: of their training rows)
+BASIS_TRAIN = 64          # frames on which the basis and the tips' are found
+BASIS_TIPS_CHECK = 1e-3   # the tips' interpolation, off by no more than this on frames between
 
 
 def _orthonormal(a: np.ndarray) -> np.ndarray:
@@ -85,6 +88,134 @@ def _basis(samples: np.ndarray, tol: float, scale: float | None = None, start: i
         if p >= min(m, limit + 8):
             return None
         p = min(2 * p, m, limit + 8)
+
+
+def _coordinate_rows(frames: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """(3F, n) the frames' displacements, row 3f + c: frame f's coordinate c."""
+    return (frames - S).transpose(0, 2, 1).reshape(3 * len(frames), len(S))
+
+
+def _blocks(work, n: int, size: int) -> None:
+    """work(i) for i = 0, size, 2 size ... < n, on all cores (numpy's loops and single-threaded
+    BLAS release the GIL; BLAS's own threads measured slower here, fighting CHOLMOD's)."""
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+    starts = range(0, n, size)
+    workers = min(os.cpu_count() or 1, len(starts))
+    if workers <= 1:
+        for i in starts:
+            work(i)
+        return
+    with ThreadPoolExecutor(workers) as ex:
+        list(ex.map(work, starts))
+
+
+def _matmul(a: np.ndarray, b: np.ndarray, size: int = 0) -> np.ndarray:
+    """a @ b, b's columns shared among the cores (see _blocks)."""
+    out = np.empty((a.shape[0], b.shape[1]), np.result_type(a, b))
+    size = size or max(1, -(-b.shape[1] // 2))
+
+    def one(j):
+        np.matmul(a, b[:, j:j + size], out=out[:, j:j + size])
+    _blocks(one, b.shape[1], size)
+    return out
+
+
+def _project(frames: np.ndarray, S: np.ndarray, q: np.ndarray, chunk: int = 16):
+    """Coefficients (k, 3F) of every frame's displacement on the orthonormal basis q (n, k), in
+    the rows' order of _coordinate_rows, the energy outside q and the total, frames a chunk at
+    a time (no transposed copy of the whole sequence)."""
+    nf, k = len(frames), q.shape[1]
+    c = np.empty((nf, k, 3))
+    qt = np.ascontiguousarray(q.T)
+    totals = np.zeros(-(-nf // chunk))
+
+    def one(i):
+        d = frames[i:i + chunk] - S
+        totals[i // chunk] = np.vdot(d, d)
+        np.matmul(qt, d, out=c[i:i + chunk])
+    _blocks(one, nf, chunk)
+    total = float(totals.sum())
+    inside = float(np.vdot(c, c))
+    return np.ascontiguousarray(c.transpose(1, 0, 2)).reshape(k, 3 * nf), max(total - inside, 0.0), total
+
+
+def _bend_rows(el: Elements, lin, coef_rows: np.ndarray, at=None, chunk: int = 8) -> np.ndarray:
+    """The tips' nonlinear part minus its rest value, (3F, E), for frames given by their
+    coefficient rows (3F, k) on the basis whose tip operators' products are lin = (a Q, b Q,
+    a S, b S) (restricted to the elements `at`), a few frames at a time so that the
+    temporaries stay in cache."""
+    aq, bq, a0, b0 = lin
+    nf, e = len(coef_rows) // 3, len(aq)
+    g0 = el.tip_bend(tuple(a0.T), tuple(b0.T), at)
+    out = np.empty((nf, 3, e))
+    aq_t, bq_t = np.ascontiguousarray(aq.T), np.ascontiguousarray(bq.T)
+
+    def one(i):
+        rows = coef_rows[3 * i:3 * (i + chunk)]
+        m = len(rows) // 3
+        A = (rows @ aq_t).reshape(m, 3, e)
+        B = (rows @ bq_t).reshape(m, 3, e)
+        A += a0.T[None]
+        B += b0.T[None]
+        g = el.tip_bend((A[:, 0], A[:, 1], A[:, 2]), (B[:, 0], B[:, 1], B[:, 2]), at)
+        for c in range(3):
+            np.subtract(g[c], g0[c], out=out[i:i + m, c])
+    _blocks(one, nf, chunk)
+    return out.reshape(3 * nf, e)
+
+
+def _gram_basis(rows: np.ndarray, tol: float, scale: float) -> np.ndarray | None:
+    """An orthonormal basis (dim, k) of the rows (m, dim), m small: from the eigenvectors of
+    their Gram matrix (31 against the range finder's 127 ms on 300 x 11,248 tips), truncated where the
+    energy left outside is within tol of `scale`; None when k would exceed BASIS_MAX of the
+    rows' count.  (Eigenvalues resolve to 1e-16 of the largest: tol down to 1e-7 holds.)"""
+    w, v = np.linalg.eigh(_matmul(rows, rows.T))
+    w, v = np.maximum(w[::-1], 0.0), v[:, ::-1]
+    tail = w.sum() - np.cumsum(w)
+    k = int(np.nonzero(tail <= (tol * tol) * max(scale * scale, 1e-300))[0][0]) + 1 if w.sum() > 0 else 0
+    if k > max(1, int(BASIS_TIPS_MAX * len(rows))):
+        return None
+    return _matmul(rows.T, v[:, :k] / np.sqrt(np.maximum(w[:k], 1e-300)))   # orthonormal to 1e-10
+
+
+def _deim_points(q: np.ndarray, rounds: int = 3) -> np.ndarray:
+    """Rows of q (n, k) to interpolate it from: `rounds` rounds of k pivots of a pivoted QR
+    of q's transpose (Q-DEIM, Drmač & Gugercin 2016), each round among the rows not yet taken
+    (oversampling: the least-squares fit from 3k rows measured 2x closer than from k), the
+    candidates restricted to the 10k rows of largest leverage (8x faster, 1.2x the error)."""
+    import scipy.linalg as sla
+    k = q.shape[1]
+    if k == 0:
+        return np.zeros(0, int)
+    cand = np.argsort(-np.einsum("ij,ij->i", q, q))[:10 * k]
+    taken = np.zeros(len(cand), bool)
+    for _ in range(rounds):
+        left = np.nonzero(~taken)[0]
+        if len(left) == 0:
+            break
+        _, piv = sla.qr(q[cand[left]].T, mode="r", pivoting=True)
+        taken[left[piv[:k]]] = True
+    return np.sort(cand[taken])
+
+
+def _combine(Z: np.ndarray, coef: np.ndarray, x0: np.ndarray, block: int = 8) -> np.ndarray:
+    """x0 + Z @ coef as frames (F, n, 3), Z (n, k), coef (k, F, 3): single-precision GEMMs
+    (rounding 1e-7 of the motion) a few frames at a time, each block transposed into place
+    while in cache, blocks on all cores (one double-precision GEMM and a transpose of the
+    whole output measured 3.6x slower)."""
+    n, k = Z.shape
+    nf = coef.shape[1]
+    out = np.empty((nf, n, 3))
+    z = Z.astype(np.float32)
+    c = coef.astype(np.float32)
+
+    def one(i):
+        m = min(block, nf - i)
+        y = (z @ c[:, i:i + m].reshape(k, 3 * m)).reshape(n, m, 3)
+        np.add(y.transpose(1, 0, 2), x0[None], out=out[i:i + block])
+    _blocks(one, nf, block)
+    return out
 
 
 def static_vertices(source_neutral: np.ndarray, frames: np.ndarray, rtol=1e-7) -> np.ndarray:
@@ -209,67 +340,91 @@ class TransferSolver:
 
     def apply_basis(self, frames: np.ndarray, tol: float = BASIS_TOL, similarity=None):
         """Frames (F, n_s, 3) through a basis of their motion (issue 19, part 6): None where the
-        motion does not lie in few enough shapes, else the target frames (F, n_t, 3).
+        motion does not lie in few enough shapes or the tips' interpolation does not hold, else
+        the target frames (F, n_t, 3); `basis_stats` says what was used, or why not.
 
         The system is linear in [S'; tips(S')], coordinate by coordinate.  The source's
-        displacements (each frame's x, y and z columns) are reduced to an orthonormal basis Q
-        (randomized range finder, truncated at `tol` of their energy); the tips' linear parts
-        follow from Q by a few sparse products, and their nonlinear parts (the normalized normal
-        of each tent, Song §IV; DT's scaled normal) are computed for every frame from those
-        products and reduced the same way.  The back-substitution then runs once per basis
-        vector, not once per frame; frames are combinations of the basis solutions (GEMMs).
-        Exact but for the two truncations."""
+        displacements (each frame's x, y and z columns) are reduced to an orthonormal basis Q,
+        found on BASIS_TRAIN frames spread over the sequence (randomized range finder,
+        truncated at `tol` of their energy) and checked on all of them; the tips' linear parts
+        follow from Q by a few sparse products.  Their nonlinear part (the normalized normal of
+        each tent, Song §IV; DT's scaled normal) is computed exactly on the same BASIS_TRAIN
+        frames, reduced to its own basis, and interpolated for every frame from a few elements
+        (DEIM, Chaturantabut & Sorensen 2010, points by pivoted QR as Drmač & Gugercin 2016,
+        oversampled 3x), checked on frames between the training ones.  The back-substitution
+        then runs once per basis vector, not once per frame; frames are combinations of the
+        basis solutions (one GEMM, single precision, frame block by frame block in the
+        output's layout).  Exact but for the truncations, the interpolation and the GEMM's
+        rounding (1e-7)."""
+        from threadpoolctl import threadpool_limits   # here: its import sets KMP_DUPLICATE_LIB_OK
+        with threadpool_limits(limits=1, user_api="blas"):
+            return self._apply_basis(frames, tol, similarity)
+
+    def _apply_basis(self, frames, tol, similarity):
         frames = np.asarray(frames, dtype=np.float64)
         nf, ns = len(frames), self.source.n_vertices
         S = self.source.vertices
-        samples = (frames - S).transpose(0, 2, 1).reshape(3 * nf, ns)        # row 3f + c: frame f's c
-        qd = _basis(samples, tol)
-        if qd is None:
-            return None
-        cd = qd.T @ samples.T                                                 # (kd, 3F)
-        blocks, rhs_cols = [], []
+        train = np.unique(np.linspace(0, nf - 1, min(nf, BASIS_TRAIN)).round().astype(int))
+        self.basis_stats = {"trained": train}
+        qd = _basis(_coordinate_rows(frames[train], S), tol)
+        cd, outside, total = (None, 0.0, 0.0) if qd is None else _project(frames, S, qd)
+        if qd is None or outside > tol * tol * total:                         # the training frames
+            qd = _basis(_coordinate_rows(frames, S), tol)                     # missed some motion
+            if qd is None:
+                self.basis_stats["why"] = "the motion does not lie in few shapes"
+                return None
+            cd, _, total = _project(frames, S, qd)
+        motion = np.sqrt(total)
+        rows = (3 * train[:, None] + np.arange(3)).ravel()                    # the training frames' rows
         rb = self._r_blocks
         first = rb[0] @ qd                                                    # R_v Q
-        motion = np.sqrt(np.einsum("ij,ij->", samples, samples))
-        cdt = cd.T                                                            # (3F, kd)
+        blocks, coefs = [], [cd]
+        self.basis_stats.update(source=qd.shape[1], tips=[], tips_check=[])
         for (el, _), r_t in zip(self.terms_s, rb[1:]):
             base, a, b = el.tip_operators
-            e = el.n_elements
-            a0, b0 = a @ S, b @ S
-            # each frame's two vectors per element, component by component, (F, E) each (double
-            # precision: single measured 1.0e-3 off on bench/batch.py's sequence, and no faster)
-            A = (cdt @ (a @ qd).T).reshape(nf, 3, e)
-            B = (cdt @ (b @ qd).T).reshape(nf, 3, e)
-            A += a0.T[None]
-            B += b0.T[None]
-            g = el.tip_bend((A[:, 0], A[:, 1], A[:, 2]), (B[:, 0], B[:, 1], B[:, 2]))
-            g0 = el.tip_bend(tuple(a0.T[c][None] for c in range(3)), tuple(b0.T[c][None] for c in range(3)))
-            gs = np.empty((nf, 3, e))
-            for c in range(3):
-                np.subtract(g[c], g0[c], out=gs[:, c])
-            gs = gs.reshape(3 * nf, e)
-            qg = _basis(gs, BASIS_TOL_TIPS, scale=motion, start=4 * max(qd.shape[1], 6) + 16)
+            lin = (a @ qd, b @ qd, a @ S, b @ S)
+            gt = _bend_rows(el, lin, cd[:, rows].T)                          # (3 F_train, E) exact
+            qg = _gram_basis(gt, BASIS_TOL_TIPS, motion * np.sqrt(len(train) / nf))
             if qg is None:
+                self.basis_stats["why"] = "the tips' motion does not lie in few shapes"
                 return None
+            if qg.shape[1] == 0:                                              # no bending: at rest
+                cg = np.zeros((0, 3 * nf))
+            elif len(train) == nf:
+                cg = qg.T @ gt.T
+            else:
+                p = _deim_points(qg)
+                gp = _bend_rows(el, tuple(m[p] for m in lin), cd.T, at=p)    # (3F, points)
+                cg = np.linalg.pinv(qg[p]) @ gp.T                             # (kg, 3F), least squares
+                # frames halfway between training ones, computed exactly
+                held = np.setdiff1d(np.unique(((train[:-1] + train[1:]) // 2)[::8]), train)
+                if len(held):
+                    hr = (3 * held[:, None] + np.arange(3)).ravel()
+                    err = _bend_rows(el, lin, cd[:, hr].T) - (qg @ cg[:, hr]).T
+                    dev = float(np.sqrt(np.einsum("ij,ij->", err, err) * nf / len(held))) / max(motion, 1e-300)
+                    self.basis_stats["tips_check"].append(dev)
+                    if dev > BASIS_TIPS_CHECK:
+                        self.basis_stats["why"] = (f"the tips' interpolation was off by {dev:.1e} of the "
+                                                   "motion between the training frames")
+                        return None
+            self.basis_stats["tips"].append(qg.shape[1])
             first = first + r_t @ (base @ qd)                                 # the tips' linear part
             blocks.append(r_t @ qg)
-            rhs_cols.append(qg.T @ gs.T)                                      # (kg, 3F)
+            coefs.append(cg)
         P = np.hstack([first] + blocks)
-        k = P.shape[1]
-        Z = np.zeros((self.n_target, k))                                      # every vertex's basis solutions
-        if k:                                                                 # (none: the frames are at rest)
-            Z[self.free] = self.solver.solve(P)
-        if len(self.fixed):                                                   # held vertices follow their partners
-            Z[self.fixed, :qd.shape[1]] = self._vm_fixed @ qd
-        coef = np.vstack([cd] + rhs_cols).reshape(k, nf, 3)                   # (k, F, 3)
+        k, kd = P.shape[1], qd.shape[1]
+        coef = np.vstack(coefs).reshape(k, nf, 3)                             # (k, F, 3)
         x0 = self._rest_solution
         if similarity is not None:                                            # back to the target's frame, on
             m = similarity.scale * similarity.rotation.T                      # the coefficients and the rest
             coef = coef @ m
             x0 = x0 @ m + similarity.translation
-        out = (Z @ coef.reshape(k, 3 * nf)).reshape(self.n_target, nf, 3)     # (n_t, F, 3)
-        out += x0[:, None, :]
-        return np.ascontiguousarray(out.transpose(1, 0, 2))
+        Z = np.zeros((self.n_target, k))                                      # every vertex's basis solutions
+        if k:                                                                 # (none: the frames are at rest)
+            Z[self.free] = self.solver.solve(P)
+        if len(self.fixed):                                                   # held vertices follow their partners
+            Z[self.fixed, :kd] = self._vm_fixed @ qd
+        return _combine(Z, coef, x0)
 
     @cached_property
     def _r_blocks(self):

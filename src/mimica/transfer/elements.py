@@ -75,16 +75,18 @@ class Elements:
         p0 = pick(0)
         return p0, (pick(1) - p0).tocsr(), (pick(2) - p0).tocsr()
 
-    def tip_bend(self, a, b):
+    def tip_bend(self, a, b, at=None):
         """g(a, b) of `tip_operators`, component by component: a and b are (x, y, z) triples of
-        arrays whose last axis runs over the elements (any precision); returns the triple g.
-        The same tips as `tips` (tested), written for the basis path's layout."""
+        arrays whose last axis runs over the elements (any precision), or over the elements
+        `at` (indices) only; returns the triple g.  The same tips as `tips` (tested), written
+        for the basis path's layout."""
         cx = a[1] * b[2] - a[2] * b[1]
         cy = a[2] * b[0] - a[0] * b[2]
         cz = a[0] * b[1] - a[1] * b[0]
         ln = np.sqrt(cx * cx + cy * cy + cz * cz)
         if self.kind == "vtc":
-            f = np.divide(self.ring_length.astype(ln.dtype), ln, out=np.zeros_like(ln), where=ln > 0)
+            h = self.ring_length if at is None else self.ring_length[at]
+            f = np.divide(h.astype(ln.dtype), ln, out=np.zeros_like(ln), where=ln > 0)
         else:
             f = 1.0 / np.sqrt(np.maximum(ln, ln.dtype.type(1e-30)))
         return cx * f, cy * f, cz * f
