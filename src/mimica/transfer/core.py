@@ -170,13 +170,14 @@ def _gram_basis(rows: np.ndarray, tol: float, scale: float) -> np.ndarray | None
     their Gram matrix (31 against the range finder's 127 ms on 300 x 11,248 tips), truncated where the
     energy left outside is within tol of `scale`; None when k would exceed BASIS_MAX of the
     rows' count.  (Eigenvalues resolve to 1e-16 of the largest: tol down to 1e-7 holds.)"""
-    w, v = np.linalg.eigh(_matmul(rows, rows.T))
+    w, v = np.linalg.eigh(rows @ rows.T)                                          # (numpy's SYRK)
     w, v = np.maximum(w[::-1], 0.0), v[:, ::-1]
     tail = w.sum() - np.cumsum(w)
     k = int(np.nonzero(tail <= (tol * tol) * max(scale * scale, 1e-300))[0][0]) + 1 if w.sum() > 0 else 0
     if k > max(1, int(BASIS_TIPS_MAX * len(rows))):
         return None
-    return _matmul(rows.T, v[:, :k] / np.sqrt(np.maximum(w[:k], 1e-300)))   # orthonormal to 1e-10
+    scaled = v[:, :k] / np.sqrt(np.maximum(w[:k], 1e-300))
+    return np.ascontiguousarray(_matmul(scaled.T, rows).T)                         # orthonormal to 1e-10
 
 
 def _deim_points(q: np.ndarray, rounds: int = 3) -> np.ndarray:
@@ -394,7 +395,7 @@ class TransferSolver:
                 cg = qg.T @ gt.T
             else:
                 p = _deim_points(qg)
-                gp = _bend_rows(el, tuple(m[p] for m in lin), cd.T, at=p)    # (3F, points)
+                gp = _bend_rows(el, tuple(m[p] for m in lin), cd.T, at=p, chunk=-(-nf // 2))   # (3F, points)
                 cg = np.linalg.pinv(qg[p]) @ gp.T                             # (kg, 3F), least squares
                 # frames halfway between training ones, computed exactly
                 held = np.setdiff1d(np.unique(((train[:-1] + train[1:]) // 2)[::8]), train)
