@@ -28,8 +28,8 @@ from .metrics import relative_error, song_vertex_error
 BASIS_FRAMES = 128        # sequences this long go through their basis by default
 BASIS_CHECK = 4           # frames solved one by one to check it (between its training frames)
 # ... which must agree within this share of their largest motion: a quarter of the 1e-3 promised,
-# since the largest deviation over a whole sequence measured 1.4-3.6x the checked frames'
-# (bench/batch.py's sequence and a 6k remesh, 96-300 frames)
+# since the largest deviation over a whole sequence measured 3.6-3.7x the checked frames'
+# (bench/batch.py's 300 frames: 7.6e-5 checked, 2.8e-4 in all; onto a 6k remesh 2.0e-4, 7.1e-4)
 BASIS_DEVIATION = 2.5e-4
 
 __all__ = ["ExpressionTransfer", "TransferSolver", "static_vertices", "relative_error", "BASIS_FRAMES",
@@ -170,8 +170,8 @@ class ExpressionTransfer:
         (TransferSolver.apply_basis: one back-substitution per basis shape), kept only when a
         few frames between its training frames, solved one by one, agree within
         BASIS_DEVIATION of their motion; `basis_report` says what happened.  Default (None):
-        sequences of BASIS_FRAMES frames or more (bench/batch.py's 300 frames: 1,700 against
-        450 frames/s, 2.8e-4 of the motion off; 96 frames: 650 against 380; 64: slower).
+        sequences of BASIS_FRAMES frames or more (bench/batch.py's 300 frames: 1,465 against
+        398 frames/s, 2.8e-4 of the motion off; 96 frames: 646 against 379; 64: slower).
         """
         frames = np.asarray(frames, dtype=np.float64)
         single = frames.ndim == 2

@@ -44,7 +44,7 @@ BASIS_TOL = 1e-5          # a sequence's basis keeps all but this share of its m
 BASIS_TOL_TIPS = 1e-4     # ... and of the motion in its tips' nonlinear part
 BASIS_MAX = 0.4           # ... and is used only when it has at most this share of the frames' count
 BASIS_TIPS_MAX = 0.6      # ... (the tips: of their training rows)
-BASIS_TRAIN = 64          # frames on which the basis and the tips' are found
+BASIS_TRAIN = 64          # frames on which the source's basis and the tips' are found
 BASIS_TIPS_CHECK = 1e-3   # the tips' interpolation, off by no more than this on frames between
 
 
@@ -168,8 +168,8 @@ def _bend_rows(el: Elements, lin, coef_rows: np.ndarray, at=None, chunk: int = 8
 def _gram_basis(rows: np.ndarray, tol: float, scale: float) -> np.ndarray | None:
     """An orthonormal basis (dim, k) of the rows (m, dim), m small: from the eigenvectors of
     their Gram matrix (31 against the range finder's 127 ms on 300 x 11,248 tips), truncated where the
-    energy left outside is within tol of `scale`; None when k would exceed BASIS_MAX of the
-    rows' count.  (Eigenvalues resolve to 1e-16 of the largest: tol down to 1e-7 holds.)"""
+    energy left outside is within tol of `scale`; None when k would exceed BASIS_TIPS_MAX of
+    the rows' count.  (Eigenvalues resolve to 1e-16 of the largest: tol down to 1e-7 holds.)"""
     w, v = np.linalg.eigh(rows @ rows.T)                                          # (numpy's SYRK)
     w, v = np.maximum(w[::-1], 0.0), v[:, ::-1]
     tail = w.sum() - np.cumsum(w)
@@ -398,11 +398,11 @@ class TransferSolver:
                 gp = _bend_rows(el, tuple(m[p] for m in lin), cd.T, at=p, chunk=-(-nf // 2))   # (3F, points)
                 cg = np.linalg.pinv(qg[p]) @ gp.T                             # (kg, 3F), least squares
                 # frames halfway between training ones, computed exactly
-                held = np.setdiff1d(np.unique(((train[:-1] + train[1:]) // 2)[::8]), train)
-                if len(held):
-                    hr = (3 * held[:, None] + np.arange(3)).ravel()
-                    err = _bend_rows(el, lin, cd[:, hr].T) - (qg @ cg[:, hr]).T
-                    dev = float(np.sqrt(np.einsum("ij,ij->", err, err) * nf / len(held))) / max(motion, 1e-300)
+                between = np.setdiff1d(np.unique(((train[:-1] + train[1:]) // 2)[::8]), train)
+                if len(between):
+                    br = (3 * between[:, None] + np.arange(3)).ravel()
+                    err = _bend_rows(el, lin, cd[:, br].T) - (qg @ cg[:, br]).T
+                    dev = float(np.sqrt(np.einsum("ij,ij->", err, err) * nf / len(between))) / max(motion, 1e-300)
                     self.basis_stats["tips_check"].append(dev)
                     if dev > BASIS_TIPS_CHECK:
                         self.basis_stats["why"] = (f"the tips' interpolation was off by {dev:.1e} of the "
