@@ -130,8 +130,9 @@ def test_long_sequences_go_through_their_basis(head_model):
     """A 160-frame performance of six expressions goes through its basis by default (one
     back-substitution per basis shape, the tips interpolated from 64 training frames) within
     1e-3 of its motion from frame by frame (measured 2.8e-4 on bench/batch.py's 300 frames);
-    a shorter one goes frame by frame; a motion of no few shapes goes frame by frame, unchanged;
-    frames at rest stay at rest."""
+    a shorter one goes frame by frame; a motion of no few shapes, or one the training frames do
+    not see (a blink between two of them), goes frame by frame, unchanged; frames at rest stay
+    at rest."""
     from mimica.transfer import BASIS_FRAMES
     frames = _sequence(head_model, 160)
     tv = held_out_identity(head_model, 131)
@@ -155,7 +156,36 @@ def test_long_sequences_go_through_their_basis(head_model):
     again = x.apply(noise, basis=True)
     assert not x.basis_report["used"] and "few shapes" in x.basis_report["why"]
     np.testing.assert_array_equal(again, x.apply(noise, basis=False))
+    from mimica.transfer.core import BASIS_TRAIN
+    blink = np.repeat(head_model.neutral[None], 160, axis=0)                   # one frame between the
+    trained = np.unique(np.linspace(0, 159, BASIS_TRAIN).round().astype(int))  # training frames moves
+    k = int(np.setdiff1d(np.arange(160), trained)[10])
+    blink[k] += head_model.delta({"eyeBlink_L": 1.0})
+    got = x.apply(blink)
+    assert not x.basis_report["used"] and "miss" in x.basis_report["why"], x.basis_report
+    np.testing.assert_array_equal(got, x.apply(blink, basis=False))
 
+
+def test_a_take_of_twelve_shapes_goes_through_its_basis(head_model):
+    """130 frames moving 12 ICT shapes independently (35 basis directions: a basis direction at
+    1.2e-5 of the largest, which the range finder once dropped) go through the basis within 1e-3
+    of the motion; 24 shapes are more than the training frames hold: frame by frame."""
+    from mimica.store import shape_names
+    names = [n for n in shape_names() if not n.startswith(("eyeLook", "Pupil", "identity", "generic"))]
+    S = head_model.mesh
+    tv = held_out_identity(head_model, 133)
+    T = S.with_vertices(tv)
+    for count, through in ((12, True), (24, False)):
+        d = np.stack([head_model.delta({n: 1.0}) for n in names[:count]])
+        rng = np.random.default_rng(0)
+        t = np.linspace(0, 4 * np.pi, 130)[:, None]
+        w = 0.6 * np.clip(np.sin(t * rng.uniform(0.5, 3.0, count) + rng.uniform(0, 2 * np.pi, count)), 0, None)
+        frames = S.vertices + np.einsum("fk,knd->fnd", w, d)
+        x = ExpressionTransfer(S, T, ict_landmarks(S), ict_landmarks(T), static=static_vertices(S.vertices, frames))
+        exact, fast = x.apply(frames, basis=False), x.apply(frames)
+        assert x.basis_report["used"] == through, (count, x.basis_report)
+        motion = np.linalg.norm(exact - tv, axis=2).max()
+        assert np.linalg.norm(fast - exact, axis=2).max() <= 1e-3 * motion
 
 def test_basis_across_topologies(head_model):
     """Onto a remeshed head (its own topology; VTC with the per-triangle term, lids, fill), the
