@@ -42,7 +42,7 @@ EPS_ANCHOR = 1e-6
 DT_STABILIZER = 0.5
 BASIS_TOL = 1e-5          # a sequence's basis keeps all but this share of its motion (RMS)
 BASIS_TOL_TIPS = 1e-4     # ... and of the motion in its tips' nonlinear part
-BASIS_MAX = 0.4           # ... and is used only when it has at most this share of the frames' count
+BASIS_MAX = 0.25          # ... and is used only when it has at most this share of its training rows
 BASIS_TIPS_MAX = 0.6      # ... (the tips: of their training rows)
 BASIS_TRAIN = 64          # frames on which the source's basis and the tips' are found
 BASIS_TIPS_CHECK = 1e-3   # the tips' interpolation, off by no more than this on frames between
@@ -62,19 +62,18 @@ def _orthonormal(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(q, dtype=a.dtype)
 
 
-def _basis(samples: np.ndarray, tol: float, scale: float | None = None, start: int = 24,
-           limit: int | None = None) -> np.ndarray | None:
+def _basis(samples: np.ndarray, tol: float, scale: float | None = None, start: int = 24) -> np.ndarray | None:
     """An orthonormal basis Q (dim, k) of the rows of `samples` (m, dim), the rows' residual
     outside it within tol of `scale` (default: the rows' own norm), by a randomized range finder
     (Halko, Martinsson & Tropp 2011) with the sketch grown until it holds; None when k would
-    exceed `limit` (default BASIS_MAX of the rows: not a low-rank motion)."""
+    exceed BASIS_MAX of the rows (not a low-rank motion)."""
     m = samples.shape[0]
     flat = samples.reshape(-1)
     total = float(flat @ flat)
     ref = total if scale is None else scale * scale
     if total <= (tol * tol) * max(ref, 1e-300):
         return np.zeros((samples.shape[1], 0))
-    limit = limit or max(1, int(BASIS_MAX * m))
+    limit = max(1, int(BASIS_MAX * m))
     rng = np.random.default_rng(0)
     p = min(limit + 8, start, m)
     while True:
@@ -373,11 +372,11 @@ class TransferSolver:
         S = self.source.vertices
         train = np.unique(np.linspace(0, nf - 1, min(nf, BASIS_TRAIN)).round().astype(int))
         self.basis_stats = {"trained": train}
-        # at most a quarter of the training rows (48): the tips need more shapes than the motion
+        # at most BASIS_MAX of the training rows (48): the tips need more shapes than the motion
         # (18 -> 64, 35 -> 90 measured on takes of 6 and 12 ICT shapes) and 72 (24 shapes) found
         # more than the training frames hold after 0.25 s; a richer motion goes frame by frame
         # at once (trying it on every frame's rows cost 2-3x the frame-by-frame time)
-        qd = _basis(_coordinate_rows(frames[train], S), tol, limit=max(1, 3 * len(train) // 4))
+        qd = _basis(_coordinate_rows(frames[train], S), tol)
         if qd is None:
             self.basis_stats["why"] = "the motion does not lie in few shapes"
             return None
