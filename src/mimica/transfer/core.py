@@ -111,10 +111,10 @@ def _blocks(work, n: int, size: int) -> None:
         list(ex.map(work, starts))
 
 
-def _matmul(a: np.ndarray, b: np.ndarray, size: int = 0) -> np.ndarray:
-    """a @ b, b's columns shared among the cores (see _blocks)."""
+def _matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a @ b, b's columns in two halves on the cores (see _blocks)."""
     out = np.empty((a.shape[0], b.shape[1]), np.result_type(a, b))
-    size = size or max(1, -(-b.shape[1] // 2))
+    size = max(1, -(-b.shape[1] // 2))
 
     def one(j):
         np.matmul(a, b[:, j:j + size], out=out[:, j:j + size])
@@ -148,11 +148,12 @@ def _project(frames: np.ndarray, S: np.ndarray, q: np.ndarray, chunk: int = 16):
 def _bend_rows(el: Elements, lin, coef_rows: np.ndarray, at=None, chunk: int = 8) -> np.ndarray:
     """The tips' nonlinear part minus its rest value, (3F, E), for frames given by their
     coefficient rows (3F, k) on the basis whose tip operators' products are lin = (a Q, b Q,
-    a S, b S) (restricted to the elements `at`), a few frames at a time so that the
-    temporaries stay in cache."""
-    aq, bq, a0, b0 = lin
+    a S, b S, g(a S, b S)), at the elements `at` (default all), a few frames at a time so that
+    the temporaries stay in cache."""
+    aq, bq, a0, b0, g0 = lin
+    if at is not None:
+        aq, bq, a0, b0, g0 = aq[at], bq[at], a0[at], b0[at], tuple(g[at] for g in g0)
     nf, e = len(coef_rows) // 3, len(aq)
-    g0 = el.tip_bend(tuple(a0.T), tuple(b0.T), at)
     out = np.empty((nf, 3, e))
     aq_t, bq_t = np.ascontiguousarray(aq.T), np.ascontiguousarray(bq.T)
 
@@ -368,7 +369,7 @@ class TransferSolver:
 
     def _apply_basis(self, frames, tol, similarity):
         frames = np.asarray(frames, dtype=np.float64)
-        nf, ns = len(frames), self.source.n_vertices
+        nf = len(frames)
         S = self.source.vertices
         train = np.unique(np.linspace(0, nf - 1, min(nf, BASIS_TRAIN)).round().astype(int))
         self.basis_stats = {"trained": train}
@@ -394,9 +395,9 @@ class TransferSolver:
         first = rb[0] @ qd                                                    # R_v Q
         blocks, coefs = [], [cd]
         self.basis_stats.update(source=qd.shape[1], tips=[], tips_check=[])
-        for (el, _), r_t in zip(self.terms_s, rb[1:]):
+        for (el, _), r_t, rest in zip(self.terms_s, rb[1:], self._tips_rest):
             base, a, b = el.tip_operators
-            lin = (a @ qd, b @ qd, a @ S, b @ S)
+            lin = (a @ qd, b @ qd) + rest                                     # + the rest's a S, b S, g
             gt = _bend_rows(el, lin, cd[:, rows].T)                          # (3 F_train, E) exact
             qg = _gram_basis(gt, BASIS_TOL_TIPS, motion * np.sqrt(len(train) / nf))
             if qg is None:
@@ -408,7 +409,7 @@ class TransferSolver:
                 cg = qg.T @ gt.T
             else:
                 p = _deim_points(qg)
-                gp = _bend_rows(el, tuple(m[p] for m in lin), cd.T, at=p, chunk=-(-nf // 2))   # (3F, points)
+                gp = _bend_rows(el, lin, cd.T, at=p, chunk=-(-nf // 2))      # (3F, points)
                 cg = np.linalg.pinv(qg[p]) @ gp.T                             # (kg, 3F), least squares
                 # frames halfway between training ones, computed exactly
                 between = np.setdiff1d(np.unique(((train[:-1] + train[1:]) // 2)[::8]), train)
@@ -439,6 +440,19 @@ class TransferSolver:
         if len(self.fixed):                                                   # held vertices follow their partners
             Z[self.fixed, :kd] = self._vm_fixed @ qd
         return _combine(Z, coef, x0)
+
+    @cached_property
+    def _tips_rest(self) -> list:
+        """Per term: the source at rest's tip operator products (a S, b S), (E, 3) each, and the
+        nonlinear part there, g(a S, b S) as an (x, y, z) triple -- what every frame's bending
+        is measured from (apply_basis)."""
+        S = self.source.vertices
+        out = []
+        for el, _ in self.terms_s:
+            _, a, b = el.tip_operators
+            a0, b0 = a @ S, b @ S
+            out.append((a0, b0, el.tip_bend(tuple(a0.T), tuple(b0.T))))
+        return out
 
     @cached_property
     def _r_blocks(self):
