@@ -26,7 +26,6 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 
 from mimica.anim import PRESETS, Timeline  # noqa: E402
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_HEAD_VERTICES, ICT_LANDMARKS_68, ICTModel  # noqa: E402
@@ -39,8 +38,8 @@ from mimica.mesh import plane_grid  # noqa: E402
 from mimica.physics.modal import against_full  # noqa: E402
 from mimica.render import contact_sheet, render_mesh, save_png, shared_frame  # noqa: E402
 from mimica.physics import precompute  # noqa: E402
-from calibrate_muscles import TARGETS  # noqa: E402  (the calibrated muscles and their ICT shapes)
 from mimica.rig import build_rig  # noqa: E402
+from mimica.rig.muscles import ICT_SHAPES as TARGETS  # noqa: E402  (the calibrated muscles, their shapes)
 import mimica  # noqa: E402
 mimica.keep_memory()                   # as the command line does (mimica/_memory.py)
 
@@ -207,7 +206,7 @@ def main():
 
 def spring_laws(face, skin, lm, hold=1.5, fps=60.0):
     """Kim's eq. 15 springs (FaceSimulator(springs="kim")) against the linear ones: each calibrated
-    muscle (tools/calibrate_muscles.py's targets, right side) held at 0.8 for `hold` seconds,
+    muscle (rig.muscles.ICT_SHAPES, right side) held at 0.8 for `hold` seconds,
     warped, its field's cosine with its ICT shape and its size against the shape's; steps/s with
     one muscle active."""
     names = list(TARGETS)

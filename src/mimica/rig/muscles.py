@@ -99,6 +99,21 @@ _RIGHT = [
               origin_depth=0.15, insertion_depth=0.02),
 ]
 
+# The ICT-FaceKit shape each muscle is calibrated against (tools/calibrate_muscles.py) and
+# checked with (bench/simulate.py); nasalis, masseter and temporalis have none (the nostrils;
+# they clench and close the jaw)
+ICT_SHAPES = {
+    "zygomaticus_major_R": "mouthSmile_R", "corrugator_supercilii_R": "browDown_R",
+    "depressor_labii_inferioris_R": "mouthLowerDown_R", "depressor_anguli_oris_R": "mouthFrown_R",
+    "frontalis_R": "browOuterUp_R", "frontalis_medial_R": "browInnerUp_R", "orbicularis_oculi_R": "cheekSquint_R",
+    "levator_labii_superioris_alaeque_nasi_R": "noseSneer_R", "levator_labii_superioris_R": "mouthUpperUp_R",
+    "zygomaticus_minor_R": "cheekRaiser_R", "levator_anguli_oris_R": "mouthShrugUpper",
+    "mentalis_R": "mouthShrugLower", "orbicularis_oris_R": "mouthPucker",
+    "orbicularis_oris_upper_R": "mouthRollUpper", "orbicularis_oris_lower_R": "mouthRollLower",
+    "buccinator_R": "mouthDimple_R", "risorius_R": "mouthStretch_R", "platysma_R": "mouthStretch_R",
+    "procerus_R": "browDown_R",
+}
+
 # The placements above are anatomical first guesses; tools/calibrate_muscles.py refines each
 # one's offsets, width, depths and reach against its ICT-FaceKit shape on training identities
 # (never the held-out ones bench/simulate.py measures) and writes them here:
