@@ -136,8 +136,8 @@ class MuscleFit:
         """The fit for a rig: its muscles' fields, the misfit summed over the vertices some
         muscle's region of interest covers, each vertex alike -- the measure of a match issue 18
         states (the cosine over a shape's vertices); weighted by the vertices' area instead, the
-        fit of ICT's shapes on the held-out identities reads min 0.690 (mouthDimple: the dense
-        lips count less by area) / median 0.893 against 0.805 / 0.905 (docs/benchmarks.md)."""
+        fit of ICT's shapes on the held-out identities read min 0.682 (mouthDimple: the dense
+        lips count less by area) / median 0.888 against 0.797 / 0.895 (docs/benchmarks.md)."""
         from .face import FaceSimulator
         sim = sim or FaceSimulator(rig, warp=False)                  # the fields are the linear face's
         fields = muscle_fields(sim)
