@@ -128,6 +128,13 @@ def calibrate_drives(faces, model, evals=60):
     return out
 
 
+def _search(cost, x0, evals):
+    """Nelder-Mead from a muscle's placement x0 (PARAMS), its first simplex STEP wide."""
+    simplex = np.vstack([x0] + [x0 + np.eye(len(x0))[i] * STEP[i] for i in range(len(x0))])
+    return minimize(cost, x0, method="Nelder-Mead",
+                    options=dict(maxfev=evals, initial_simplex=simplex, xatol=1e-3, fatol=1e-4))
+
+
 def calibrate(name, faces, targets, evals=160):
     base = next(d for d in _RIGHT if d.name == name)
     both = not targets[0][1].endswith(("_L", "_R"))          # a shape of both sides: the muscle and its twin
@@ -155,9 +162,7 @@ def calibrate(name, faces, targets, evals=160):
 
     t = time.time()
     c0 = cost(x0)
-    simplex = np.vstack([x0] + [x0 + np.eye(len(x0))[i] * STEP[i] for i in range(len(x0))])
-    res = minimize(cost, x0, method="Nelder-Mead",
-                   options=dict(maxfev=evals, initial_simplex=simplex, xatol=1e-3, fatol=1e-4))
+    res = _search(cost, x0, evals)
     best = mdef(res.x)
     us = fields(best)
     # strength: the least-squares scale of the field onto the shape, so the shape is at REACH
@@ -216,9 +221,7 @@ def calibrate_joint(name, faces, target, evals=120):
         return -float(np.mean(out))
     t = time.time()
     c0 = cost(x0)
-    simplex = np.vstack([x0] + [x0 + np.eye(len(x0))[k] * STEP[k] for k in range(len(x0))])
-    res = minimize(cost, x0, method="Nelder-Mead",
-                   options=dict(maxfev=evals, initial_simplex=simplex, xatol=1e-3, fatol=1e-4))
+    res = _search(cost, x0, evals)
     best = mdef(res.x)
     us = [f.field(best) for f in faces]
     scale = np.mean([(u * target).sum() / max((u * u).sum(), 1e-300) for u in us])

@@ -36,7 +36,7 @@ WARP_DIFFUSION = 16.0
 # nonlinear shell (--solver full) then failed on a full smile (CHOLMOD: not positive definite;
 # with a shifted diagonal it blew up to 4x the motion); bend 0.2 alone measured worse (0.888).
 # The library's placements were found on that softer skin (tools/calibrate_muscles.py --skin)
-# and kept: on this one they fit better than those found on it (docs/benchmarks.md, issue 18).
+# and kept: on this skin they fit better than those found on it before (docs/benchmarks.md).
 SKIN_AREA, SKIN_BEND = 1.0, 0.05
 
 
