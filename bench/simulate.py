@@ -39,7 +39,7 @@ from mimica.physics.modal import against_full  # noqa: E402
 from mimica.render import contact_sheet, render_mesh, save_png, shared_frame  # noqa: E402
 from mimica.physics import precompute  # noqa: E402
 from mimica.rig import build_rig  # noqa: E402
-from mimica.rig.muscles import ICT_SHAPES as TARGETS  # noqa: E402  (the calibrated muscles, their shapes)
+from mimica.rig.muscles import ICT_SHAPES  # noqa: E402  (the calibrated muscles, their shapes)
 import mimica  # noqa: E402
 mimica.keep_memory()                   # as the command line does (mimica/_memory.py)
 
@@ -209,7 +209,7 @@ def spring_laws(face, skin, lm, hold=1.5, fps=60.0):
     muscle (rig.muscles.ICT_SHAPES, right side) held at 0.8 for `hold` seconds,
     warped, its field's cosine with its ICT shape and its size against the shape's; steps/s with
     one muscle active."""
-    names = list(TARGETS)
+    names = list(ICT_SHAPES)
     rig = precompute(build_rig(skin, lm, muscles=names, gravity=False))
     res, speed = {}, {}
     for law in ("linear", "kim"):
@@ -224,12 +224,12 @@ def spring_laws(face, skin, lm, hold=1.5, fps=60.0):
                 sim.advance(a)
             took += time.perf_counter() - t
             steps += int(hold * fps) * sim.substeps
-            u, ref = sim.displacement(), face.shape(TARGETS[name]) - face.neutral
+            u, ref = sim.displacement(), face.shape(ICT_SHAPES[name]) - face.neutral
             res[law, name] = (displacement_cosine(u, ref),
                               np.linalg.norm(u, axis=1).max() / np.linalg.norm(ref, axis=1).max())
         speed[law] = steps / took
     for name in names:
-        print(f"  springs {name:40s} {TARGETS[name]:16s} linear cos {res['linear', name][0]:.3f} size "
+        print(f"  springs {name:40s} {ICT_SHAPES[name]:16s} linear cos {res['linear', name][0]:.3f} size "
               f"{res['linear', name][1]:.2f} | eq. 15 cos {res['kim', name][0]:.3f} size {res['kim', name][1]:.2f}")
     for law in ("linear", "kim"):
         c = [res[law, n][0] for n in names]
@@ -244,7 +244,7 @@ def stretch_modes(face, seeds=(1001, 1002, 1003)):
     held-out identities."""
     from mimica.physics.face import shell_stretch_modes
     from mimica.physics.fit import skin_stiffness, static_field
-    names = list(TARGETS)
+    names = list(ICT_SHAPES)
     cos = {"bar": [], "shell": []}
     aligns = []
     for seed in seeds:
@@ -255,7 +255,7 @@ def stretch_modes(face, seeds=(1001, 1002, 1003)):
             if kind == "shell":
                 aligns += [a for _, a, _ in shell_stretch_modes(rig)]
             K = skin_stiffness(rig)
-            cos[kind] += [displacement_cosine(static_field(rig, m, K), face.shape(TARGETS[m.name]) - face.neutral)
+            cos[kind] += [displacement_cosine(static_field(rig, m, K), face.shape(ICT_SHAPES[m.name]) - face.neutral)
                           for m in rig.muscles]
     print(f"stretch modes: shell modes aligned with the bars by {np.median(aligns):.2f} (median; "
           f"{np.min(aligns):.2f}-{np.max(aligns):.2f}); {len(names)} calibrated muscles on {len(seeds)} held-out "

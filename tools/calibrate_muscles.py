@@ -2,7 +2,7 @@
 
 Each muscle of rig/muscles.py is placed from the 68 landmarks by a few numbers (offsets of its
 origin and insertion, width, depths, its reach alpha, its contraction).  For each muscle with a
-shape of ICT-FaceKit that it makes (TARGETS), this searches those numbers (Nelder-Mead from the
+shape of ICT-FaceKit that it makes (rig.muscles.ICT_SHAPES), this searches those numbers (Nelder-Mead from the
 anatomical guess) for the largest mean cosine between the muscle's rest field at activation 1
 and the shape, on TRAINING identities only: ICT's generic face and two random identities whose
 seeds bench/simulate.py never uses (it measures on 1001-1003).  A shape of both sides (a pucker)
@@ -16,7 +16,7 @@ jawOpen, eyeBlink, eyeSquint and cheekPuff: `--drives`.
 `--joint MUSCLE`: place one muscle for the whole library's fit of its shape instead (the other
 muscles' fields held, the fit physics.fit.MuscleFit's, the cosine of the fitted face): what
 frontalis medial needed -- alone it reaches 0.77 of browInnerUp, which the fit then made of it
-and the lateral pterygoids (held-out identities 0.77; 0.82 placed this way).
+and the lateral pterygoids (held-out identities, the simulator's skin: 0.76; 0.80 placed this way).
 
 `--skin AREA BEND DRIVE_SPRING` (first): calibrate on another skin than the simulator's
 (physics.face.SKIN_AREA, SKIN_BEND, DRIVE_SPRING).  calibration.json's present round was made with
@@ -50,7 +50,6 @@ from mimica.rig import build_rig, strip_muscle  # noqa: E402
 from mimica.rig.muscles import _RIGHT, ICT_SHAPES, _mirror  # noqa: E402
 
 TRAIN = (None, 11, 12)           # the generic face, then identity seeds (held-out: 1001-1003)
-TARGETS = ICT_SHAPES             # each calibrated muscle and its ICT shape (rig/muscles.py)
 PARAMS = ("origin_lift", "origin_out", "insertion_lift", "insertion_out", "width", "origin_depth",
           "insertion_depth", "alpha")
 STEP = np.array([0.08, 0.08, 0.08, 0.08, 0.04, 0.03, 0.02, 4.0])
@@ -135,6 +134,13 @@ def _search(cost, x0, evals):
                     options=dict(maxfev=evals, initial_simplex=simplex, xatol=1e-3, fatol=1e-4))
 
 
+def _contraction(mdef, fields, targets) -> float:
+    """The contraction at which the fields reach their shapes at REACH: the least-squares scale
+    of each field onto its shape, averaged over the faces."""
+    scale = np.mean([(u * tg).sum() / max((u * u).sum(), 1e-300) for u, tg in zip(fields, targets)])
+    return float((mdef.contraction or 0.25) * scale / REACH)
+
+
 def calibrate(name, faces, targets, evals=160):
     base = next(d for d in _RIGHT if d.name == name)
     both = not targets[0][1].endswith(("_L", "_R"))          # a shape of both sides: the muscle and its twin
@@ -165,9 +171,7 @@ def calibrate(name, faces, targets, evals=160):
     res = _search(cost, x0, evals)
     best = mdef(res.x)
     us = fields(best)
-    # strength: the least-squares scale of the field onto the shape, so the shape is at REACH
-    scale = np.mean([(u * tg).sum() / max((u * u).sum(), 1e-300) for u, (tg, _) in zip(us, targets)])
-    contraction = float((best.contraction or 0.25) * scale / REACH)
+    contraction = _contraction(best, us, [tg for tg, _ in targets])
     if contraction <= 0:
         raise SystemExit(f"{name}: its best field points away from {targets[0][1]} (cosine {-res.fun:.3f}); "
                          "its origin and insertion need another placement in rig/muscles.py")
@@ -178,30 +182,22 @@ def calibrate(name, faces, targets, evals=160):
     return out, -c0, -res.fun
 
 
-ABOUT = ("tools/calibrate_muscles.py --skin 0.25 0.2 8: each muscle's placement fitted to its ICT-FaceKit shape "
-         f"on training identities (generic face, seeds {TRAIN[1:]}), frontalis medial's for the whole library's fit "
-         "of it (--joint); held-out identities are never used")
+ABOUT = ("tools/calibrate_muscles.py: each muscle's placement fitted to its ICT-FaceKit shape on training "
+         f"identities (generic face, seeds {TRAIN[1:]}); held-out identities are never used; 'how': the options "
+         "each muscle (and the drives) was placed with")
 
 
 def calibrate_joint(name, faces, target, evals=120):
     """One muscle's placement for the fitted cosine of its shape by the whole library (the
     other fields held at their calibration) on the training faces; its contraction then as
     calibrate's."""
-    from mimica.physics.face import JAW_CLOSERS
-    from mimica.physics.fit import MuscleFit
+    from mimica.physics.fit import MuscleFit, static_fields
     base = next(d for d in _RIGHT if d.name == name)
     fits = []
-    for f in faces:                                  # the library's fields on each face, once
+    for f in faces:                                  # the library's fit on each face, once
         rig = build_rig(f.skin, f.lm, muscles="all", gravity=False)
-        K = skin_stiffness(rig)
-        names = [m.name for m in rig.muscles]
-        fields = np.stack([np.zeros_like(f.skin.vertices) if m.name.rsplit("_", 1)[0] in JAW_CLOSERS
-                           else static_field(rig, m, K, SPRING) for m in rig.muscles])
-        reach = np.zeros(len(f.skin.vertices), bool)
-        for m in rig.muscles:
-            reach |= np.asarray(m.roi, bool)
-        fits.append((names, fields, reach.astype(float)))
-    i = fits[0][0].index(name)
+        fits.append(MuscleFit.of_fields(rig, static_fields(rig, SPRING)))
+    i = fits[0].names.index(name)
     x0 = np.array([getattr(base, p) for p in PARAMS], float)
 
     def mdef(x):
@@ -210,10 +206,10 @@ def calibrate_joint(name, faces, target, evals=120):
     def cost(x):
         out = []
         try:
-            for f, (names, fields, w) in zip(faces, fits):
-                fields = fields.copy()
+            for f, lib in zip(faces, fits):
+                fields = lib.fields.copy()
                 fields[i] = f.field(mdef(x))
-                mf = MuscleFit(names, fields, w)
+                mf = MuscleFit(lib.names, fields, lib.weights, lib.inputs)
                 a, _ = mf.fit(target, 5.0)             # the scale is set after, as calibrate's
                 out.append(displacement_cosine(mf.displacement(a), target))
         except Exception:                            # a placement off the skin
@@ -224,9 +220,8 @@ def calibrate_joint(name, faces, target, evals=120):
     res = _search(cost, x0, evals)
     best = mdef(res.x)
     us = [f.field(best) for f in faces]
-    scale = np.mean([(u * target).sum() / max((u * u).sum(), 1e-300) for u in us])
     out = {p: round(float(v), 4) for p, v in zip(PARAMS, np.clip(res.x, LOW, HIGH))}
-    out["contraction"] = round(float((best.contraction or 0.25) * scale / REACH), 4)
+    out["contraction"] = round(_contraction(best, us, [target] * len(us)), 4)
     print(f"{name:42s} {ICT_SHAPES[name]:16s} fitted cosine {-c0:.3f} -> {-res.fun:.3f}, alone "
           f"{np.mean([displacement_cosine(u, target) for u in us]):.3f}  ({res.nfev} evaluations, "
           f"{time.time() - t:.0f} s)", flush=True)
@@ -234,32 +229,35 @@ def calibrate_joint(name, faces, target, evals=120):
 
 
 def main():
+    skin = ""
     if sys.argv[1:2] == ["--skin"]:
         from mimica.physics import face
         face.SKIN_AREA, face.SKIN_BEND, face.DRIVE_SPRING = map(float, sys.argv[2:5])
+        skin = " ".join(sys.argv[1:5])
         del sys.argv[1:5]
     model = ICTModel(ICT_FACE_AREA_VERTICES)
     faces = [Face(model, s) for s in TRAIN]
     path = Path(__file__).resolve().parents[1] / "src/mimica/rig/calibration.json"
     cal = json.loads(path.read_text()) if path.exists() else {"muscles": {}}
-    if sys.argv[1:] == ["--drives"]:
-        cal.setdefault("drives", {}).update(calibrate_drives(faces, model))
-        path.write_text(json.dumps(cal, indent=1, sort_keys=True) + "\n")
-        return
-    if sys.argv[1:2] == ["--joint"] and len(sys.argv) == 3:
-        name = sys.argv[2]
-        cal["muscles"][name] = calibrate_joint(name, faces, model.delta({TARGETS[name]: 1.0}))
+
+    def save(what, how):
         cal["about"] = ABOUT
-        path.write_text(json.dumps(cal, indent=1, sort_keys=True) + "\n")
-        return
-    names = sys.argv[1:] or list(TARGETS)
-    for name in names:
-        shape = TARGETS[name]
-        targets = [(model.delta({shape: 1.0}), shape) for _ in faces]   # ICT's deltas hold across identities
-        cal["muscles"][name], _, _ = calibrate(name, faces, targets)
-        cal["about"] = ABOUT
+        cal.setdefault("how", {})[what] = how or "(the simulator's skin)"
         path.write_text(json.dumps(cal, indent=1, sort_keys=True) + "\n")
 
+    if sys.argv[1:] == ["--drives"]:
+        cal.setdefault("drives", {}).update(calibrate_drives(faces, model))
+        save("drives", skin)
+    elif sys.argv[1:2] == ["--joint"] and len(sys.argv) == 3:
+        name = sys.argv[2]
+        cal["muscles"][name] = calibrate_joint(name, faces, model.delta({ICT_SHAPES[name]: 1.0}))
+        save(name, f"{skin} --joint".strip())
+    else:
+        for name in sys.argv[1:] or list(ICT_SHAPES):
+            shape = ICT_SHAPES[name]
+            targets = [(model.delta({shape: 1.0}), shape) for _ in faces]   # ICT's deltas hold across identities
+            cal["muscles"][name], _, _ = calibrate(name, faces, targets)
+            save(name, skin)
 
 if __name__ == "__main__":
     main()

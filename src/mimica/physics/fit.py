@@ -140,14 +140,22 @@ class MuscleFit:
         lips count less by area) / median 0.888 against 0.797 / 0.895 (docs/benchmarks.md)."""
         from .face import FaceSimulator
         sim = sim or FaceSimulator(rig, warp=False)                  # the fields are the linear face's
-        fields = muscle_fields(sim)
+        return cls.of_fields(rig, muscle_fields(sim), sim.inputs)
+
+    @classmethod
+    def of_fields(cls, rig, fields: np.ndarray, inputs=None) -> "MuscleFit":
+        """The fit for a rig from its muscles' fields (m, n, 3) made otherwise (static_fields:
+        what calibration evaluates); inputs: the rig's ActivationMap (made when None)."""
+        from .face import ActivationMap
+        inputs = ActivationMap(rig.muscles) if inputs is None else inputs
+        fields = np.array(fields, float)
         # the jaw's closers are left out (at 0): they only hold the jaw that the digastric opens
         # (ActivationMap), so the fitted opening is the digastric's own activation
-        fields[sim.inputs.closers] = 0.0
+        fields[inputs.closers] = 0.0
         reach = np.zeros(rig.skin.n_vertices, bool)
         for m in rig.muscles:
             reach |= np.asarray(m.roi, bool)
-        return cls([m.name for m in rig.muscles], fields, reach.astype(float), sim.inputs)
+        return cls([m.name for m in rig.muscles], fields, reach.astype(float), inputs)
 
     def fit(self, displacements: np.ndarray, upper: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """((F, m) activations in [0, upper], (F,) relative misfit) of displacements (F, n, 3)
