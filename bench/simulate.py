@@ -32,14 +32,13 @@ from mimica.data import ICT_FACE_AREA_VERTICES, ICT_HEAD_VERTICES, ICT_LANDMARKS
 from mimica.physics import ShellEnergy, lumped_mass  # noqa: E402
 from mimica.physics.face import FaceSimulator, displacement_cosine  # noqa: E402
 from mimica.physics.fit import MuscleFit  # noqa: E402
-from mimica.store import shape_names  # noqa: E402
 from mimica.physics.fullface import FullFaceSimulator  # noqa: E402
 from mimica.mesh import plane_grid  # noqa: E402
 from mimica.physics.modal import against_full  # noqa: E402
 from mimica.render import contact_sheet, render_mesh, save_png, shared_frame  # noqa: E402
 from mimica.physics import precompute  # noqa: E402
 from mimica.rig import build_rig  # noqa: E402
-from mimica.rig.muscles import ICT_SHAPES  # noqa: E402  (the calibrated muscles, their shapes)
+from mimica.rig.muscles import ICT_SHAPES, coverage_shapes  # noqa: E402  (the calibrated muscles, their shapes)
 import mimica  # noqa: E402
 mimica.keep_memory()                   # as the command line does (mimica/_memory.py)
 
@@ -317,24 +316,48 @@ def smile_deviations(skin, lm, duration=0.6):
     return out
 
 
-def blink_gaps(rig, mf, expr, act, rest):
-    """eyeBlink_L/R fitted: the simulated face held at the fitted activations; its lid opening
-    left at the eye's middle (pairs open at least half the widest at rest) against the widest
-    rest opening, and the smallest opening anywhere (negative: crossed)."""
+def blink_gaps(rig, mf, expr, act, rest, d):
+    """eyeBlink_L/R fitted: the simulated face held at the fitted activations (each system at its
+    steady state, the figure) and played (the warped face stepped 2 s with them held, whose
+    equilibrium the forces' rotation moves a little); its lid opening left at the eye's middle
+    (pairs open at least half the widest at rest) against the widest rest opening, and the
+    smallest opening anywhere (negative: crossed).  A picture of each eye: at rest, ICT's blink,
+    the least squares alone held back evenly (before session 10), the fit now
+    (docs/figures/blink_fit.png)."""
+    from mimica.physics.face import lid_contact
     from mimica.rig.drives import lid_opening
     sim = FaceSimulator(rig)
     states = [sm.steady_state() for sm in sim.systems]
-    for e in ("eyeBlink_L", "eyeBlink_R"):
+    plain = MuscleFit(mf.names, mf.fields, mf.weights, mf.inputs)          # no lid contact in the fit
+    tiles, labels = [], []
+    for e in ("eyeBlink_R", "eyeBlink_L"):
         a = act[expr.index(e)]
+        info = rig.muscle(f"orbicularis_oculi_palpebral_{e[-1]}").info
+        c = mf.names.index(f"orbicularis_oculi_palpebral_{e[-1]}")
+        b = plain.fit(d[expr.index(e)])[0]
+        even = plain.displacement(b)
+        lid_contact(even, b[c] * plain.fields[c], rest, info, passes=0)
+        fr = (np.array(info["centre"]) + 0.5 * info["width"] * np.array(info["fwd"]), 0.9 * info["width"])
+        for lab, x in (("rest", rest), (f"ICT {e}", rest + d[expr.index(e)]),
+                       (f"held back evenly ({b[c]:.2f})", rest + even),
+                       (f"per position, closed ({a[c]:.2f})", rest + mf.displacement(a))):
+            tiles.append(render_mesh(rig.skin, x, size=(260, 200), frame=fr))
+            labels.append(lab)
         for sm, x, ai in zip(sim.systems, states, sim.inputs(a)):
             sm.set_state(ai * x)
         x = rest + sim.displacement()
-        info = rig.muscle(f"orbicularis_oculi_palpebral_{e[-1]}").info
         o0, o = lid_opening(rest, info), lid_opening(x, info)
         wide = o0 >= 0.5 * o0.max()
+        sim.reset()                                    # played: the warped face held at them for 2 s
+        for _ in range(120):
+            sim.advance(a)
+        o2 = lid_opening(rest + sim.displacement(), info)
         print(f"{e} fitted: lid gap {o[wide].max() / o0.max():.3f} of the open gap (<= 0.05), smallest opening "
               f"{o.min() / o0.max():+.3f} (>= 0: never crossed); closing activation "
-              f"{a[mf.names.index(f'orbicularis_oculi_palpebral_{e[-1]}')]:.2f}")
+              f"{a[mf.names.index(f'orbicularis_oculi_palpebral_{e[-1]}')]:.2f}; played 2 s (warped): gap "
+              f"{o2[wide].max() / o0.max():.3f}, smallest {o2.min() / o0.max():+.3f}")
+    save_png(Path("docs/figures") / "blink_fit.png", contact_sheet(
+        tiles, labels, columns=4, title="ICT's blink fitted (held-out identity; closing activation)"))
 
 
 def coverage(face, skin, whole, seeds=(1001, 1002, 1003)):
@@ -342,7 +365,7 @@ def coverage(face, skin, whole, seeds=(1001, 1002, 1003)):
     identities, fit frames per second of an ARKit take on the generic face)."""
     from mimica.export import ARKIT_52
     from mimica.export.blendshapes import ict_sources
-    expr = [n for n in shape_names() if not n.startswith(("eyeLook", "Pupil", "identity", "generic"))]
+    expr = coverage_shapes()
     cos = {}
     for seed in seeds:
         tv = face.identity(np.random.default_rng(seed).normal(0, 0.8, 20))
@@ -353,7 +376,7 @@ def coverage(face, skin, whole, seeds=(1001, 1002, 1003)):
         for e, a, de in zip(expr, act, d):
             cos[(e, seed)] = displacement_cosine(mf.displacement(a), de)
         if seed == seeds[0]:                           # the lids of the fitted blinks, and a picture
-            blink_gaps(other, mf, expr, act, tv)
+            blink_gaps(other, mf, expr, act, tv, d)
             fr = shared_frame([tv])
             fr = (fr[0] + [0, 1.0, 0], fr[1] * 0.8)
             sk = skin.with_vertices(tv)

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel
-from mimica.physics.face import ActivationMap, FaceSimulator, displacement_cosine
-from mimica.physics.fit import muscle_fields, skin_stiffness, static_field, static_fields
+from mimica.physics.face import ActivationMap, FaceSimulator, displacement_cosine, lid_contact
+from mimica.physics.fit import MuscleFit, muscle_fields, skin_stiffness, static_field, static_fields
 from mimica.rig import Rig, build_rig
 from mimica.rig.drives import jaw_open_factors, jaw_open_parts, lid_opening
 
@@ -137,6 +137,68 @@ def test_lids_never_cross_at_any_activation(eye):
     sim.reset()
     frames = sim.run(lambda t: np.clip(np.sin(np.arange(len(EYE)) + 9 * t), 0, 1) * np.r_[1, 1, 1, 1, 1, 1], 1.0)
     assert lid_opening(frames, info).min() >= -1e-6
+
+
+def _wide_gap(opening, rest):
+    """The widest opening left at the pairs open at least half the widest at rest, against it."""
+    wide = rest >= 0.5 * rest.max()
+    return opening[wide].max() / rest.max()
+
+
+def test_contact_holds_each_position_where_the_rims_meet(eye):
+    """The lid closed with the lower one raised (the two together would cross in the middle):
+    contact stops the lid where it touches, position by position, so the rims meet all along
+    the open eye and never cross; held back evenly instead (a share of the whole closing field:
+    passes=0), the middle met while the ends stayed open.  The simulators (warped, linear,
+    reduced) playing it held never cross and close within 5 % of the opening."""
+    info = eye.muscle("orbicularis_oculi_palpebral_R").info
+    rest = eye.skin.vertices
+    o0 = lid_opening(rest, info)
+    a = np.array([1.0, 0.3, 0, 0, 0, 0.1])
+    fields = static_fields(eye)
+    assert lid_opening(rest + np.tensordot(a, fields, 1), info).min() < -0.05 * o0.max()   # they would cross
+    for passes, gap in ((4, 0.01), (0, None)):
+        u = lid_contact(np.tensordot(a, fields, 1), a[0] * fields[0], rest, info, passes=passes)
+        o = lid_opening(rest + u, info)
+        assert o.min() >= -1e-9
+        if gap is None:
+            assert _wide_gap(o, o0) > 0.05                 # held back evenly: the ends open
+        else:
+            assert _wide_gap(o, o0) <= gap
+    for kw in ({}, {"warp": False}, {"reduced": 1e-4}):
+        sim = FaceSimulator(eye, **kw)
+        for _ in range(400):                                 # held: settled
+            sim.advance(a)
+        o = lid_opening(rest + sim.displacement(), info)
+        assert o.min() >= -1e-9, kw
+        assert _wide_gap(o, o0) <= 0.05, kw
+
+
+def test_a_fitted_blink_closes_the_eye(eye, face):
+    """ICT's eyeBlink fitted: the least squares alone stops the lid short (a crossing in the
+    middle counts against it); a closed target's lid is closed until the rims meet, and contact
+    holds them there -- in the fit's displacement and in the simulator playing the fitted
+    activations.  A squint, not a closed lid, keeps its least-squares activations."""
+    fit = MuscleFit.of_rig(eye)
+    info = eye.muscle("orbicularis_oculi_palpebral_R").info
+    rest = eye.skin.vertices
+    o0 = lid_opening(rest, info)
+    a, _ = fit.fit(face.delta({"eyeBlink_R": 1.0}))
+    shapes = np.stack([face.delta({"eyeBlink_R": 1.0}), face.delta({"eyeSquint_R": 1.0})])
+    np.testing.assert_allclose(fit.fit_combinations(shapes, np.array([[1.0, 0.0]]))[0][0], a, atol=1e-9)
+    plain = MuscleFit(fit.names, fit.fields, fit.weights, fit.inputs)             # no lid contact
+    b, _ = plain.fit(face.delta({"eyeBlink_R": 1.0}))
+    assert _wide_gap(lid_opening(rest + plain.displacement(b), info), o0) > 0.05
+    assert a[0] > b[0]
+    o = lid_opening(rest + fit.displacement(a), info)
+    assert _wide_gap(o, o0) <= 0.05 and o.min() >= -1e-9
+    sim = FaceSimulator(eye)
+    for sm, x, ai in zip(sim.systems, [sm.steady_state() for sm in sim.systems], sim.inputs(a)):
+        sm.set_state(ai * x)
+    o = lid_opening(rest + sim.displacement(), info)
+    assert _wide_gap(o, o0) <= 0.05 and o.min() >= -1e-9
+    squint = face.delta({"eyeSquint_R": 1.0})
+    np.testing.assert_allclose(fit.fit(squint)[0], plain.fit(squint)[0], atol=1e-12)
 
 
 def test_drive_rig_round_trip(eye, tmp_path):

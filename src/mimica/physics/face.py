@@ -361,16 +361,68 @@ def _drive_motions(m) -> list:
 CONTACT_SLACK = 1.15            # measured: the lower lid's skin rises 2 % of the opening past its anchors
 
 
+def lid_contact(u, uc, rest, info, passes: int = 4):
+    """Lid contact, position by position: u (n, 3) the skin's displacement, uc (n, 3) the
+    closing drive's part of it.  Where the margins would cross, the closing field is taken away
+    there, along the eye, until they meet: at each pair of facing margin nodes the share of uc
+    that brings the opening to 0 (bisection, all pairs at once), interpolated across the eye
+    between the pairs (by the position of their upper nodes) for every node the closing drive
+    moves.  The rims then meet wherever the closing lid reaches the lower one and are held
+    apart nowhere else -- a share of the whole field, the same at every pair, held the ends of
+    a fitted blink 9 % of the opening apart where its middle met (docs/benchmarks.md).  Passes
+    repeat it for the lower nodes' own shares; what still crosses after them has the rest of
+    the field taken away evenly.  Returns u (changed in place)."""
+    p = lid_pairs(info)
+    if len(p) == 0:
+        return u
+    c, up, fwd = (np.asarray(info[k], float) for k in ("centre", "up", "fwd"))
+    across = np.cross(fwd, up)
+    moving = np.nonzero(np.abs(uc).max(axis=1) > 0)[0]
+    if len(moving) == 0:
+        return u
+    uc = uc[moving]
+    t = (rest[moving] - c) @ across
+    tp = (rest[p[:, 0]] - c) @ across
+    order = np.argsort(tp)
+    where = np.searchsorted(moving, p)                 # the pairs' nodes among the moving ones
+    inside = (where < len(moving)) & (moving[np.minimum(where, len(moving) - 1)] == p)
+    for _ in range(passes):
+        xp = rest[p] + u[p]
+        if margin_opening(xp, info).min() >= 0:
+            return u
+        ucp = np.where(inside[..., None], uc[np.minimum(where, len(moving) - 1)], 0.0)
+        lo, hi = np.zeros(len(p)), np.ones(len(p))
+        crossed = margin_opening(xp, info) < 0
+        for _ in range(24):
+            mid = 0.5 * (lo + hi)
+            ok = margin_opening(xp - mid[:, None, None] * ucp, info) >= 0
+            lo, hi = np.where(ok, lo, mid), np.where(ok, mid, hi)
+        h = np.where(crossed, hi, 0.0)
+        hn = np.interp(t, tp[order], h[order])
+        u[moving] -= hn[:, None] * uc
+        uc = uc * (1.0 - hn)[:, None]                   # what is left of the closing field
+    xp = rest[p] + u[p]
+    if margin_opening(xp, info).min() < 0:              # the lower nodes' shares left a crossing
+        ucp = np.where(inside[..., None], uc[np.minimum(where, len(moving) - 1)], 0.0)
+        lo, hi = 0.0, 1.0
+        for _ in range(24):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if margin_opening(xp - mid * ucp, info).min() >= 0 else (mid, hi)
+        u[moving] -= hi * uc
+    return u
+
+
 class ActivationMap:
     """The muscles' activations -> each force system's input.  A muscle's input is its
     activation, except for the drives (rig.drives): the jaw opens by the digastric's activation
     less its strongest closer's (masseter, temporalis: the teeth stop it at rest, so never below
-    0), and a lid closes at most until its rim meets the other (lid contact: the closing drive
-    moves the rim by its input x the opening, the lower lid's raise by its `raise` part of it,
-    the levator lifts it by its `wide` angle; the input is held where they meet).  Drive
-    inputs stay in 0..1."""
+    0).  With `lid_room` (the full-space solver, which has no contact), a lid closes at most
+    until its rim meets the other (the closing drive moves the rim by its input x the opening,
+    the lower lid's raise by its `raise` part of it, the levator lifts it by its `wide` angle;
+    the input is held where they meet); the modal face instead stops the lids where they touch,
+    position by position (lid_contact).  Drive inputs stay in 0..1."""
 
-    def __init__(self, muscles):
+    def __init__(self, muscles, lid_room: bool = True):
         names = [m.name for m in muscles]
         self.drives = [i for i, m in enumerate(muscles) if m.kind == "drive"]
         self.closers = [i for i, n in enumerate(names) if n.rsplit("_", 1)[0] in JAW_CLOSERS]
@@ -385,6 +437,7 @@ class ActivationMap:
             w, r = same.get("wide"), same.get("raise")
             ratio = muscles[w].info["wide"] / max(float(m.info.get("gap_max", 1.0)), 1e-9) if w is not None else 0.0
             self.lids.append((i, r, w, ratio, muscles[r].info["raise"] if r is not None else 0.0))
+        self.lid_room = lid_room
 
     def __call__(self, activations) -> np.ndarray:
         if not self.drives:
@@ -394,7 +447,7 @@ class ActivationMap:
             for j in self.jaw_open:
                 a[j] -= max(a[self.closers].max(), 0.0)
         a[self.drives] = np.clip(a[self.drives], 0.0, 1.0)
-        for c, r, w, ratio, lift in self.lids:
+        for c, r, w, ratio, lift in (self.lids if self.lid_room else []):
             # (the raised lower lid's skin reaches a little past its anchors: CONTACT_SLACK)
             room = 1.0 - (a[r] * lift * CONTACT_SLACK if r is not None else 0.0) + \
                 (a[w] * ratio if w is not None else 0.0)
@@ -642,7 +695,7 @@ class FaceSimulator:
         self.gravity_scale = 1.0       # scales gravity (a timeline's "gravity" channel)
         self.systems = [_MuscleSystem(rig, m, self.h, spring, xi, zeta, rho, warp, springs) for m in rig.muscles]
         self.names = [m.name for m in rig.muscles]
-        self.inputs = ActivationMap(rig.muscles)
+        self.inputs = ActivationMap(rig.muscles, lid_room=False)      # the lids: lid_contact
         self.gravity = None
         if rig.gravity_basis is not None:
             self.gravity = ModalWarpingSolver(rig.gravity_basis, self.h, xi=xi, zeta=zeta, density=rho)
@@ -811,37 +864,36 @@ class FaceSimulator:
             u = (U @ z).astype(np.float64).reshape(-1, 3)
             for sv in self._other_solvers():
                 sv.add_displacement(u, False)
-            return u
+            cols = np.r_[0, np.cumsum([p.shape[0] for p in proj])]
+
+            def closing(i):                                   # the closing drive's own part of u
+                return (U[:, cols[i]:cols[i + 1]] @ z[cols[i]:cols[i + 1]]).astype(np.float64).reshape(-1, 3)
+            return self._lid_contact(u, closing)
         self._sync()
         u = np.zeros_like(self.rig.skin.vertices)
         for sv in [s.solver for s in self.systems if not s.resting] + self._other_solvers():
             sv.add_displacement(u, self.warp)
-        return self._lid_contact(u)
 
-    def _lid_contact(self, u):
-        """Lid contact: where the upper and lower margins of an eye would cross (the closing lid
-        with the other muscles around the eye), the closing drive's field is backed off, by
-        bisection on its share, until they meet (rig.drives.margin_opening >= 0 at every pair;
-        only the margin nodes are looked at)."""
+        def closing(i):
+            uc = np.zeros_like(u)
+            self.systems[i].solver.add_displacement(uc, self.warp)
+            return uc
+        return self._lid_contact(u, closing)
+
+    def _lid_contact(self, u, closing):
+        """Lid contact (lid_contact): where the upper and lower margins of an eye would cross,
+        the closing drive's field (closing(i), only then made) is taken away there until they
+        meet (rig.drives.margin_opening >= 0 at every pair; only the margin nodes are looked at
+        otherwise)."""
         rest = self.rig.skin.vertices
         for i in self.inputs.lid_close:
             info = self.rig.muscles[i].info
             p = lid_pairs(info)
-            if len(p) == 0 or self.systems[i].resting:
+            if len(p) == 0 or (self.systems[i].resting and self._xr is None):
                 continue
-            xp = rest[p] + u[p]
-            if margin_opening(xp, info).min() >= 0:
+            if margin_opening(rest[p] + u[p], info).min() >= 0:
                 continue
-            uc = np.zeros_like(u)
-            self.systems[i].solver.add_displacement(uc, self.warp)
-            ucp = uc[p]
-            lo, hi = 0.0, 1.0                                      # the share of uc taken away
-            if margin_opening(xp - ucp, info).min() < 0:
-                lo = hi                                            # crossed without it: take it all
-            for _ in range(20 if lo < hi else 0):
-                mid = 0.5 * (lo + hi)
-                lo, hi = (lo, mid) if margin_opening(xp - mid * ucp, info).min() >= 0 else (mid, hi)
-            u -= hi * uc
+            lid_contact(u, closing(i), rest, info)
         return u
 
     def fields(self) -> dict:

@@ -19,13 +19,19 @@ a muscle and stays unfitted.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import MimicaError
+from ..rig.drives import lid_pairs, margin_opening
 
 RIDGE = 1e-6        # relative to the Gram matrix's mean diagonal: keeps twin muscles apart
+# A target lid open at most this part of its rest opening is a closed one (the fit closes it
+# until the rims meet): ICT's eyeBlink, sculpted on the generic face, leaves 0.06-0.23 of the
+# opening at the facing margin nodes of six identities (0.14 on the generic face itself, the
+# nodes at different depths where its lids meet); its squints and cheek raisers 0.69 or more.
+LID_CLOSED = 1 / 3
 
 
 def muscle_fields(sim) -> np.ndarray:
@@ -119,7 +125,9 @@ class MuscleFit:
     names: list
     fields: np.ndarray           # (m, n, 3)
     weights: np.ndarray          # (n,) vertex weights of the misfit (1 on the muscles' reach, else 0)
-    inputs: object = None        # the rig's ActivationMap: lid contact applied to the fitted activations
+    inputs: object = None        # the rig's ActivationMap (the jaw's closers, the drives' range)
+    rest: np.ndarray = None      # (n, 3) the rig's skin at rest: lid contact (None: no lids)
+    lids: list = field(default_factory=list)   # (closing drive's index, its info): lid contact
 
     def __post_init__(self):
         U = self.fields.reshape(len(self.names), -1)                 # (m, 3n)
@@ -130,6 +138,13 @@ class MuscleFit:
         G += RIDGE * max(float(np.mean(np.diag(G))), 1e-300) * np.eye(len(G))
         self._U, self._w3 = U, w3
         self._L = np.linalg.cholesky(G)
+        self._lid = []                                   # per lid: what _contact looks at, once
+        for c, info in self.lids:
+            p = lid_pairs(info)
+            x0 = self.rest[p]
+            o0 = margin_opening(x0, info)
+            up = self.fields[:, p]                                           # (m, k, 2, 3)
+            self._lid.append((c, info, p, x0, o0 >= 0.5 * o0.max(), float(o0.max()), up))
 
     @classmethod
     def of_rig(cls, rig, sim=None) -> "MuscleFit":
@@ -147,7 +162,7 @@ class MuscleFit:
         """The fit for a rig from its muscles' fields (m, n, 3) made otherwise (static_fields:
         what calibration evaluates); inputs: the rig's ActivationMap (made when None)."""
         from .face import ActivationMap
-        inputs = ActivationMap(rig.muscles) if inputs is None else inputs
+        inputs = ActivationMap(rig.muscles, lid_room=False) if inputs is None else inputs
         fields = np.array(fields, float)
         # the jaw's closers are left out (at 0): they only hold the jaw that the digastric opens
         # (ActivationMap), so the fitted opening is the digastric's own activation
@@ -155,7 +170,9 @@ class MuscleFit:
         reach = np.zeros(rig.skin.n_vertices, bool)
         for m in rig.muscles:
             reach |= np.asarray(m.roi, bool)
-        return cls([m.name for m in rig.muscles], fields, reach.astype(float), inputs)
+        lids = [(i, rig.muscles[i].info) for i in inputs.lid_close if len(lid_pairs(rig.muscles[i].info))]
+        return cls([m.name for m in rig.muscles], fields, reach.astype(float), inputs,
+                   np.array(rig.skin.vertices, float), lids)
 
     def fit(self, displacements: np.ndarray, upper: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """((F, m) activations in [0, upper], (F,) relative misfit) of displacements (F, n, 3)
@@ -170,10 +187,14 @@ class MuscleFit:
         y = solve_triangular(self._L, h, lower=True)                  # L^-1 U^T W d
         Lt = self._L.T
         act = np.empty((len(d), len(self.names)))
+        at = [d.reshape(len(d), -1, 3)[:, lid_pairs(info)] for _, info in self.lids]    # (F, k, 2, 3) each
         for f in range(len(d)):
-            act[f] = self._contact(_box_ls(Lt, y[:, f], upper))
+            act[f] = self._inputs(_box_ls(Lt, y[:, f], upper))
+        act = self._close_lids(act, at)
         dd = (d * d * self._w3).sum(1)
         res = act @ self._U - d
+        for f in self._touching(act):                                # the lids held where they meet
+            res[f] = self.displacement(act[f]).reshape(-1) - d[f]
         mis = np.sqrt((res * res * self._w3).sum(1) / np.maximum(dd, 1e-300))
         return (act[0], mis[0]) if one else (act, mis)
 
@@ -192,16 +213,64 @@ class MuscleFit:
         h = H @ w.T                                                   # (m, F): U^T W d_f
         y = solve_triangular(self._L, h, lower=True)                  # (m, F)
         Lt = self._L.T
-        act = np.array([self._contact(_box_ls(Lt, y[:, f], upper)) for f in range(len(w))]).reshape(len(w), -1)
+        at = [np.tensordot(w, S.reshape(len(S), -1, 3)[:, lid_pairs(info)], 1) for _, info in self.lids]
+        act = np.array([self._inputs(_box_ls(Lt, y[:, f], upper)) for f in range(len(w))]).reshape(len(w), -1)
+        act = self._close_lids(act, at)
         G = self._G
         dd = np.einsum("fj,jk,fk->f", w, D, w)
         err = np.einsum("fi,ij,fj->f", act, G, act) - 2 * np.einsum("fi,if->f", act, h) + dd
         return act, np.sqrt(np.maximum(err, 0.0) / np.maximum(dd, 1e-300))
 
-    def _contact(self, a):
-        """Lid contact on fitted activations: a closing lid held where the rims meet."""
-        return a if self.inputs is None or not self.inputs.lids else self.inputs(a)
+    def _inputs(self, a):
+        """The drives' inputs of fitted activations (the rig's ActivationMap: the jaw, 0..1)."""
+        return a if self.inputs is None or not self.inputs.drives else self.inputs(a)
+
+    def _close_lids(self, act, targets):
+        """Fitted activations (F, m) with each closing lid closed as far as its target's:
+        targets, per lid, the target's displacement at the lid's margin pairs (F, k, 2, 3).  Lid
+        contact makes a lid nonlinear in its activation: past the point where the rims first
+        touch, more activation closes the rest of the eye while contact holds the rest
+        (FaceSimulator, lid_contact); the least squares, linear, sees only the crossing it would
+        make, and stopped a fitted blink 8-9 % of the opening short at the ends of the eye.  So
+        where the fitted lid is left more open than the target at its widest (the pairs open at
+        least half the widest at rest; a target within LID_CLOSED of closed: not at all), its
+        closing activation is raised, up to 1, until it is not: the smallest such activation,
+        on a grid of 32 and then 32 within it, all frames at once."""
+        for (c, info, p, x0, wide, o0max, Up), dp in zip(self._lid, targets):
+            goal = np.maximum(margin_opening(x0 + dp, info)[:, wide].max(1), 0.0)      # (F,)
+            goal[goal <= LID_CLOSED * o0max] = 0.0
+            x = x0 + np.tensordot(act, Up, 1)                                          # (F, k, 2, 3)
+            f = np.nonzero((margin_opening(x, info)[:, wide].max(1) > goal) & (act[:, c] < 1.0))[0]
+            if len(f) == 0:
+                continue
+            base = x[f] - act[f, c][:, None, None, None] * Up[c]                       # without the lid
+            lo, hi, rows = act[f, c], np.ones(len(f)), np.arange(len(f))
+            for _ in range(2):
+                grid = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, 33)    # (F', 33)
+                o = margin_opening(base[:, None] + grid[..., None, None, None] * Up[c], info)[..., wide].max(-1)
+                ok = o <= goal[f, None]
+                i = np.maximum(ok.argmax(1), 1)                    # the first that holds (lo never does)
+                hit = ok.any(1)                                    # none: as far as it goes, 1
+                lo = np.where(hit, grid[rows, i - 1], hi)
+                hi = np.where(hit, grid[rows, i], hi)
+            act[f, c] = hi
+        return act
+
+    def _touching(self, act):
+        """The frames (indices) whose fitted lids would cross, linearly: lid contact holds them."""
+        out = set()
+        for c, info, p, x0, _, _, Up in self._lid:
+            o = margin_opening(x0 + np.tensordot(act, Up, 1), info)
+            out.update(np.nonzero(o.min(1) < 0)[0].tolist())
+        return sorted(out)
 
     def displacement(self, activations: np.ndarray) -> np.ndarray:
-        """The rest displacement (n, 3) of the fitted activations (m,)."""
-        return (np.asarray(activations, float) @ self._U).reshape(-1, 3)
+        """The rest displacement (n, 3) of the fitted activations (m,): the fields' sum, the lids
+        held where they meet (lid contact, as the modal face holds them)."""
+        from .face import lid_contact
+        a = np.asarray(activations, float)
+        u = (a @ self._U).reshape(-1, 3)
+        for c, info in self.lids:
+            if a[c] > 0:
+                lid_contact(u, a[c] * self._U[c].reshape(-1, 3), self.rest, info)
+        return u

@@ -114,6 +114,15 @@ ICT_SHAPES = {
     "procerus_R": "browDown_R",
 }
 
+
+
+def coverage_shapes() -> list[str]:
+    """ICT-FaceKit's expression shapes that muscles and the jaw make (issue 18's coverage
+    figure; what calibration's --joint-all fits): all but the gaze (eyeLook*) and the pupils."""
+    from ..store import shape_names
+    return [n for n in shape_names() if not n.startswith(("eyeLook", "Pupil", "identity", "generic"))]
+
+
 # The placements above are anatomical first guesses; tools/calibrate_muscles.py refines each
 # one's offsets, width, depths and reach against its ICT-FaceKit shape on training identities
 # (never the held-out ones bench/simulate.py measures) and writes them here:
