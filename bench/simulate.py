@@ -325,7 +325,7 @@ def blink_gaps(rig, mf, expr, act, rest, d):
     the least squares alone held back evenly (before session 10), the fit now
     (docs/figures/blink_fit.png)."""
     from mimica.physics.face import lid_contact
-    from mimica.rig.drives import lid_opening
+    from mimica.rig.drives import lid_opening, open_pairs
     sim = FaceSimulator(rig)
     states = [sm.steady_state() for sm in sim.systems]
     plain = MuscleFit(mf.names, mf.fields, mf.weights, mf.inputs)          # no lid contact in the fit
@@ -347,7 +347,7 @@ def blink_gaps(rig, mf, expr, act, rest, d):
             sm.set_state(ai * x)
         x = rest + sim.displacement()
         o0, o = lid_opening(rest, info), lid_opening(x, info)
-        wide = o0 >= 0.5 * o0.max()
+        wide = open_pairs(o0)
         sim.reset()                                    # played: the warped face held at them for 2 s
         for _ in range(120):
             sim.advance(a)

@@ -245,7 +245,7 @@ def calibrate_joint(name, faces, target, evals=120, shapes=None):
     out["contraction"] = round(_contraction(best, us, [target] * len(us)), 4)
     what = ICT_SHAPES[name] if shapes is None else f"{len(shapes)} shapes"
     print(f"{name:42s} {what:16s} fitted cosine {-c0:.3f} -> {-res.fun:.3f}, alone "
-          f"{np.mean([displacement_cosine(u, target) for u in us]):.3f}  ({res.nfev} evaluations, "
+          f"{alone(us):.3f}  ({res.nfev} evaluations, "
           f"{time.time() - t:.0f} s)", flush=True)
     return out
 

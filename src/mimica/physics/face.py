@@ -384,13 +384,16 @@ def lid_contact(u, uc, rest, info, passes: int = 4):
     t = (rest[moving] - c) @ across
     tp = (rest[p[:, 0]] - c) @ across
     order = np.argsort(tp)
-    where = np.searchsorted(moving, p)                 # the pairs' nodes among the moving ones
-    inside = (where < len(moving)) & (moving[np.minimum(where, len(moving) - 1)] == p)
+    where = np.minimum(np.searchsorted(moving, p), len(moving) - 1)   # the pairs' nodes among the moving
+    inside = moving[where] == p
+
+    def at_pairs(field):                               # (k, 2, 3), zero where it moves no pair node
+        return np.where(inside[..., None], field[where], 0.0)
     for _ in range(passes):
         xp = rest[p] + u[p]
         if margin_opening(xp, info).min() >= 0:
             return u
-        ucp = np.where(inside[..., None], uc[np.minimum(where, len(moving) - 1)], 0.0)
+        ucp = at_pairs(uc)
         lo, hi = np.zeros(len(p)), np.ones(len(p))
         crossed = margin_opening(xp, info) < 0
         for _ in range(24):
@@ -403,7 +406,7 @@ def lid_contact(u, uc, rest, info, passes: int = 4):
         uc = uc * (1.0 - hn)[:, None]                   # what is left of the closing field
     xp = rest[p] + u[p]
     if margin_opening(xp, info).min() < 0:              # the lower nodes' shares left a crossing
-        ucp = np.where(inside[..., None], uc[np.minimum(where, len(moving) - 1)], 0.0)
+        ucp = at_pairs(uc)
         lo, hi = 0.0, 1.0
         for _ in range(24):
             mid = 0.5 * (lo + hi)

@@ -12,8 +12,8 @@ over the skin that muscles move (W: one per vertex, zero where no muscle reaches
 normal equations G = U^T W U (m x m) are formed once: a frame costs one small bounded solve
 on the Cholesky factor of G, independent of the mesh size.  The jaw and the lids are drives of
 the rig (rig.drives: the jaw's pose is the digastric's and the lateral pterygoids' activations),
-fitted with the muscles; a closing lid is then held where the rims meet (lid contact), and the
-jaw's closers are left at 0.  The fields are the linear modal face's (warp off); the gaze is not
+fitted with the muscles; a lid closed in the target is then closed until the rims meet, and
+held there (lid contact, as the simulator holds it), and the jaw's closers are left at 0.  The fields are the linear modal face's (warp off); the gaze is not
 a muscle and stays unfitted.
 """
 
@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import MimicaError
-from ..rig.drives import lid_pairs, margin_opening
+from ..rig.drives import lid_pairs, margin_opening, open_pairs
 
 RIDGE = 1e-6        # relative to the Gram matrix's mean diagonal: keeps twin muscles apart
 # A target lid open at most this part of its rest opening is a closed one (the fit closes it
@@ -144,7 +144,7 @@ class MuscleFit:
             x0 = self.rest[p]
             o0 = margin_opening(x0, info)
             up = self.fields[:, p]                                           # (m, k, 2, 3)
-            self._lid.append((c, info, p, x0, o0 >= 0.5 * o0.max(), float(o0.max()), up))
+            self._lid.append((c, info, p, x0, open_pairs(o0), float(o0.max()), up))
 
     @classmethod
     def of_rig(cls, rig, sim=None) -> "MuscleFit":
@@ -202,7 +202,8 @@ class MuscleFit:
         """((F, m) activations, (F,) relative misfit) for frames that are combinations of a few
         shapes' displacements (K, n, 3) with weights (F, K) -- an ARKit take: U^T W d and the
         misfit's norms come from K projections made once, so a frame never touches the mesh
-        (the misfit from these norms loses digits where it is under about 1e-3)."""
+        (the misfit from these norms loses digits where it is under about 1e-3, and is the linear
+        face's: where lid contact holds a lid, fit() measures the held one)."""
         from scipy.linalg import solve_triangular
         S = np.asarray(shapes, float).reshape(len(shapes), -1)
         if S.shape[1] != self._U.shape[1]:

@@ -297,6 +297,13 @@ def margin_opening(xp, info) -> np.ndarray:
     return psi[..., 0] - psi[..., 1]
 
 
+def open_pairs(rest_opening) -> np.ndarray:
+    """The margin pairs open at least half the widest at rest (bool): where a closed lid's gap
+    is measured (issue 18's figure; the corners' folds are left out)."""
+    rest_opening = np.asarray(rest_opening, float)
+    return rest_opening >= 0.5 * rest_opening.max()
+
+
 def lid_opening(x, info) -> np.ndarray:
     """margin_opening of skin positions x (n, 3) or (F, n, 3)."""
     return margin_opening(np.asarray(x, float)[..., lid_pairs(info), :], info)

@@ -115,7 +115,6 @@ ICT_SHAPES = {
 }
 
 
-
 def coverage_shapes() -> list[str]:
     """ICT-FaceKit's expression shapes that muscles and the jaw make (issue 18's coverage
     figure; what calibration's --joint-all fits): all but the gaze (eyeLook*) and the pupils."""
