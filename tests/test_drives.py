@@ -10,7 +10,7 @@ from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel
 from mimica.physics.face import ActivationMap, FaceSimulator, displacement_cosine, lid_contact
 from mimica.physics.fit import MuscleFit, muscle_fields, skin_stiffness, static_field, static_fields
 from mimica.rig import Rig, build_rig
-from mimica.rig.drives import jaw_open_factors, jaw_open_parts, lid_opening
+from mimica.rig.drives import jaw_open_factors, jaw_open_parts, lid_opening, open_pairs
 
 EYE = ["orbicularis_oculi_palpebral_R", "orbicularis_oculi_lower_R", "levator_palpebrae_R", "orbicularis_oculi_R",
        "frontalis_R", "corrugator_supercilii_R"]
@@ -141,8 +141,7 @@ def test_lids_never_cross_at_any_activation(eye):
 
 def _wide_gap(opening, rest):
     """The widest opening left at the pairs open at least half the widest at rest, against it."""
-    wide = rest >= 0.5 * rest.max()
-    return opening[wide].max() / rest.max()
+    return opening[open_pairs(rest)].max() / rest.max()
 
 
 def test_contact_holds_each_position_where_the_rims_meet(eye):

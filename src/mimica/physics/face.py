@@ -361,6 +361,18 @@ def _drive_motions(m) -> list:
 CONTACT_SLACK = 1.15            # measured: the lower lid's skin rises 2 % of the opening past its anchors
 
 
+def _shares(xp, ucp, info, steps: int = 24) -> np.ndarray:
+    """Per pair of margin nodes xp (k, 2, 3), the smallest share of the closing field there ucp
+    (k, 2, 3) whose removal leaves it open (margin_opening >= 0); 1 where even all of it does
+    not.  Bisection, all pairs at once."""
+    lo, hi = np.zeros(len(xp)), np.ones(len(xp))
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        ok = margin_opening(xp - mid[:, None, None] * ucp, info) >= 0
+        lo, hi = np.where(ok, lo, mid), np.where(ok, mid, hi)
+    return hi
+
+
 def lid_contact(u, uc, rest, info, passes: int = 4):
     """Lid contact, position by position: u (n, 3) the skin's displacement, uc (n, 3) the
     closing drive's part of it.  Where the margins would cross, the closing field is taken away
@@ -391,27 +403,17 @@ def lid_contact(u, uc, rest, info, passes: int = 4):
         return np.where(inside[..., None], field[where], 0.0)
     for _ in range(passes):
         xp = rest[p] + u[p]
-        if margin_opening(xp, info).min() >= 0:
+        o = margin_opening(xp, info)
+        if o.min() >= 0:
             return u
-        ucp = at_pairs(uc)
-        lo, hi = np.zeros(len(p)), np.ones(len(p))
-        crossed = margin_opening(xp, info) < 0
-        for _ in range(24):
-            mid = 0.5 * (lo + hi)
-            ok = margin_opening(xp - mid[:, None, None] * ucp, info) >= 0
-            lo, hi = np.where(ok, lo, mid), np.where(ok, mid, hi)
-        h = np.where(crossed, hi, 0.0)
+        h = np.where(o < 0, _shares(xp, at_pairs(uc), info), 0.0)
         hn = np.interp(t, tp[order], h[order])
         u[moving] -= hn[:, None] * uc
         uc = uc * (1.0 - hn)[:, None]                   # what is left of the closing field
     xp = rest[p] + u[p]
-    if margin_opening(xp, info).min() < 0:              # the lower nodes' shares left a crossing
-        ucp = at_pairs(uc)
-        lo, hi = 0.0, 1.0
-        for _ in range(24):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (lo, mid) if margin_opening(xp - mid * ucp, info).min() >= 0 else (mid, hi)
-        u[moving] -= hi * uc
+    o = margin_opening(xp, info)
+    if o.min() < 0:                                     # the lower nodes' shares left a crossing:
+        u[moving] -= _shares(xp, at_pairs(uc), info)[o < 0].max() * uc      # the same share everywhere
     return u
 
 

@@ -187,7 +187,7 @@ class MuscleFit:
         y = solve_triangular(self._L, h, lower=True)                  # L^-1 U^T W d
         Lt = self._L.T
         act = np.empty((len(d), len(self.names)))
-        at = [d.reshape(len(d), -1, 3)[:, lid_pairs(info)] for _, info in self.lids]    # (F, k, 2, 3) each
+        at = [d.reshape(len(d), -1, 3)[:, lid[2]] for lid in self._lid]            # (F, k, 2, 3) each
         for f in range(len(d)):
             act[f] = self._inputs(_box_ls(Lt, y[:, f], upper))
         act = self._close_lids(act, at)
@@ -214,7 +214,7 @@ class MuscleFit:
         h = H @ w.T                                                   # (m, F): U^T W d_f
         y = solve_triangular(self._L, h, lower=True)                  # (m, F)
         Lt = self._L.T
-        at = [np.tensordot(w, S.reshape(len(S), -1, 3)[:, lid_pairs(info)], 1) for _, info in self.lids]
+        at = [np.tensordot(w, S.reshape(len(S), -1, 3)[:, lid[2]], 1) for lid in self._lid]
         act = np.array([self._inputs(_box_ls(Lt, y[:, f], upper)) for f in range(len(w))]).reshape(len(w), -1)
         act = self._close_lids(act, at)
         G = self._G

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MimicaError
+from ..store import shape_names
 
 
 @dataclass(frozen=True)
@@ -118,7 +119,6 @@ ICT_SHAPES = {
 def coverage_shapes() -> list[str]:
     """ICT-FaceKit's expression shapes that muscles and the jaw make (issue 18's coverage
     figure; what calibration's --joint-all fits): all but the gaze (eyeLook*) and the pupils."""
-    from ..store import shape_names
     return [n for n in shape_names() if not n.startswith(("eyeLook", "Pupil", "identity", "generic"))]
 
 
