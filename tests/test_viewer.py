@@ -142,6 +142,11 @@ def test_page_in_headless_chromium(server, tmp_path):
         # a software GL draws at a lower resolution while frames stream, sharp again once still
         pg.wait_for_function("window.mimica.scale().scale === 1", timeout=5000)
         pg.screenshot(path=str(ARTIFACTS / "viewer_slider.png"))
+        # a streamed scale within a step of full resolution still goes back to exactly 1
+        pg.evaluate("window.mimica.setScale(0.9); window.mimica.setScale(0.99)")
+        assert pg.evaluate("window.mimica.scale().scale") == pytest.approx(0.99)
+        pg.evaluate("window.mimica.setScale(1)")
+        assert pg.evaluate("window.mimica.scale().scale") == 1
         # the timeline: keys drawn with the mouse on the curve editor, then played
         pg.select_option("#channel", "frontalis_L")
         box = pg.locator("#curve").bounding_box()

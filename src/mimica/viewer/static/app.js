@@ -54,9 +54,12 @@ let lastTick = 0, gapAvg = 0, lastChange = 0, adjusted = 0;
 let sharp = true;              // drawn at full resolution because the face is still
 let moving = false;            // a new frame or a camera move since the last animation frame
 state.scale = () => ({ scale, liveScale, gapAvg });   // for tests: the resolution drawn now
+state.setScale = (s) => setScale(s);                  // for tests
 function setScale(s) {
   s = Math.max(MIN_SCALE, Math.min(1, s));
-  if (Math.abs(s - scale) < 0.02) return;
+  // small steps are not worth a resize, but full resolution is always reached exactly: a
+  // streamed scale of 0.99 once kept a still face from ever being drawn sharp
+  if (s === scale || (s < 1 && Math.abs(s - scale) < 0.02)) return;
   scale = s;
   renderer.setPixelRatio(window.devicePixelRatio * s);
   renderer.setSize(view.clientWidth, view.clientHeight, false);
