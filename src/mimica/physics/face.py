@@ -122,8 +122,16 @@ class _MuscleSystem:
         self.q = self.v = 0.0
         self.resting = True           # exactly at rest (never moved since made or set): skipped
         self.fq_parts = None
-        uniq, inv = np.unique(muscle.attach, return_inverse=True)
+        at, wt, of = muscle.springs()                                 # a strip's springs fan out over the skin
+        uniq, inv = np.unique(at, return_inverse=True)
         phi = sv.rows(uniq)                                           # (u, 3, r)
+        # a strip node's spring, seen from the skin: its fan's mode rows by weight (k, 3, r); where
+        # one force acts per spring (warping's R^T, eq. 15) it acts at this weighted point, in
+        # its attachment node's frame (a fan is a few nodes: one frame each measured 3x slower)
+        ends = None
+        if muscle.kind != "drive":
+            fan = sp.csr_matrix((wt, (of, inv)), shape=(len(muscle.nodes), len(uniq)))
+            ends = (muscle.attach, (fan @ phi.reshape(len(uniq), -1)).reshape(len(muscle.nodes), 3, -1))
         if muscle.kind == "drive":
             # a drive's springs are in its system's stiffness (precompute): its modes are those of
             # the skin held by its anchors, loaded by the anchors' motion K_s u_part
@@ -138,16 +146,16 @@ class _MuscleSystem:
             s_init = muscle.nodes - rig.skin.vertices[muscle.attach]
             l0 = np.maximum(np.linalg.norm(s_init, axis=1), 1e-9 * rig.params["mean_edge"])
             self.stiff = np.diag(sv.lam)
-            self._kim = (s_init, spring_stiffness(rig, spring) * l0, phi[inv], np.asarray(muscle.stretch, float))
+            self._kim = (s_init, spring_stiffness(rig, spring) * l0, ends[1], np.asarray(muscle.stretch, float))
             loads = [np.zeros((len(uniq), 3))]
         else:
             k = spring_stiffness(rig, spring)
-            springs_at = np.bincount(inv, minlength=len(uniq)).astype(float)
+            springs_at = np.bincount(inv, wt, minlength=len(uniq))
             pr = phi.reshape(-1, phi.shape[2])
             ks = k * pr.T @ (np.repeat(springs_at, 3)[:, None] * pr) / rho   # Phi_a^T K_s Phi_a
             self.stiff = np.diag(sv.lam) + ks
             pull = np.zeros((len(uniq), 3))
-            np.add.at(pull, inv, k * muscle.stretch / rho)               # K_s u_m per unit stretch
+            np.add.at(pull, inv, (k * wt / rho)[:, None] * muscle.stretch[of])   # K_s u_m per unit stretch
             loads = [pull]
         self.rho = rho
         self.step_inv = np.linalg.inv(np.eye(len(b.lam)) + h * np.diag(sv.c) + h * h * self.stiff)
@@ -159,10 +167,14 @@ class _MuscleSystem:
             self._kim_free, self._kim_rows = _free_rows(b, muscle.attach)
             self._psi_k = None
         elif warp:                                    # Kim eq. 10: the pulls in the nodes' frames, R^T F
-            ok, self._rows = _free_rows(b, uniq)
+            if ends is None:                          # a drive: at its anchors' nodes
+                ok, self._rows = _free_rows(b, uniq)
+                self._phi_a, self._loads = phi[ok], [f[ok] for f in loads]
+            else:                                     # a strip: each spring's pull k u_m at its end
+                ok, self._rows = _free_rows(b, ends[0])
+                self._phi_a = ends[1][ok]
+                self._loads = [spring_stiffness(rig, spring) * np.asarray(muscle.stretch, float)[ok] / rho]
             self._psi_a = None                        # the rotation field there, when first needed
-            self._phi_a = phi[ok]
-            self._loads = [f[ok] for f in loads]
 
     def state(self) -> np.ndarray:
         sv = self.solver
@@ -340,6 +352,30 @@ def drive_springs(rig, muscle) -> np.ndarray:
     return k
 
 
+def strip_springs(rig, muscle, spring: float = 4.0) -> tuple:
+    """A strip muscle's springs on the skin: ((n,) stiffness per skin node, (n, 3) their pull at
+    full activation K_s u_m), each strip node's spring fanned out (rig.spring_fan)."""
+    at, wt, of = muscle.springs()
+    k = spring_stiffness(rig, spring) * wt
+    f = np.zeros((rig.skin.n_vertices, 3))
+    np.add.at(f, at, k[:, None] * muscle.stretch[of])
+    return np.bincount(at, k, minlength=rig.skin.n_vertices), f
+
+
+def strip_loads(rig, muscle) -> np.ndarray:
+    """(3n, 3u) a strip's load patterns: each spring pulling its fan along x, y and z, once for
+    the nodes that share a skin node (their fans are the same)."""
+    at, wt, of = muscle.springs()
+    _, first = np.unique(muscle.attach, return_index=True)
+    col = np.full(len(muscle.nodes), -1)
+    col[first] = np.arange(len(first))
+    keep = col[of] >= 0
+    loads = np.zeros((3 * rig.skin.n_vertices, 3 * len(first)))
+    for c in range(3):
+        np.add.at(loads, (3 * at[keep] + c, 3 * col[of[keep]] + c), wt[keep])
+    return loads
+
+
 def drive_load(rig, muscle, motion=None) -> np.ndarray:
     """(n, 3) the force of a drive's anchors moved by `motion` (default: their motion at full
     activation), K_s u_part."""
@@ -503,8 +539,10 @@ def precompute(rig, progress=None):
             loads = [drive_load(rig, m, motion) for motion in _drive_motions(m)]
             return ModalBasis.compute(energy, mass, ~m.roi, r=modes, stiffness=Kd, rotation=W,
                                       load_shapes=np.stack([f.ravel() for f in loads], 1))
-        return ModalBasis.compute(energy, mass, ~m.roi, r=modes, load_nodes=np.unique(m.attach),
-                                  stiffness=K, rotation=W)
+        # its springs' loads, the Ritz vectors solved with the springs in (its static field exact)
+        Ks = (K + sp.diags(np.repeat(strip_springs(rig, m)[0], 3))).tocsr()
+        return ModalBasis.compute(energy, mass, ~m.roi, r=modes, load_shapes=strip_loads(rig, m),
+                                  stiffness=K, rotation=W, span=Ks)
     for k, m in enumerate(todo):                   # (two threads measured slower: BLAS has both cores)
         if progress:
             progress(k, len(todo), m.name)

@@ -63,15 +63,12 @@ def static_field(rig, m, K, spring: float = 4.0, motion=None) -> np.ndarray:
     skin_stiffness; motion: a drive's anchors moved otherwise than at full activation."""
     import scipy.sparse as sp
     from ..solver import SPDSolver
-    from .face import drive_load, drive_springs, spring_stiffness
+    from .face import drive_load, drive_springs, strip_springs
     n = rig.skin.n_vertices
     if m.kind == "drive":
         ks, f = drive_springs(rig, m), drive_load(rig, m, motion)     # fixed at precompute
     else:
-        k = spring_stiffness(rig, spring)
-        ks = np.bincount(m.attach, minlength=n) * k
-        f = np.zeros((n, 3))
-        np.add.at(f, m.attach, k * m.stretch)
+        ks, f = strip_springs(rig, m, spring)
     dof = (3 * np.nonzero(m.roi)[0][:, None] + np.arange(3)).ravel()
     A = (K + sp.diags(np.repeat(ks, 3))).tocsr()[dof][:, dof]
     u = np.zeros(3 * n)

@@ -34,8 +34,9 @@ class FullFaceSimulator:
         so one step a frame (substeps=1); xtol, relative to the rig's mean edge, ends Newton
         once no node moves further (at 1e-2 the ICT face under a full smile took 2-10
         iterations a step, and a smaller step did not take fewer).  footprint: the radius, in
-        mean edges, over which each spring's insertion is spread (0: on its one skin node, as
-        in the modal face); engage: the muscle stretch |q| at which its springs are fully on."""
+        mean edges, over which each spring's insertion (its fan, rig.spring_fan) is spread
+        again (0: on the fan alone, as in the modal face); engage: the muscle stretch |q| at
+        which its springs are fully on."""
         precompute(rig)             # the stiffnesses, and the densities of the modal face's systems
         self.rig, self.fps, self.substeps, self.engage = rig, fps, substeps, engage
         self.h = h = 1.0 / (fps * substeps)
@@ -76,12 +77,15 @@ class FullFaceSimulator:
                 w = DRIVE_SPRING * (m.weight if m.weight is not None else np.ones(len(at)))
                 self.spread.append(sp.csr_matrix((w, (at, np.arange(len(at)))), shape=(len(x), len(at))))
                 continue
-            near_at = tree.query_ball_point(x[at], R)  # each attachment node is among its own
-            cols = np.repeat(np.arange(len(at)), [len(js) for js in near_at])
+            fj, fw, fi = m.springs()                   # the modal face's fan (rig.spring_fan) ...
+            fj = remap[fj]                             # (in its ROI, as its attachments)
+            near_at = tree.query_ball_point(x[fj], R)  # ... each member spread again (its node among its own)
+            cols = np.repeat(np.arange(len(fj)), [len(js) for js in near_at])
             rows = np.concatenate(near_at).astype(int)
-            w = (1 - (np.linalg.norm(x[rows] - x[at[cols]], axis=1) / R) ** 2) ** 2
-            W = sp.csr_matrix((w, (rows, cols)), shape=(len(x), len(at)))
-            self.spread.append(W @ sp.diags(1.0 / np.asarray(W.sum(axis=0)).ravel()))
+            w = (1 - (np.linalg.norm(x[rows] - x[fj[cols]], axis=1) / R) ** 2) ** 2
+            S = sp.csr_matrix((w, (rows, cols)), shape=(len(x), len(fj)))
+            S = S @ sp.diags(1.0 / np.asarray(S.sum(axis=0)).ravel())
+            self.spread.append(S @ sp.csr_matrix((fw, (np.arange(len(fj)), fi)), shape=(len(fj), len(at))))
         self.spring_sum = [self.k * np.asarray(W.sum(axis=1)).ravel() for W in self.spread]
         self.solver = FullSolver(energy, rho * mass[self.nodes], ~free[self.nodes], h,
                                  xi=damping * 2 * np.pi * frequency, zeta=zeta, newton_iters=newton_iters,

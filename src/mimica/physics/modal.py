@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+import scipy.linalg
 import scipy.sparse as sp
 
 from ..errors import MimicaError
@@ -192,12 +193,17 @@ class ModalBasis:
 
     @classmethod
     def compute(cls, energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, r: int = 20,
-                load_nodes=None, stiffness=None, rotation=None, load_shapes=None) -> "ModalBasis":
+                load_nodes=None, stiffness=None, rotation=None, load_shapes=None,
+                span=None) -> "ModalBasis":
         """Modes of the shell with `fixed` nodes removed, for forces on `load_nodes`, or of the
-        given force patterns `load_shapes` (3n, k) (a drive's anchors moving).
+        given force patterns `load_shapes` (3n, k) (a drive's anchors moving, a muscle's fanned
+        springs pulling).
 
         Without either, the loads are uniform body forces (gravity); r sets how many
-        Krylov vectors are added beyond the static load shapes.
+        Krylov vectors are added beyond the static load shapes.  span: the stiffness whose
+        solves make the Ritz vectors (default `stiffness`): a muscle's skin with its springs,
+        so that its static response lies in the span exactly, while the modes' eigenvalues
+        stay the skin's alone (the springs are the muscle system's own).
         """
         n = energy.n
         fixed = np.asarray(fixed, bool)
@@ -216,7 +222,8 @@ class ModalBasis:
         # force on the load nodes exact, which the lowest (bending) modes alone cannot give
         # for forces along the skin.
         shift = -1e-9 * float(np.abs(Kff.diagonal()).mean() / m.mean())   # keeps drifting parts solvable
-        fac = SPDSolver((Kff - shift * sp.diags(m)).tocsc())
+        Ks = Kff if span is None else span[dof][:, dof].tocsc()
+        fac = SPDSolver((Ks - shift * sp.diags(m)).tocsc())
         if load_shapes is not None:
             loads = np.asarray(load_shapes, float).reshape(3 * n, -1)[dof]
         elif load_nodes is not None and len(load_nodes):
@@ -246,8 +253,10 @@ class ModalBasis:
             # 1e-8, a third of Householder's time on the whole library)
             V = (V @ U) / np.sqrt(g)
         else:
-            q, rr = np.linalg.qr(S)
-            keep = np.abs(np.diag(rr)) > 1e-10 * np.abs(np.diag(rr)).max()
+            # rank-revealing (pivoted) QR: dependent columns (two strip nodes sharing a skin
+            # node load it alike) go last and are dropped without taking the others' parts along
+            q, rr, _ = scipy.linalg.qr(S, mode="economic", pivoting=True)
+            keep = np.abs(np.diag(rr)) > 1e-10 * np.abs(rr[0, 0])
             V = q[:, keep] / np.sqrt(m)[:, None]
         kr = V.T @ (Kff @ V)
         lam, y = np.linalg.eigh(0.5 * (kr + kr.T))
