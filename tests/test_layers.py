@@ -147,25 +147,29 @@ def test_no_import_cycles():
 
 
 def test_importing_mimica_changes_nothing_process_wide():
-    """Every module imported: the allocator (mallopt), signal handlers, numpy's error state,
-    warning filters and the environment are as before (threadpoolctl's import sets an
-    environment variable: it is imported where it is used)."""
+    """Every module imported: the allocator (mallopt), signal handlers, numpy's error state and
+    huge-page advice, warning filters and the environment are as before (threadpoolctl's import
+    sets an environment variable: it is imported where it is used); keep_memory() then turns the
+    advice off."""
     names = sorted(n for n in modules() if not n.endswith("__main__"))
     code = f"""
 import json, os, signal, sys, warnings
 import numpy as np
 import scipy.sparse, scipy.spatial, scipy.special, scipy.linalg  # their own filters, set on their import
 before = (dict(os.environ), signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM), np.geterr(),
-          len(warnings.filters))
+          len(warnings.filters), np._core.multiarray._get_madvise_hugepage())
 import importlib
 for n in {names!r}:
     importlib.import_module(n)
 import mimica._memory as m
 after = (dict(os.environ), signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM), np.geterr(),
-         len(warnings.filters))
-print(json.dumps({{"same": [a == b for a, b in zip(before, after)], "mallopt": m._done}}))
+         len(warnings.filters), np._core.multiarray._get_madvise_hugepage())
+done = m._done
+m.keep_memory()                              # the command line's and the batch jobs' setting: the advice off
+print(json.dumps({{"same": [a == b for a, b in zip(before, after)], "mallopt": done,
+                  "advice": np._core.multiarray._get_madvise_hugepage()}}))
 """
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
     got = json.loads(r.stdout.strip().splitlines()[-1])
-    assert got == {"same": [True] * 5, "mallopt": False}, got
+    assert got == {"same": [True] * 6, "mallopt": False, "advice": False}, got

@@ -204,3 +204,32 @@ def test_basis_across_topologies(head_model):
     assert x.basis_report["used"], x.basis_report
     motion = np.linalg.norm(exact - rs.mesh.vertices, axis=2).max()
     assert np.linalg.norm(fast - exact, axis=2).max() <= 1e-3 * motion
+
+
+def test_the_shared_thread_pool_works_in_a_forked_child_and_nested():
+    """core._blocks keeps one thread pool a process: a forked child (which has none of its
+    threads) gets its own instead of waiting forever, and work already on the pool runs in place."""
+    import os
+    import sys
+    import subprocess
+    code = """
+import os, numpy as np
+from mimica.transfer.core import _blocks
+out = np.zeros(8)
+def inner(i):
+    out[i:i + 2] += 1
+def outer(i):
+    _blocks(inner, 8, 2)                          # on a pool thread: runs in place
+_blocks(inner, 8, 2)
+pid = os.fork()
+if pid == 0:
+    _blocks(outer, 4, 2)
+    os._exit(0 if out.sum() == 8 + 2 * 8 else 3)
+_, status = os.waitpid(pid, 0)
+print(os.waitstatus_to_exitcode(status), out.sum())
+"""
+    if not hasattr(os, "fork"):
+        pytest.skip("no fork on this platform")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.split() == ["0", "8.0"]

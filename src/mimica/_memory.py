@@ -3,9 +3,15 @@ otherwise mmap'd fresh and page-faulted on every call, which on virtual machines
 than the arithmetic (measured: a 311x419 bilinear resample 7.9 ms -> 1.2 ms).
 
 Arrays under 64 MiB come from the heap, and up to 256 MiB of freed heap is kept for reuse.
-A process-wide setting, so importing mimica never does it: the command line and the
+numpy's advice that large arrays use huge pages is turned off (numpy/numpy#31590): with the
+kernel's transparent huge pages at defrag=madvise (Debian's and Ubuntu's default), a first touch
+of advised memory waits for the kernel to compact memory once it is fragmented -- bench/batch.py's
+basis path with its 81 MB outputs kept, as a program writing them keeps them: 1,150-1,250 frames/s
+with the advice, 1,700-2,030 without (this VM, the same run of rounds).
+
+A process-wide setting, so importing mimica never does it: the command line, batch jobs and the
 benchmarks call `keep_memory()`; a Python user may.  MIMICA_MALLOC=default leaves the
-allocator alone.
+allocator and numpy alone.
 """
 
 from __future__ import annotations
@@ -27,5 +33,9 @@ def keep_memory() -> bool:
         ok = libc.mallopt(m_mmap_threshold, 64 << 20) == 1 and libc.mallopt(m_trim_threshold, 256 << 20) == 1
     except (OSError, AttributeError):
         return False
+    import numpy as np
+    advise = getattr(getattr(getattr(np, "_core", None), "multiarray", None), "_set_madvise_hugepage", None)
+    if advise is not None:
+        advise(False)
     _done = ok
     return ok

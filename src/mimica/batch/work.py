@@ -53,6 +53,8 @@ def run_job(job: dict, root: str) -> dict:
     """Run one job (Job.to_dict() and its upstream outputs under "inputs"); its outputs are
     written atomically, then its marker.  Returns its record: status done or failed, the one
     line of a failure, seconds, where it ran, what it said."""
+    from .._memory import keep_memory
+    keep_memory()                                  # a worker is mimica's process, as the command line's
     root = Path(root)
     t = time.perf_counter()
     said: list[str] = []

@@ -96,19 +96,29 @@ def _coordinate_rows(frames: np.ndarray, S: np.ndarray) -> np.ndarray:
     return (frames - S).transpose(0, 2, 1).reshape(3 * len(frames), len(S))
 
 
+_POOL = None
+
+
 def _blocks(work, n: int, size: int) -> None:
     """work(i) for i = 0, size, 2 size ... < n, on all cores (numpy's loops and single-threaded
-    BLAS release the GIL; BLAS's own threads measured slower here, fighting CHOLMOD's)."""
+    BLAS release the GIL; BLAS's own threads measured slower here, fighting CHOLMOD's).  One
+    pool for the process, started on first use (again in a forked child, which has none of its
+    threads): a pool a call started 10 threads a basis transfer, 11 of its 183 ms under cProfile
+    (bench/batch.py's 300 frames).  Work already on one of its threads runs where it is (a
+    task waiting on its own pool could wait forever)."""
     import os
+    import threading
     from concurrent.futures import ThreadPoolExecutor
+    global _POOL
     starts = range(0, n, size)
-    workers = min(os.cpu_count() or 1, len(starts))
-    if workers <= 1:
+    cores = os.cpu_count() or 1
+    if min(cores, len(starts)) <= 1 or threading.current_thread().name.startswith("mimica-blocks"):
         for i in starts:
             work(i)
         return
-    with ThreadPoolExecutor(workers) as ex:
-        list(ex.map(work, starts))
+    if _POOL is None or _POOL[0] != os.getpid():
+        _POOL = (os.getpid(), ThreadPoolExecutor(cores, thread_name_prefix="mimica-blocks"))
+    list(_POOL[1].map(work, starts))
 
 
 def _matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -171,12 +181,27 @@ def _bend_rows(el: Elements, lin, coef_rows: np.ndarray, at=None, chunk: int = 8
     return out.reshape(3 * nf, e)
 
 
+def _gram(a: np.ndarray) -> np.ndarray:
+    """a @ a.T for a wide (m, n) a: numpy's SYRK on column blocks, the blocks on the cores
+    (see _blocks): the 192 x 11,248 tips' rows of bench/batch.py's basis path, 11.1 -> 5.5 ms."""
+    import os
+    nb = max(1, min(os.cpu_count() or 1, a.shape[1] // 2048))
+    size = -(-a.shape[1] // nb)
+    parts = [None] * nb
+
+    def one(j):
+        b = a[:, j:j + size]
+        parts[j // size] = b @ b.T
+    _blocks(one, a.shape[1], size)
+    return sum(parts)
+
+
 def _gram_basis(rows: np.ndarray, tol: float, scale: float) -> np.ndarray | None:
     """An orthonormal basis (dim, k) of the rows (m, dim), m small: from the eigenvectors of
     their Gram matrix (31 against the range finder's 127 ms on 300 x 11,248 tips), truncated where the
     energy left outside is within tol of `scale`; None when k would exceed BASIS_TIPS_MAX of
     the rows' count.  (Eigenvalues resolve to 1e-16 of the largest: tol down to 1e-7 holds.)"""
-    w, v = np.linalg.eigh(rows @ rows.T)                                          # (numpy's SYRK)
+    w, v = np.linalg.eigh(_gram(rows))
     w, v = np.maximum(w[::-1], 0.0), v[:, ::-1]
     tail = w.sum() - np.cumsum(w)
     k = int(np.nonzero(tail <= (tol * tol) * max(scale * scale, 1e-300))[0][0]) + 1 if w.sum() > 0 else 0
