@@ -200,12 +200,15 @@ def test_a_fitted_blink_closes_the_eye(eye, face):
     np.testing.assert_allclose(fit.fit(squint)[0], plain.fit(squint)[0], atol=1e-12)
 
 
-def test_drive_rig_round_trip(eye, tmp_path):
+def test_rig_round_trip(eye, tmp_path):
     path = eye.save(tmp_path / "eye.rig")
     back = Rig.load(path)
     for a, b in zip(eye.muscles, back.muscles):
         assert (a.kind, a.info.get("motion")) == (b.kind, b.info.get("motion"))
         if a.weight is not None:
             np.testing.assert_array_equal(a.weight, b.weight)
+        for x, y in zip(a.springs(), b.springs()):                # a strip's fanned springs too
+            np.testing.assert_array_equal(x, y)
+    assert any(m.fan is not None for m in back.muscles)
     assert back.muscle("orbicularis_oculi_palpebral_R").info["rims"] == eye.muscle(
         "orbicularis_oculi_palpebral_R").info["rims"]
