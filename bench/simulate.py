@@ -354,7 +354,7 @@ def blink_gaps(rig, mf, expr, act, rest, d):
         o2 = lid_opening(rest + sim.displacement(), info)
         print(f"{e} fitted: lid gap {o[wide].max() / o0.max():.3f} of the open gap (<= 0.05), smallest opening "
               f"{o.min() / o0.max():+.3f} (>= 0: never crossed); closing activation "
-              f"{a[mf.names.index(f'orbicularis_oculi_palpebral_{e[-1]}')]:.2f}; played 2 s (warped): gap "
+              f"{a[c]:.2f}; played 2 s (warped): gap "
               f"{o2[wide].max() / o0.max():.3f}, smallest {o2.min() / o0.max():+.3f}")
     save_png(Path("docs/figures") / "blink_fit.png", contact_sheet(
         tiles, labels, columns=4, title="ICT's blink fitted (held-out identity; closing activation)"))

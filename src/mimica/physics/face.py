@@ -129,7 +129,7 @@ class _MuscleSystem:
         # one force acts per spring (warping's R^T, eq. 15) it acts at this weighted point, in
         # its attachment node's frame (a fan is a few nodes: one frame each measured 3x slower)
         ends = None
-        if muscle.kind != "drive":
+        if muscle.kind != "drive" and (warp or springs == "kim"):
             fan = sp.csr_matrix((wt, (of, inv)), shape=(len(muscle.nodes), len(uniq)))
             ends = (muscle.attach, (fan @ phi.reshape(len(uniq), -1)).reshape(len(muscle.nodes), 3, -1))
         if muscle.kind == "drive":
@@ -149,14 +149,11 @@ class _MuscleSystem:
             self._kim = (s_init, spring_stiffness(rig, spring) * l0, ends[1], np.asarray(muscle.stretch, float))
             loads = [np.zeros((len(uniq), 3))]
         else:
-            k = spring_stiffness(rig, spring)
-            springs_at = np.bincount(inv, wt, minlength=len(uniq))
+            k_at, pull = strip_springs(rig, muscle, spring)            # per skin node
             pr = phi.reshape(-1, phi.shape[2])
-            ks = k * pr.T @ (np.repeat(springs_at, 3)[:, None] * pr) / rho   # Phi_a^T K_s Phi_a
+            ks = pr.T @ (np.repeat(k_at[uniq], 3)[:, None] * pr) / rho     # Phi_a^T K_s Phi_a
             self.stiff = np.diag(sv.lam) + ks
-            pull = np.zeros((len(uniq), 3))
-            np.add.at(pull, inv, (k * wt / rho)[:, None] * muscle.stretch[of])   # K_s u_m per unit stretch
-            loads = [pull]
+            loads = [pull[uniq] / rho]                                   # K_s u_m per unit stretch
         self.rho = rho
         self.step_inv = np.linalg.inv(np.eye(len(b.lam)) + h * np.diag(sv.c) + h * h * self.stiff)
         parts = [np.einsum("kcr,kc->r", phi, f) for f in loads]
