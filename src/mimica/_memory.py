@@ -12,6 +12,9 @@ with the advice, 1,700-2,030 without (this VM, the same run of rounds).
 A process-wide setting, so importing mimica never does it: the command line, batch jobs and the
 benchmarks call `keep_memory()`; a Python user may.  MIMICA_MALLOC=default leaves the
 allocator and numpy alone.
+
+`prefaulted(shape)`, for one array: a large output whose pages another thread maps while the
+caller computes (the basis path maps its 81 MB of frames during its solve).
 """
 
 from __future__ import annotations
@@ -39,3 +42,39 @@ def keep_memory() -> bool:
         advise(False)
     _done = ok
     return ok
+
+
+_MADV_POPULATE_WRITE = 23          # Linux 5.14+
+
+
+def _populate(a) -> None:
+    """Have the kernel map every page of `a` now: one madvise(MADV_POPULATE_WRITE) over its
+    whole pages (ctypes lets go of the GIL meanwhile), else a write to each page."""
+    import mmap
+    page = mmap.PAGESIZE
+    start, end = a.ctypes.data, a.ctypes.data + a.nbytes
+    lo, hi = -(-start // page) * page, end // page * page
+    if hi > lo and sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.madvise.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
+            if libc.madvise(lo, hi - lo, _MADV_POPULATE_WRITE) == 0:
+                return
+        except (OSError, AttributeError):
+            pass
+    a.reshape(-1).view("u1")[::page] = 0
+
+
+def prefaulted(shape, dtype="f8"):
+    """An uninitialized array whose memory is mapped on another thread while the caller goes
+    on, and the function that waits for it (call it before writing the array from several
+    threads).  A large fresh array's first touch costs a page fault a page (on this VM 81 MB:
+    26-39 ms mapped at once, 34-45 ms touched page by page), which the idle core of a
+    single-threaded stage can take on instead."""
+    import threading
+    import numpy as np
+    a = np.empty(shape, dtype)
+    t = threading.Thread(target=_populate, args=(a,), name="mimica-prefault", daemon=True)
+    t.start()
+    return a, t.join

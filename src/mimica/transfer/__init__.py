@@ -211,16 +211,13 @@ class ExpressionTransfer:
     def _through_basis(self, f: np.ndarray):
         """The frames through their basis, or None (not low-rank, or off by more than
         BASIS_DEVIATION on the frames checked one by one)."""
-        out = self.solver.apply_basis(f, similarity=self._back)
+        out = self.solver.apply_basis(f, similarity=self._back, check=BASIS_CHECK)
         if out is None:
             self.basis_report = {"used": False, "why": self.solver.basis_stats["why"]}
             return None
-        # checked where the tips were interpolated: frames between the training ones
-        others = np.setdiff1d(np.arange(len(f)), self.solver.basis_stats["trained"])
-        if len(others) == 0:
-            others = np.arange(len(f))
-        pick = others[np.unique(np.linspace(0, len(others) - 1, BASIS_CHECK).round().astype(int))]
-        exact = self.solver.apply(f[pick], self._back)
+        # checked where the tips were interpolated: frames between the training ones, solved one
+        # by one in the basis's back-substitution
+        pick, exact = self.solver.basis_stats["checked"], self.solver.basis_stats["exact"]
         # against the frames' largest motion, and no less than 1e-6 of the face's size (frames at
         # rest move by rounding alone)
         motion = max(float(np.linalg.norm(exact - self.target.vertices, axis=2).max()),

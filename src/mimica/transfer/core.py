@@ -23,8 +23,10 @@ from __future__ import annotations
 from functools import cached_property
 
 import numpy as np
+import scipy.linalg as sla
 import scipy.sparse as sp
 
+from .._memory import prefaulted
 from ..errors import MimicaError
 from ..mesh import Mesh
 from .elements import Elements, dt_elements, gradient_operator, vtc_elements
@@ -56,9 +58,9 @@ def _orthonormal(a: np.ndarray) -> np.ndarray:
     they dropped a 12-shape take's directions at 1.2e-5, and its basis never reached BASIS_TOL."""
     q = np.asarray(a, np.float64)
     for _ in range(2):
-        w, v = np.linalg.eigh(q.T @ q)
+        w, v = np.linalg.eigh(_inner(q.T))
         keep = w > 1e-14 * max(float(w.max()), 1e-300)
-        q = q @ (v[:, keep] / np.sqrt(w[keep]))
+        q = _matmul(q, v[:, keep] / np.sqrt(w[keep]))
     return np.ascontiguousarray(q, dtype=a.dtype)
 
 
@@ -77,9 +79,11 @@ def _basis(samples: np.ndarray, tol: float, scale: float | None = None, start: i
     rng = np.random.default_rng(0)
     p = min(limit + 8, start, m)
     while True:
-        sketch = samples.T @ rng.standard_normal((m, p))
+        # the products on the cores (_matmul, _inner); the sketch this way round (3.8 against 5.9 ms
+        # on one core)
+        sketch = _matmul(rng.standard_normal((p, m)), samples, split="columns").T
         q = _orthonormal(sketch)
-        b = q.T @ samples.T                                                   # (p, m)
+        b = _inner(q.T, samples.T)                                            # (p, m)
         u, sv, _ = np.linalg.svd(b, full_matrices=False)
         tail = total - np.cumsum(sv * sv)                                     # energy outside the first k
         ok = np.nonzero(tail <= (tol * tol) * ref)[0]
@@ -91,12 +95,35 @@ def _basis(samples: np.ndarray, tol: float, scale: float | None = None, start: i
         p = min(2 * p, m, limit + 8)
 
 
-def _coordinate_rows(frames: np.ndarray, S: np.ndarray) -> np.ndarray:
-    """(3F, n) the frames' displacements, row 3f + c: frame f's coordinate c."""
-    return (frames - S).transpose(0, 2, 1).reshape(3 * len(frames), len(S))
+def _coordinate_rows(frames: np.ndarray, S: np.ndarray, at=None) -> np.ndarray:
+    """(3F, n) the frames' displacements (of the frames `at`, default all), row 3f + c: frame
+    f's coordinate c; frame by frame into place (gathering the frames, then transposing them:
+    4 against 16 ms for bench/batch.py's 64 training frames)."""
+    at = np.arange(len(frames)) if at is None else np.asarray(at)
+    out = np.empty((len(at), 3, len(S)))
+    st = S.T
+
+    def one(i):
+        for j in range(i, min(i + 16, len(at))):
+            np.subtract(frames[at[j]].T, st, out=out[j])
+    _blocks(one, len(at), 16)
+    return out.reshape(3 * len(at), len(S))
 
 
 _POOL = None
+_BLAS = None
+
+
+def _one_blas_thread():
+    """A context in which the BLAS libraries run on one thread (the work is spread on the cores
+    by _blocks), from a controller made once: threadpoolctl's threadpool_limits looks the loaded
+    libraries up on every call (1 ms, against 0.04 ms).  Made on first use, after numpy, SciPy
+    and CHOLMOD have loaded their BLAS."""
+    global _BLAS
+    if _BLAS is None:
+        from threadpoolctl import ThreadpoolController   # here: its import sets KMP_DUPLICATE_LIB_OK
+        _BLAS = ThreadpoolController()
+    return _BLAS.limit(limits=1, user_api="blas")
 
 
 def _blocks(work, n: int, size: int) -> None:
@@ -121,14 +148,19 @@ def _blocks(work, n: int, size: int) -> None:
     list(_POOL[1].map(work, starts))
 
 
-def _matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a @ b, b's columns in two halves on the cores (see _blocks)."""
+def _matmul(a: np.ndarray, b: np.ndarray, split: str = "rows") -> np.ndarray:
+    """a @ b, a's rows (or b's columns) in two halves on the cores (see _blocks)."""
     out = np.empty((a.shape[0], b.shape[1]), np.result_type(a, b))
-    size = max(1, -(-b.shape[1] // 2))
+    rows = split == "rows"
+    n = a.shape[0] if rows else b.shape[1]
+    size = max(1, -(-n // 2))
 
-    def one(j):
-        np.matmul(a, b[:, j:j + size], out=out[:, j:j + size])
-    _blocks(one, b.shape[1], size)
+    def one(i):
+        if rows:
+            np.matmul(a[i:i + size], b, out=out[i:i + size])
+        else:
+            np.matmul(a, b[:, i:i + size], out=out[:, i:i + size])
+    _blocks(one, n, size)
     return out
 
 
@@ -144,8 +176,13 @@ def _project(frames: np.ndarray, S: np.ndarray, q: np.ndarray, chunk: int = 16):
     def one(i):
         d = frames[i:i + chunk] - S
         totals[i // chunk] = np.vdot(d, d)
-        if k <= 24:                                     # a GEMM of 3 columns a frame
-            np.matmul(qt, d, out=c[i:i + chunk])
+        if k <= 24:                                     # a GEMM of 3 columns a frame, over blocks of
+            m = len(d)                                  # vertices whose rows of q stay in cache for
+            acc, part = c[i:i + m], np.empty((m, k, 3))  # the chunk's frames (17 -> 14 ms)
+            acc[:] = 0.0
+            for v in range(0, len(S), 2048):
+                np.matmul(qt[:, v:v + 2048], d[:, v:v + 2048], out=part)
+                acc += part
         else:                                           # one GEMM for the chunk (72 shapes: 137 -> 53 ms;
             m = len(d)                                  # 18: 17 against 59)
             c[i:i + m] = (qt @ d.transpose(1, 0, 2).reshape(len(S), 3 * m)).reshape(k, m, 3).transpose(1, 0, 2)
@@ -181,17 +218,18 @@ def _bend_rows(el: Elements, lin, coef_rows: np.ndarray, at=None, chunk: int = 8
     return out.reshape(3 * nf, e)
 
 
-def _gram(a: np.ndarray) -> np.ndarray:
-    """a @ a.T for a wide (m, n) a: numpy's SYRK on column blocks, the blocks on the cores
-    (see _blocks): the 192 x 11,248 tips' rows of bench/batch.py's basis path, 11.1 -> 5.5 ms."""
+def _inner(a: np.ndarray, b: np.ndarray | None = None) -> np.ndarray:
+    """a @ b (default a @ a.T, numpy's SYRK) for a wide (m, n) a: the n's in blocks on the cores
+    (see _blocks), summed: the 192 x 11,248 tips' rows of bench/batch.py's basis path, a @ a.T
+    11.1 -> 5.5 ms."""
     import os
     nb = max(1, min(os.cpu_count() or 1, a.shape[1] // 2048))
     size = -(-a.shape[1] // nb)
     parts = [None] * nb
 
     def one(j):
-        b = a[:, j:j + size]
-        parts[j // size] = b @ b.T
+        x = a[:, j:j + size]
+        parts[j // size] = x @ (x.T if b is None else b[j:j + size])
     _blocks(one, a.shape[1], size)
     return sum(parts)
 
@@ -201,14 +239,14 @@ def _gram_basis(rows: np.ndarray, tol: float, scale: float) -> np.ndarray | None
     their Gram matrix (31 against the range finder's 127 ms on 300 x 11,248 tips), truncated where the
     energy left outside is within tol of `scale`; None when k would exceed BASIS_TIPS_MAX of
     the rows' count.  (Eigenvalues resolve to 1e-16 of the largest: tol down to 1e-7 holds.)"""
-    w, v = np.linalg.eigh(_gram(rows))
+    w, v = np.linalg.eigh(_inner(rows))
     w, v = np.maximum(w[::-1], 0.0), v[:, ::-1]
     tail = w.sum() - np.cumsum(w)
     k = int(np.nonzero(tail <= (tol * tol) * max(scale * scale, 1e-300))[0][0]) + 1 if w.sum() > 0 else 0
     if k > max(1, int(BASIS_TIPS_MAX * len(rows))):
         return None
     scaled = v[:, :k] / np.sqrt(np.maximum(w[:k], 1e-300))
-    return np.ascontiguousarray(_matmul(scaled.T, rows).T)                         # orthonormal to 1e-10
+    return _matmul(rows.T, scaled)                                             # orthonormal to 1e-10
 
 
 def _deim_points(q: np.ndarray, rounds: int = 3) -> np.ndarray:
@@ -216,7 +254,6 @@ def _deim_points(q: np.ndarray, rounds: int = 3) -> np.ndarray:
     of q's transpose (Q-DEIM, Drmač & Gugercin 2016), each round among the rows not yet taken
     (oversampling: the least-squares fit from 3k rows measured 2x closer than from k), the
     candidates restricted to the 10k rows of largest leverage (8x faster, 1.2x the error)."""
-    import scipy.linalg as sla
     k = q.shape[1]
     if k == 0:
         return np.zeros(0, int)
@@ -231,15 +268,15 @@ def _deim_points(q: np.ndarray, rounds: int = 3) -> np.ndarray:
     return np.sort(cand[taken])
 
 
-def _combine(Z: np.ndarray, coef: np.ndarray, x0: np.ndarray, block: int = 8) -> np.ndarray:
+def _combine(Z: np.ndarray, coef: np.ndarray, x0: np.ndarray, block: int = 8, out=None) -> np.ndarray:
     """x0 + Z @ coef as frames (F, n, 3), Z (n, k), coef (k, F, 3): single-precision GEMMs
     (rounding 1e-7 of the motion) a few frames at a time, each block transposed into place
     while in cache, blocks on all cores (one double-precision GEMM and a transpose of the
     whole output measured 3.6x slower)."""
     n, k = Z.shape
     nf = coef.shape[1]
-    out = np.empty((nf, n, 3))
-    z = Z.astype(np.float32)
+    out = np.empty((nf, n, 3)) if out is None else out
+    z = Z.astype(np.float32, copy=False)
     c = coef.astype(np.float32)
 
     def one(i):
@@ -370,10 +407,14 @@ class TransferSolver:
         self._vm_fixed = Vm_c.tocsr()
         self._fixed_base = T[fixed_v] - self._vm_fixed @ S
 
-    def apply_basis(self, frames: np.ndarray, tol: float = BASIS_TOL, similarity=None):
+    def apply_basis(self, frames: np.ndarray, tol: float = BASIS_TOL, similarity=None, check: int = 0):
         """Frames (F, n_s, 3) through a basis of their motion (issue 19, part 6): None where the
         motion does not lie in few enough shapes or the tips' interpolation does not hold, else
         the target frames (F, n_t, 3); `basis_stats` says what was used, or why not.
+        check: this many frames between the training ones are also solved one by one, exactly as
+        `apply` would (in the same back-substitution as the basis: 12 columns more there against
+        a solve of their own, 8.5 ms), `basis_stats["checked"]` their indices and
+        `basis_stats["exact"]` their target frames.
 
         The system is linear in [S'; tips(S')], coordinate by coordinate.  The source's
         displacements (each frame's x, y and z columns) are reduced to an orthonormal basis Q,
@@ -388,11 +429,10 @@ class TransferSolver:
         basis solutions (one GEMM, single precision, frame block by frame block in the
         output's layout).  Exact but for the truncations, the interpolation and the GEMM's
         rounding (1e-7)."""
-        from threadpoolctl import threadpool_limits   # here: its import sets KMP_DUPLICATE_LIB_OK
-        with threadpool_limits(limits=1, user_api="blas"):
-            return self._apply_basis(frames, tol, similarity)
+        with _one_blas_thread():
+            return self._apply_basis(frames, tol, similarity, check)
 
-    def _apply_basis(self, frames, tol, similarity):
+    def _apply_basis(self, frames, tol, similarity, check):
         frames = np.asarray(frames, dtype=np.float64)
         nf = len(frames)
         S = self.source.vertices
@@ -402,7 +442,7 @@ class TransferSolver:
         # (18 -> 64, 35 -> 90 measured on takes of 6 and 12 ICT shapes) and 72 (24 shapes) found
         # more than the training frames hold after 0.25 s; a richer motion goes frame by frame
         # at once (trying it on every frame's rows cost 2-3x the frame-by-frame time)
-        qd = _basis(_coordinate_rows(frames[train], S), tol)
+        qd = _basis(_coordinate_rows(frames, S, train), tol)
         if qd is None:
             self.basis_stats["why"] = "the motion does not lie in few shapes"
             return None
@@ -417,11 +457,11 @@ class TransferSolver:
         motion = np.sqrt(total)
         rows = (3 * train[:, None] + np.arange(3)).ravel()                    # the training frames' rows
         rb = self._r_blocks
-        first = rb[0] @ qd                                                    # R_v Q
-        blocks, coefs = [], [cd]
+        first = self._r_linear @ qd                                           # R_v Q + R_t (base Q): the
+        blocks, coefs = [], [cd]                                              # tips' linear part with it
         self.basis_stats.update(source=qd.shape[1], tips=[], tips_check=[])
         for (el, _), r_t, rest in zip(self.terms_s, rb[1:], self._tips_rest):
-            base, a, b = el.tip_operators
+            _, a, b = el.tip_operators
             lin = (a @ qd, b @ qd) + rest                                     # + the rest's a S, b S, g
             gt = _bend_rows(el, lin, cd[:, rows].T)                          # (3 F_train, E) exact
             qg = _gram_basis(gt, BASIS_TOL_TIPS, motion * np.sqrt(len(train) / nf))
@@ -435,12 +475,13 @@ class TransferSolver:
             else:
                 p = _deim_points(qg)
                 gp = _bend_rows(el, lin, cd.T, at=p, chunk=-(-nf // 2))      # (3F, points)
-                cg = np.linalg.pinv(qg[p]) @ gp.T                             # (kg, 3F), least squares
+                qp, rp = np.linalg.qr(qg[p])                                  # (kg, 3F), least squares (QR:
+                cg = sla.solve_triangular(rp, qp.T @ gp.T)                    # 0.5 against pinv's 2 ms)
                 # frames halfway between training ones, computed exactly
                 between = np.setdiff1d(np.unique(((train[:-1] + train[1:]) // 2)[::8]), train)
                 if len(between):
                     br = (3 * between[:, None] + np.arange(3)).ravel()
-                    err = _bend_rows(el, lin, cd[:, br].T) - (qg @ cg[:, br]).T
+                    err = _bend_rows(el, lin, cd[:, br].T, chunk=-(-len(between) // 2)) - (qg @ cg[:, br]).T
                     dev = float(np.sqrt(np.einsum("ij,ij->", err, err) * nf / len(between))) / max(motion, 1e-300)
                     self.basis_stats["tips_check"].append(dev)
                     if dev > BASIS_TIPS_CHECK:
@@ -448,23 +489,41 @@ class TransferSolver:
                                                    "motion between the training frames")
                         return None
             self.basis_stats["tips"].append(qg.shape[1])
-            first = first + r_t @ (base @ qd)                                 # the tips' linear part
             blocks.append(r_t @ qg)
             coefs.append(cg)
-        P = np.hstack([first] + blocks)
-        k, kd = P.shape[1], qd.shape[1]
+        blocks.insert(0, first)
+        k, kd = sum(blk.shape[1] for blk in blocks), qd.shape[1]
         coef = np.vstack(coefs).reshape(k, nf, 3)                             # (k, F, 3)
         x0 = self._rest_solution
         if similarity is not None:                                            # back to the target's frame, on
             m = similarity.scale * similarity.rotation.T                      # the coefficients and the rest
             coef = coef @ m
             x0 = x0 @ m + similarity.translation
-        Z = np.zeros((self.n_target, k))                                      # every vertex's basis solutions
-        if k:                                                                 # (none: the frames are at rest)
-            Z[self.free] = self.solver.solve(P)
+        if check:                                                             # frames between the training ones
+            others = np.setdiff1d(np.arange(nf), train)
+            others = others if len(others) else np.arange(nf)
+            pick = others[np.unique(np.linspace(0, len(others) - 1, check).round().astype(int))]
+            rhs, ycols = self._rhs(frames[pick])
+            blocks.append(rhs)
+        # the right-hand sides in CHOLMOD's column-major order (it copies any other: 41 against 47 ms)
+        P = np.empty((len(self.free), sum(blk.shape[1] for blk in blocks)), order="F")
+        at = 0
+        for blk in blocks:
+            P[:, at:at + blk.shape[1]] = blk
+            at += blk.shape[1]
+        # the output's pages mapped on another thread while the solve runs on this one (the
+        # solve holds the GIL; 81 MB of fresh memory cost 26-39 ms to map on this VM)
+        out, mapped = prefaulted((nf, self.n_target, 3))
+        Z = np.zeros((self.n_target, k), np.float32)                          # every vertex's basis solutions
+        if P.shape[1]:                                                        # (none: the frames are at rest)
+            sol = self.solver.solve(P)
+            Z[self.free] = sol[:, :k]
+            if check:
+                self.basis_stats.update(checked=pick, exact=self._place(sol[:, k:], ycols, len(pick), similarity))
         if len(self.fixed):                                                   # held vertices follow their partners
             Z[self.fixed, :kd] = self._vm_fixed @ qd
-        return _combine(Z, coef, x0)
+        mapped()
+        return _combine(Z, coef, x0, out=out)
 
     @cached_property
     def _tips_rest(self) -> list:
@@ -478,6 +537,16 @@ class TransferSolver:
             a0, b0 = a @ S, b @ S
             out.append((a0, b0, el.tip_bend(tuple(a0.T), tuple(b0.T))))
         return out
+
+    @cached_property
+    def _r_linear(self) -> sp.csr_matrix:
+        """R's map of the source's displacements with every term's tips' linear part (base x):
+        R_v + sum_t R_t base_t (one sparse product a basis instead of 1 + 2 a term)."""
+        rb = self._r_blocks
+        out = rb[0]
+        for (el, _), r_t in zip(self.terms_s, rb[1:]):
+            out = out + r_t @ el.tip_operators[0]
+        return out.tocsr()
 
     @cached_property
     def _r_blocks(self):
@@ -548,6 +617,14 @@ class TransferSolver:
         if f.shape[1:] != self.source.vertices.shape:
             raise MimicaError(f"source frames have {f.shape[1]} vertices, the source neutral has "
                               f"{self.source.n_vertices}")
+        nf = f.shape[0]
+        rhs, ycols = self._rhs(f)
+        out = self._place(self.solver.solve(rhs), ycols, nf, similarity, out)
+        return out[0] if single else out
+
+    def _rhs(self, f: np.ndarray):
+        """The right-hand sides (n_free, 3F) of frames f (F, n_s, 3), columns frame-major, and
+        the source columns they were made from ([positions; tips of every term], (n_s + E, 3F))."""
         nf, ns = f.shape[0], f.shape[1]
         ycols = np.empty((self.A_s.shape[1], 3 * nf))                      # columns: frame-major
         fv = ycols[:ns].reshape(ns, nf, 3)
@@ -558,7 +635,12 @@ class TransferSolver:
             at += el.n_elements
         rhs = self.R @ ycols
         rhs.reshape(-1, nf, 3)[:] += self.k0[:, None, :]
-        sol = self.solver.solve(rhs)                                        # (n_free, 3F)
+        return rhs, ycols
+
+    def _place(self, sol, ycols, nf: int, similarity=None, out=None) -> np.ndarray:
+        """Target frames (F, n_t, 3) from the free unknowns' solution (n_free, 3F) and the
+        source columns (the held vertices follow their partners)."""
+        ns = self.source.n_vertices
         x = np.empty((self.n_target, nf, 3))
         x[self.free] = sol.reshape(-1, nf, 3)
         if len(self.fixed):
@@ -570,4 +652,4 @@ class TransferSolver:
         if out is None:
             out = np.empty((nf, self.n_target, 3))
         out[:] = np.moveaxis(x, 1, 0)
-        return out[0] if single else out
+        return out
