@@ -129,24 +129,28 @@ def test_tips_from_their_operators(head_model, kind):
 def test_long_sequences_go_through_their_basis(head_model):
     """A 160-frame performance of six expressions goes through its basis by default (one
     back-substitution per basis shape, the tips interpolated from 64 training frames) within
-    1e-3 of its motion from frame by frame (measured 2.8e-4 on bench/batch.py's 300 frames);
-    a shorter one goes frame by frame; a motion of no few shapes, or one the training frames do
+    1e-3 of its motion from frame by frame (measured 2.8e-4 on bench/batch.py's 300 frames),
+    its check solving the frames whose tips the fit misses most, which see the largest
+    deviation; a shorter one goes frame by frame; a motion of no few shapes, or one the training frames do
     not see (a blink between two of them), goes frame by frame, unchanged; frames at rest stay
     at rest."""
-    from mimica.transfer import BASIS_FRAMES
+    from mimica.transfer import BASIS_DEVIATION, BASIS_FRAMES
     frames = _sequence(head_model, 160)
     tv = held_out_identity(head_model, 131)
     x, exact = _transfer(head_model, tv, frames)                               # frame by frame
     assert not x.basis_report["used"]
     fast = x.apply(frames)                                                     # by default: 160 >= 128
     assert len(frames) >= BASIS_FRAMES
-    assert x.basis_report["used"] and x.basis_report["deviation"] <= 2.5e-4, x.basis_report
-    assert x.solver.basis_stats["tips_check"][0] <= 1e-3                     # interpolated, and checked
+    assert x.basis_report["used"] and x.basis_report["deviation"] <= BASIS_DEVIATION, x.basis_report
     st = x.solver.basis_stats                                                  # the checked frames, solved in
     assert len(st["checked"]) == 4 and not np.isin(st["checked"], st["trained"]).any()   # the basis's solve,
     np.testing.assert_allclose(st["exact"], exact[st["checked"]], rtol=0, atol=1e-12 * np.ptp(tv))  # as one by one
     motion = np.linalg.norm(exact - tv, axis=2).max()
-    assert np.linalg.norm(fast - exact, axis=2).max() <= 1e-3 * motion
+    worst = np.linalg.norm(fast - exact, axis=2).max() / motion
+    assert worst <= 1e-3
+    # the check sees the worst of it: the frames the tips' fit misses most (measured 1.0 of the
+    # sequence's largest deviation; four frames spread evenly saw a quarter)
+    assert x.basis_report["deviation"] >= 0.8 * worst, (x.basis_report, worst)
     x.apply(frames[:BASIS_FRAMES - 1])
     assert not x.basis_report["used"]                                          # shorter: frame by frame
     still = np.repeat(head_model.neutral[None], 70, axis=0)                    # rest stays at rest
@@ -190,8 +194,8 @@ def test_a_take_of_twelve_shapes_goes_through_its_basis(head_model):
 
 def test_basis_across_topologies(head_model):
     """Onto a remeshed head (its own topology; VTC with the per-triangle term, lids, fill), the
-    basis path stays within 1e-3 of the motion of frame by frame (measured 7.1e-4 on 300 frames;
-    on 96 its check finds 5.6e-4 and it goes frame by frame)."""
+    basis path stays within 1e-3 of the motion of frame by frame (measured 4.4e-4 on these 300
+    frames, its check 4.5e-4)."""
     from mimica.correspond.remesh import resample_face
     from mimica.data import ICT_FACE_AREA_FACES, ICT_LANDMARKS_68
     from mimica.landmarks import Landmarks
