@@ -94,11 +94,10 @@ def _basis(samples: np.ndarray, tol: float, scale: float | None = None, start: i
         p = min(2 * p, m, limit + 8)
 
 
-def _coordinate_rows(frames: np.ndarray, S: np.ndarray, at=None) -> np.ndarray:
-    """(3F, n) the frames' displacements (of the frames `at`, default all), row 3f + c: frame
-    f's coordinate c; frame by frame into place (gathering the frames, then transposing them:
-    4 against 16 ms for bench/batch.py's 64 training frames)."""
-    at = np.arange(len(frames)) if at is None else np.asarray(at)
+def _coordinate_rows(frames: np.ndarray, S: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """(3F, n) the displacements of the frames `at`, row 3f + c: frame f's coordinate c; frame
+    by frame into place (gathering the frames, then transposing them: 4 against 16 ms for
+    bench/batch.py's 64 training frames)."""
     out = np.empty((len(at), 3, len(S)))
     st = S.T
 
