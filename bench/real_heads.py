@@ -31,7 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from mimica.align import face_cylinder, fit_similarity  # noqa: E402
+from mimica.align import fit_similarity  # noqa: E402
 from mimica.correspond.remesh import resample_face  # noqa: E402
 from mimica.data import (EXPRESSIONS, ICT_FACE_AREA_FACES, ICT_FACE_AREA_VERTICES, ICT_HEAD_VERTICES,  # noqa: E402
                          ICT_LANDMARKS_68, ICTModel, data_dir)
@@ -41,6 +41,8 @@ from mimica.landmarks import Landmarks, ict_landmarks  # noqa: E402
 from mimica.mesh import Mesh, read_mesh  # noqa: E402
 from mimica.transfer import ExpressionTransfer, relative_error, static_vertices  # noqa: E402
 from mimica.transfer.contacts import closure  # noqa: E402
+sys.path.insert(0, str(ROOT / "tools"))
+from hard_heads import carried_landmarks  # noqa: E402
 import mimica  # noqa: E402
 mimica.keep_memory()
 
@@ -84,36 +86,8 @@ def made_heads(model):
         tv = held_out(head, seed) + (blink if closed else 0)
         orig = head.mesh.with_vertices(tv)
         rs = resample_face(orig, tv[ICT_LANDMARKS_68], n_vertices=10000, seed=seed, seal=seal)
-        out.append((name, rs.mesh, _carried_landmarks(rs, orig), not closed))
+        out.append((name, rs.mesh, carried_landmarks(rs, orig), not closed))
     return out
-
-
-def _carried_landmarks(rs, original):
-    """The remeshed head's landmarks on the right side of every slit: each ICT landmark vertex
-    goes to the nearest new vertex lifted from a triangle around it (closest-point snapping
-    puts both inner-lip points of a closed mouth on one lip)."""
-    tri = original.triangles
-    ids = []
-    for v in ICT_LANDMARKS_68:
-        around = np.nonzero((tri[rs.triangle] == v).any(1))[0]
-        if not len(around):
-            ring = np.unique(tri[(tri == v).any(1)])
-            around = np.nonzero(np.isin(tri[rs.triangle], ring).any(1))[0]
-        ids.append(around[np.argmin(np.linalg.norm(rs.mesh.vertices[around] - original.vertices[v], axis=1))]
-                   if len(around) else -1)
-    ids = np.array(ids)
-    # where none was lifted: the closest point, the inner lips' points a little inside their own
-    # lip (on sealed lips both would land on the seam, on either side of a cut)
-    pts = original.vertices[ICT_LANDMARKS_68].copy()
-    up = face_cylinder(pts).axes[1]
-    d = 0.03 * np.linalg.norm(pts[45] - pts[36])
-    pts[[61, 62, 63]] += d * up
-    pts[[65, 66, 67]] -= d * up
-    ids[60:68] = -1
-    snapped = Landmarks.snap(rs.mesh, pts)
-    exact = Landmarks.from_vertex_indices(rs.mesh, np.maximum(ids, 0))
-    keep = ids >= 0
-    return Landmarks(np.where(keep, exact.triangle, snapped.triangle), np.where(keep[:, None], exact.bary, snapped.bary))
 
 
 def shared_head():

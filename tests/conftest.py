@@ -12,6 +12,10 @@ import pytest
 # one data setting for the tests, also when they run against an installed wheel (CI): the
 # shared data beside this checkout unless MIMICA_DATA says otherwise
 os.environ.setdefault("MIMICA_DATA", str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+# FBX goes through Blender: the tests' Blender is .venv-blender's bpy (`make blender`; CI makes it)
+_BLENDER = Path(__file__).resolve().parents[1] / ".venv-blender" / "bin" / "python"
+if _BLENDER.is_file():
+    os.environ.setdefault("MIMICA_BLENDER_PYTHON", str(_BLENDER))
 # the repository's tools (the viewer's browser harness, tools/viewer_probe.py) for the tests
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 

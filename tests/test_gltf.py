@@ -30,19 +30,19 @@ def validate(paths) -> list[dict]:
 
 
 def _accessor(g, i):
-    from mimica.mesh.io import _gltf_accessor
-    return _gltf_accessor(g, i)
+    from mimica.mesh.io.gltf import read_accessor
+    return read_accessor(g, i)
 
 
 def _vertex_of(g) -> np.ndarray:
     """The mesh vertex of each of the file's vertices (the uv seams split)."""
-    from mimica.mesh.io import VERTEX_MAP, _gltf_buffer
+    from mimica.mesh.io.gltf import VERTEX_MAP, buffer_bytes
     prim = g.meshes[0].primitives[0]
     n = g.accessors[prim.attributes.POSITION].count
     if not (isinstance(prim.extras, dict) and VERTEX_MAP in prim.extras):
         return np.arange(n)
     view = g.bufferViews[prim.extras[VERTEX_MAP]]
-    return np.frombuffer(_gltf_buffer(g, view.buffer), np.uint32, n, view.byteOffset or 0).astype(int)
+    return np.frombuffer(buffer_bytes(g, view.buffer), np.uint32, n, view.byteOffset or 0).astype(int)
 
 
 @pytest.fixture(scope="module")
@@ -93,7 +93,7 @@ def test_normals_are_smooth_and_targets_carry_their_change(written, head_model):
     np.testing.assert_allclose(n0, m.vertex_normals(base)[v], atol=1e-6)
     shape = head_model.shape("jawOpen")
     dn = _accessor(g, prim.targets[1]["NORMAL"])
-    from mimica.mesh.io import SPARSE_NORMAL, SPARSE_TOLERANCE      # export writes sparse targets
+    from mimica.mesh.io.gltf import SPARSE_NORMAL, SPARSE_TOLERANCE      # export writes sparse targets
     np.testing.assert_allclose(n0 + dn, m.vertex_normals(shape)[v], atol=SPARSE_NORMAL + 1e-6)
     np.testing.assert_allclose(_accessor(g, prim.targets[1]["POSITION"]), 0.01 * (shape - base)[v],  # metres
                                atol=SPARSE_TOLERANCE * 1.001)
@@ -187,20 +187,20 @@ def test_quantized_targets_equal_the_float_ones_within_their_step(written, head_
     (QUANTIZE_ERROR, 0.015 mm) of the float ones, normal changes within half an 8-bit step; the
     extension is declared required; mimica's reader gives floats back."""
     import pygltflib as gl
-    from mimica.mesh.io import QUANTIZATION, QUANTIZE_ERROR, SPARSE_NORMAL, SPARSE_TOLERANCE, _unit_normals
+    from mimica.mesh.io.gltf import QUANTIZATION, SPARSE_NORMAL, unit_normals
     m = head_model.mesh
     g = gl.GLTF2().load(str(written / "quantized.glb"))
     assert g.extensionsRequired == [QUANTIZATION] and g.extensionsUsed == [QUANTIZATION]
     prim = g.meshes[0].primitives[0]
     v = _vertex_of(g)
-    n0 = _unit_normals(m, m.vertices)
+    n0 = unit_normals(m, m.vertices)
     far_counts = []
     for t, name in zip(prim.targets[1:], ("eyeBlink_R", "jawOpen")):
         shape = head_model.shape(name)
         pos, nrm = g.accessors[t["POSITION"]], g.accessors[t["NORMAL"]]
         assert (pos.componentType, pos.normalized) == (gl.SHORT, True)
         assert (nrm.componentType, nrm.normalized) == (gl.BYTE, True)
-        n1 = _unit_normals(m, shape)[v]
+        n1 = unit_normals(m, shape)[v]
         dn = n1 - n0[v]
         got = _accessor(g, t["NORMAL"])
         turned = np.linalg.norm(dn, axis=1) > SPARSE_NORMAL

@@ -111,7 +111,7 @@ def test_write_is_atomic(tmp_path, mixed, monkeypatch):
     def boom(mesh, path):
         path.write_text("partial")
         raise RuntimeError("disk full")
-    monkeypatch.setattr(io, "_write_obj", boom)
+    monkeypatch.setattr(io, "write_obj", boom)
     out = tmp_path / "written"
     with pytest.raises(RuntimeError):
         write_mesh(out / "out.obj", mixed)

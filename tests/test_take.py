@@ -29,7 +29,7 @@ def live_link_csv(path, weights, start="13:32:48:00"):
 
 def test_live_link_take_plays_on_the_head(head_glb, tmp_path, capsys):
     import pygltflib as gl
-    from mimica.mesh.io import _gltf_accessor
+    from mimica.mesh.io.gltf import read_accessor
     rng = np.random.default_rng(0)
     frames = 90
     w = np.clip(rng.normal(0.3, 0.2, (frames, 52)), 0, 1)
@@ -41,11 +41,11 @@ def test_live_link_take_plays_on_the_head(head_glb, tmp_path, capsys):
     g = gl.GLTF2().load(str(tmp_path / "t.glb"))
     names = g.meshes[0].extras["targetNames"]
     s = g.animations[0].samplers[0]
-    times = _gltf_accessor(g, s.input)
+    times = read_accessor(g, s.input)
     # Live Link's timecode: frame f at f / 60 s, its sub-frame fraction (.fff) carried along
     sub = ((37 * np.arange(frames)) % 1000) / 1000.0
     np.testing.assert_allclose(times, (np.arange(frames) + sub - sub[0]) / 60.0, atol=1e-6)
-    got = _gltf_accessor(g, s.output).reshape(frames, len(names))
+    got = read_accessor(g, s.output).reshape(frames, len(names))
     for j, n in enumerate(names):
         np.testing.assert_allclose(got[:, j], w[:, ARKIT_52.index(n)], atol=1e-6)
 
@@ -55,13 +55,13 @@ def test_live_link_take_plays_on_the_head(head_glb, tmp_path, capsys):
 
 def test_a_weights_csv_with_a_time_column(head_glb, tmp_path):
     import pygltflib as gl
-    from mimica.mesh.io import _gltf_accessor
+    from mimica.mesh.io.gltf import read_accessor
     lines = [",".join(["time"] + ARKIT_52)] + [",".join([f"{t / 30:.5f}"] + ["0.5" if n == "jawOpen" else "0"
                                                                              for n in ARKIT_52]) for t in range(10)]
     (tmp_path / "w.csv").write_text("\n".join(lines))
     assert main(["animate", str(head_glb), "--arkit", str(tmp_path / "w.csv"), "--out", str(tmp_path / "w.glb")]) == 0
     g = gl.GLTF2().load(str(tmp_path / "w.glb"))
-    got = _gltf_accessor(g, g.animations[0].samplers[0].output).reshape(10, -1)
+    got = read_accessor(g, g.animations[0].samplers[0].output).reshape(10, -1)
     names = g.meshes[0].extras["targetNames"]
     assert np.allclose(got[:, names.index("jawOpen")], 0.5) and np.allclose(np.delete(got, names.index("jawOpen"), 1), 0)
 
@@ -113,16 +113,16 @@ def _skinned(g, frame):
     """The file's base positions skinned as a glTF viewer does (joint world matrix x inverse bind,
     blended by WEIGHTS_0) with the head joint's rotation at keyframe `frame`; morphs left out."""
     from scipy.spatial.transform import Rotation
-    from mimica.mesh.io import _gltf_accessor
+    from mimica.mesh.io.gltf import read_accessor
     prim = g.meshes[0].primitives[0]
-    pos = _gltf_accessor(g, prim.attributes.POSITION).astype(float)
-    joints = _gltf_accessor(g, prim.attributes.JOINTS_0).astype(int)
-    wts = _gltf_accessor(g, prim.attributes.WEIGHTS_0)
+    pos = read_accessor(g, prim.attributes.POSITION).astype(float)
+    joints = read_accessor(g, prim.attributes.JOINTS_0).astype(int)
+    wts = read_accessor(g, prim.attributes.WEIGHTS_0)
     skin = g.skins[0]
     neck, head = (g.nodes[j] for j in skin.joints)
-    ibm = _gltf_accessor(g, skin.inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1)   # column-major
+    ibm = read_accessor(g, skin.inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1)   # column-major
     rot = g.animations[0].channels[1]
-    q = _gltf_accessor(g, g.animations[0].samplers[rot.sampler].output)[frame]
+    q = read_accessor(g, g.animations[0].samplers[rot.sampler].output)[frame]
     t = np.eye(4)
     t[:3, 3] = neck.translation
     r = np.eye(4)
@@ -161,8 +161,8 @@ def test_head_rotation_turns_the_head_and_bends_the_neck(ict_head_glb, tmp_path,
     g = gl.GLTF2().load(str(out))
     stored = g.meshes[0].extras[HEAD_KEY]
     assert g.nodes[g.skins[0].joints[0]].translation == pytest.approx(stored["pivot"])
-    from mimica.mesh.io import _gltf_accessor
-    keys = _gltf_accessor(g, g.animations[0].samplers[1].output)
+    from mimica.mesh.io.gltf import read_accessor
+    keys = read_accessor(g, g.animations[0].samplers[1].output)
     want = head_quaternions(yaw, pitch, roll)
     assert np.allclose(np.abs((keys * want).sum(1)), 1, atol=1e-6)             # the same rotations
     assert (np.sum(keys[1:] * keys[:-1], 1) > 0).all()                          # slerp takes the short way

@@ -57,7 +57,7 @@ def test_video_to_animation_and_live_link_csv(head_glb, tmp_path, capsys):
     from mimica.export.take import read_take
     from mimica.image.ictphotos import ICTPhotos
     from mimica.image.io import write_image
-    from mimica.mesh.io import _gltf_accessor
+    from mimica.mesh.io.gltf import read_accessor
     photos = ICTPhotos(size=(320, 400))
     jaw = _ramp(14, 2, 10, 1.0)
     frames = tmp_path / "frames"
@@ -76,10 +76,10 @@ def test_video_to_animation_and_live_link_csv(head_glb, tmp_path, capsys):
     times, weights, rate = read_take(out.with_suffix(".csv"), fps=25)
     assert len(times) == 14 and {"headYaw", "headPitch", "headRoll"} <= set(weights)
     g = gl.GLTF2().load(str(out))
-    np.testing.assert_allclose(_gltf_accessor(g, g.animations[0].samplers[0].input), times, atol=1e-6)
+    np.testing.assert_allclose(read_accessor(g, g.animations[0].samplers[0].input), times, atol=1e-6)
     np.testing.assert_allclose(times, np.arange(14) / 25, atol=1e-6)
     names = g.meshes[0].extras["targetNames"]
-    anim = _gltf_accessor(g, g.animations[0].samplers[0].output).reshape(14, len(names))
+    anim = read_accessor(g, g.animations[0].samplers[0].output).reshape(14, len(names))
     for j, n in enumerate(names):
         np.testing.assert_allclose(anim[:, j], weights[n], atol=2e-6)
     got = weights["jawOpen"]

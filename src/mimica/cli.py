@@ -146,6 +146,8 @@ def _head_options(p, what: str) -> None:
 
 def _correspondence_line(xfer) -> str:
     """'; correspondence (nicp): 99.8% of the target's skin matched, 2.1% with low confidence'."""
+    if xfer.relaid:
+        return "; the target is the source's own mesh in another vertex layout (found by its uv): solved on its topology"
     cor = xfer.correspondence                  # the skin's, when the heads have parts
     if cor is None:
         return ""
@@ -158,6 +160,14 @@ def _correspondence_line(xfer) -> str:
     return line
 
 
+def _say_uncut_mouth(xfer, what, landmarks_flag: str) -> None:
+    """One line where sealed lips were left sealed: why, and what to do."""
+    if xfer.mouth_uncut is not None:
+        _say(f"{what}: the lips are sealed and stay so: {xfer.mouth_uncut.why}; give the head's 68 landmarks "
+             f"({landmarks_flag}) so that the mouth's corners and lips are where they are, or say --cut-mouth off "
+             "(--show draws where the seam was looked for)")
+
+
 def _warn_sealed_eyes(mesh, lm, what):
     """One line when a face's eyes are closed surfaces (blinks then move the lids over them)."""
     if lm is None:
@@ -167,6 +177,15 @@ def _warn_sealed_eyes(mesh, lm, what):
     if shut:
         _say(f"note: {what}: the {' and '.join(shut)} eye{'s are' if len(shut) > 1 else ' is'} one closed "
              "surface; lids move over it, they do not open or close")
+
+
+def _read_head(path):
+    """read_mesh, and the lines a file of another tool has to say (gltf.GltfLayout.notes)."""
+    from .mesh import read_mesh
+    mesh = read_mesh(path)
+    for n in (mesh.layout.notes if mesh.layout is not None else []):
+        _say(f"{path}: {n}")
+    return mesh
 
 
 def _say(msg):
@@ -229,6 +248,7 @@ def cmd_transfer(a):
     if xfer.mouth is not None:
         _say(f"{a.target}: the lips were sealed; cut apart along {len(xfer.mouth.seam)} vertices, "
              f"{len(xfer.mouth.copies_of)} added after the target's own (--cut-mouth off to keep them sealed)")
+    _say_uncut_mouth(xfer, a.target, "--target-landmarks")
     _warn_sealed_eyes(target, lt, a.target)
     target = xfer.output_mesh
     if len(frames) >= BASIS_FRAMES:                    # a long sequence: through its basis, if it holds
@@ -1006,24 +1026,36 @@ def _weights_from_video(a, head: Path, out: Path):
 def cmd_blendshapes(a):
     from .export import ARKIT_52, arkit_blendshapes
     from .landmarks import read_landmarks
-    from .mesh import atomic_path, read_mesh, write_glb
-    from .mesh.io import SPARSE_TOLERANCE
+    from .mesh import atomic_path, write_glb
+    from .mesh.io import SPARSE_TOLERANCE, UNITS, GltfLayout
     out = Path(a.out)
     if a.format and not out.suffix:                       # `--format usd --out head`: head.usd
         out = out.with_suffix("." + a.format)
     elif a.format and out.suffix.lower() != "." + a.format:
         raise MimicaError(f"--format {a.format} with --out {out}: say the format once (the suffix, or --format)")
-    if out.suffix.lower() not in (".glb", ".gltf", ".usd", ".usda", ".usdc", ".npz"):
-        raise MimicaError(f"{out}: blendshapes are written as glTF (.glb or .gltf), USD (.usd, .usda, .usdc) "
-                          "or NumPy arrays (.npz: the positions of each shape, for the Blender add-on)")
+    if out.suffix.lower() not in (".glb", ".gltf", ".usd", ".usda", ".usdc", ".npz", ".fbx"):
+        raise MimicaError(f"{out}: blendshapes are written as glTF (.glb or .gltf), FBX (an FBX head's own file), "
+                          "USD (.usd, .usda, .usdc) or NumPy arrays (.npz: the positions of each shape, for the "
+                          "Blender add-on)")
+    if out.suffix.lower() == ".fbx" and Path(a.head).suffix.lower() != ".fbx":
+        raise MimicaError(f"{out}: FBX is written back into the FBX head it was read from; write .glb for "
+                          f"{Path(a.head).name} (Blender, Maya and game engines import it)")
     t0 = time.perf_counter()
-    head = read_mesh(a.head)
+    head = _read_head(a.head)
     lm = read_landmarks(a.landmarks, head) if a.landmarks else None
     shapes = arkit_blendshapes(head, lm, progress=_say, cut_mouth=a.cut_mouth == "auto", match=a.match)
     if line := _correspondence_line(shapes.transfer).lstrip("; "):
         _say(line)
+    _say_uncut_mouth(shapes.transfer, a.head, "--landmarks")
     _warn_sealed_eyes(head, shapes.landmarks, a.head)
-    if out.suffix.lower() == ".npz":
+    if out.suffix.lower() == ".fbx":
+        from .mesh.io import write_fbx_layout
+        with atomic_path(out) as tmp:
+            info = write_fbx_layout(tmp, head.layout, shapes.mesh, {n: shapes[n] for n in ARKIT_52})
+        _say(f"written into {Path(a.head).name}'s own objects through Blender's FBX exporter"
+             + (f" ({info['appended']} vertices added by the mouth's cut)" if info["appended"] else "")
+             + f", {out.stat().st_size / 1e6:.1f} MB")
+    elif out.suffix.lower() == ".npz":
         with atomic_path(out) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, vertices=shapes.mesh.vertices, **{n: shapes[n] for n in ARKIT_52})
@@ -1035,18 +1067,33 @@ def cmd_blendshapes(a):
     else:
         from .export.take import HEAD_KEY, head_joint
         from .mesh.io import glb_units
+        layout = head.layout if isinstance(head.layout, GltfLayout) else None
         joint = head_joint(shapes.mesh, shapes.landmarks)   # where `animate --head-rotation` turns it
-        k = glb_units(shapes.mesh, a.units)[1]
+        k = UNITS[layout.unit] if layout is not None else glb_units(shapes.mesh, a.units)[1]
         extras = {} if joint is None else {HEAD_KEY: {n: (k * p).tolist() for n, p in joint.items()}}
         lm = shapes.landmarks
         if lm.present.all():                            # for `animate --video`: the points it fits
             from .export.video import LANDMARKS_KEY
             extras[LANDMARKS_KEY] = {"vertices": shapes.mesh.triangles[lm.triangle].tolist(),
                                      "bary": np.round(lm.bary, 7).tolist()}
+        targets = {n: shapes[n] for n in ARKIT_52}
+        binary = out.suffix.lower() == ".glb"
         with atomic_path(out) as tmp:
-            info = write_glb(tmp, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, binary=out.suffix.lower() == ".glb",
-                             units=a.units, sparse=SPARSE_TOLERANCE, quantize=a.quantize, extras=extras)
-        _say(_units_line(shapes.mesh, info["units"], a.units) + "; " + _sparse_line(out, info, len(ARKIT_52)))
+            if isinstance(layout, GltfLayout):          # back into the user's own file
+                from .mesh.io import write_gltf_layout
+                info = write_gltf_layout(tmp, layout, shapes.mesh, targets, binary=binary, extras=extras)
+            else:
+                info = write_glb(tmp, shapes.mesh, targets, binary=binary, units=a.units, sparse=SPARSE_TOLERANCE,
+                                 quantize=a.quantize, extras=extras)
+        if isinstance(layout, GltfLayout):
+            _say(f"written into {Path(a.head).name}'s own nodes, materials and vertices"
+                 + (f" ({info['appended']} vertices added by the mouth's cut)" if info["appended"] else "")
+                 + f"; units as the file's; {info['sparse']} of {info['accessors']} morph target accessors sparse "
+                 f"(moves under {SPARSE_TOLERANCE * 1e3:g} mm left out), {out.stat().st_size / 1e6:.1f} MB")
+            for n in info["notes"]:
+                _say(f"{out}: {n}")
+        else:
+            _say(_units_line(shapes.mesh, info["units"], a.units) + "; " + _sparse_line(out, info, len(ARKIT_52)))
     if a.show:
         from .render import save_png
         from .render.diagnose import transfer_picture

@@ -33,6 +33,7 @@ class MouthCut:
     copies_of: np.ndarray         # (k,) for each appended vertex, the vertex it copies
     seam: np.ndarray              # the seam's vertices, corner to corner
     inward: np.ndarray | None = None   # (n + k, 3) offsets into each seam vertex's own lip (0 elsewhere)
+    why: str = ""                 # sealed lips left uncut: why (the seam tried is `seam`)
 
     @property
     def cut(self) -> bool:
@@ -123,7 +124,9 @@ def cut_mouth(mesh: Mesh, landmarks) -> MouthCut:
         return none
     seam = _seam(mesh, lm)
     if len(seam) < 3 or len(np.unique(seam)) != len(seam):
-        return none
+        why = "no path over the mesh between the mouth's corners" if len(seam) == 0 else \
+            "the mouth's corners are too close on the mesh" if len(seam) < 3 else "the path between the lips crosses itself"
+        return MouthCut(mesh, np.zeros(0, np.int64), seam, why=why)
     inner = seam[1:-1]
     # the faces around the seam, split into the two lips: faces meet across shared edges,
     # except the seam's own edges
@@ -156,8 +159,9 @@ def cut_mouth(mesh: Mesh, landmarks) -> MouthCut:
     near = cKDTree(seam_pos).query(cent)[1]
     below_face = (cent - seam_pos[near]) @ up < 0
     below_comp = np.array([below_face[comp == c].mean() > 0.5 for c in range(nc)])
-    if below_comp.all() or not below_comp.any():
-        return none                          # not two lips: leave the mesh alone
+    if below_comp.all() or not below_comp.any():   # not two lips: leave the mesh alone
+        return MouthCut(mesh, np.zeros(0, np.int64), seam,
+                        why="the path found between the mouth's corners does not part an upper from a lower lip")
     copy = np.full(mesh.n_vertices, -1, np.int64)
     copy[inner] = mesh.n_vertices + np.arange(len(inner))
     new_fi = fi.copy()
@@ -165,7 +169,7 @@ def cut_mouth(mesh: Mesh, landmarks) -> MouthCut:
     sel = np.isin(face_of, lower_faces) & on
     new_fi[sel] = copy[fi[sel]]
     v = np.vstack([mesh.vertices, mesh.vertices[inner]])
-    cut = Mesh(v, new_fi, st, name=mesh.name, groups=mesh.groups, group_names=mesh.group_names)
+    cut = Mesh(v, new_fi, st, name=mesh.name, groups=mesh.groups, group_names=mesh.group_names, layout=mesh.layout)
     if mesh.uv is not None and mesh.face_uv_indices is not None:
         cut.uv, cut.face_uv_indices = mesh.uv, mesh.face_uv_indices
     # where each side's seam vertex sits inside its own lip: half way to its faces' centroids

@@ -102,6 +102,10 @@ def _mouth_frame(lm):
 
 
 def _ict_parts(mesh: Mesh, lm) -> Parts:
+    """ICT's table: its head (the first 11,248 vertices) is the skin; the eyeballs, teeth, gums and
+    tongue are its own only on its whole mesh.  Vertices of a head-only mesh past the head
+    (a user's own additions) follow the skin."""
+    from ..data import ICT_N_VERTICES
     n = mesh.n_vertices
     label = np.zeros(n, np.int64)
     names = [p[0] for p in ICT_PARTS]
@@ -109,7 +113,10 @@ def _ict_parts(mesh: Mesh, lm) -> Parts:
         label[a:min(b, n)] = k
     role = np.full(n, ROLES.index(FOLLOW))
     role[:11248] = ROLES.index(SKIN)
-    if n > 11248:
+    if n < ICT_N_VERTICES and n > 11248:
+        label[11248:] = len(names)
+        names.append("other")
+    if n >= ICT_N_VERTICES:
         role[21451:23021] = ROLES.index(EYE_LEFT)
         role[23021:24591] = ROLES.index(EYE_RIGHT)
         _split_mouth(mesh, lm, np.arange(14062, 21451), role)

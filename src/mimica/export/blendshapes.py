@@ -48,8 +48,9 @@ class Blendshapes(dict):
     transfer = None               # the ExpressionTransfer that made them (vertex_report, pictures)
 
 
-def arkit_blendshapes(head, landmarks=None, progress=None, store=None, cut_mouth=True, match="nicp") -> Blendshapes:
-    """The 52 ARKit shapes on `head` (a Mesh of any topology)."""
+def arkit_blendshapes(head, landmarks=None, progress=None, store=None, cut_mouth=True, match="nicp",
+                      relayout=True) -> Blendshapes:
+    """The 52 ARKit shapes on `head` (a Mesh of any topology; relayout: see ExpressionTransfer)."""
     from ..data import ICT_N_VERTICES
     from ..landmarks import ict_landmarks, landmarks_for
     from ..mesh import read_mesh
@@ -71,7 +72,8 @@ def arkit_blendshapes(head, landmarks=None, progress=None, store=None, cut_mouth
                                           np.zeros_like(src.vertices)) for a in ARKIT_52])
     say("transferring 52 shapes")
     xfer = ExpressionTransfer(src, head, ict_landmarks(src), lt, method="vtc",
-                              static=static_vertices(src.vertices, frames), cut_mouth=cut_mouth, match=match)
+                              static=static_vertices(src.vertices, frames), cut_mouth=cut_mouth, match=match,
+                              relayout=relayout)
     if xfer.mouth is not None:
         say(f"the lips were sealed: cut apart along {len(xfer.mouth.seam)} vertices "
             f"({len(xfer.mouth.copies_of)} added after the head's own)")

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MimicaError
-from ..mesh.io import _gltf_accessor
+from ..mesh.io.gltf import read_accessor
 from .blendshapes import ARKIT_52
 
 
@@ -165,103 +165,80 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: 
     the one `blendshapes` stored (HEAD_KEY); a GLB without one needs `pivot` (it then turns whole).
     Returns {"driven": how many of the head's targets the take drives, "pivot": the pivot used or
     None, "bending": how many vertices bend with the neck}."""
-    import pygltflib as gl
+    from ..mesh.io.gltf import (ARRAY_BUFFER, FLOAT, UNSIGNED_BYTE, _load, _placed_meshes, open_for_edit,
+                                save_edited)
     head_glb = Path(head_glb)
-    try:
-        g = gl.GLTF2().load(str(head_glb))
-        mesh = g.meshes[0]
-        names = list((mesh.extras or {}).get("targetNames") or [])
-    except Exception as e:
-        raise MimicaError(f"{head_glb}: not a readable glTF file ({type(e).__name__}: {e})") from None
-    if not names or not mesh.primitives[0].targets:
-        raise MimicaError(f"{head_glb}: no named morph targets (make them with `blendshapes`)")
-    driven = [n for n in names if n in weights]
-    if not driven:
-        raise MimicaError(f"{head_glb}: none of its morph targets is an ARKit shape")
+    g = _load(head_glb)
+    doc, buf, _ = open_for_edit(head_glb)
+    # every node of the scene showing a mesh with morph targets named like the take's shapes
+    shown = {}
+    for node, mi, _, _ in _placed_meshes(g, head_glb):
+        names = list((doc["meshes"][mi].get("extras") or {}).get("targetNames") or [])
+        if any(n in weights for n in names):
+            shown.setdefault(mi, []).append(node)
+    if not shown:
+        raise MimicaError(f"{head_glb}: no mesh with morph targets named as ARKit shapes (make them with "
+                          "`blendshapes`)")
     if head_rotation and not all(n in weights for n in HEAD_ROTATION):
         raise MimicaError("the take has no HeadYaw, HeadPitch and HeadRoll columns to turn the head by")
-    w = np.zeros((len(times), len(names)), np.float32)
-    for j, n in enumerate(names):
-        if n in weights:
-            w[:, j] = weights[n]
-    node = next((i for i, nd in enumerate(g.nodes) if nd.mesh == 0), None)
-    if node is None:
-        raise MimicaError(f"{head_glb}: no node shows its mesh")
-    blob = bytearray(g.binary_blob() or b"")
-    if len(g.buffers) != 1 or g.buffers[0].uri is not None:
-        raise MimicaError(f"{head_glb}: a .glb with one embedded buffer is needed (as `blendshapes` writes)")
-
-    def add(arr, minmax=False, kind=gl.SCALAR):
-        arr = np.ascontiguousarray(arr, np.float32)
-        blob.extend(b"\0" * ((-len(blob)) % 4))
-        g.bufferViews.append(gl.BufferView(buffer=0, byteOffset=len(blob), byteLength=arr.nbytes))
-        blob.extend(arr.tobytes())
-        a = gl.Accessor(bufferView=len(g.bufferViews) - 1, componentType=gl.FLOAT, count=len(arr), type=kind)
-        if minmax:
-            a.min, a.max = [float(arr.min())], [float(arr.max())]
-        g.accessors.append(a)
-        return len(g.accessors) - 1
-
-    def add_raw(arr, comp, kind, normalized=False):
-        """A vertex attribute of integers (its view 4-byte aligned, as glTF wants)."""
-        arr = np.ascontiguousarray(arr)
-        blob.extend(b"\0" * ((-len(blob)) % 4))
-        g.bufferViews.append(gl.BufferView(buffer=0, byteOffset=len(blob), byteLength=arr.nbytes,
-                                           target=gl.ARRAY_BUFFER))
-        blob.extend(arr.tobytes())
-        g.accessors.append(gl.Accessor(bufferView=len(g.bufferViews) - 1, componentType=comp, count=len(arr),
-                                       type=kind, normalized=True if normalized else None))
-        return len(g.accessors) - 1
-
-    it = add(times, True)
-    iw = add(w.reshape(-1))
-    samplers = [gl.AnimationSampler(input=it, output=iw, interpolation="LINEAR")]
-    channels = [gl.AnimationChannel(sampler=0, target=gl.AnimationChannelTarget(node=node, path="weights"))]
+    it = buf.add(np.asarray(times, np.float32), None, "SCALAR", FLOAT, True)
+    samplers, channels, driven = [], [], set()
+    for mi, nodes in shown.items():
+        names = list(doc["meshes"][mi]["extras"]["targetNames"])
+        w = np.zeros((len(times), len(names)), np.float32)
+        for j, n in enumerate(names):
+            if n in weights:
+                w[:, j] = weights[n]
+                driven.add(n)
+        samplers.append({"input": it, "output": buf.add(w.reshape(-1), None, "SCALAR", FLOAT),
+                         "interpolation": "LINEAR"})
+        channels += [{"sampler": len(samplers) - 1, "target": {"node": nd, "path": "weights"}} for nd in nodes]
     used_pivot, bending = None, 0
     if head_rotation:
-        stored = (mesh.extras or {}).get(HEAD_KEY) or {}
+        placings = [(mi, nd) for mi, nodes in shown.items() for nd in nodes]
+        if len(placings) != 1:
+            raise MimicaError(f"{head_glb}: the head is several meshes or placings; it can only be turned on a "
+                              "head as `blendshapes` writes it from an OBJ")
+        mi, nd = placings[0]
+        mesh, node = doc["meshes"][mi], doc["nodes"][nd]
+        stored = (mesh.get("extras") or {}).get(HEAD_KEY) or {}
         pivot = pivot if pivot is not None else stored.get("pivot")
         if pivot is None:
             raise MimicaError(f"{head_glb}: no head pivot stored (made by an older mimica?): say where the head "
                               "turns (x,y,z in metres)")
         used_pivot = [float(x) for x in pivot]
-        nd = g.nodes[node]
-        if nd.rotation or nd.scale or nd.matrix or nd.translation or nd.skin is not None:
+        if any(k in node for k in ("rotation", "scale", "matrix", "translation", "skin")):
             raise MimicaError(f"{head_glb}: its mesh's node is placed or skinned already; the head can only be "
                               "turned on a mesh as `blendshapes` writes it")
         # glTF skin (2.0 3.7.3): JOINTS_0 / WEIGHTS_0 on every vertex, joint 0 the neck (still),
         # joint 1 the head beneath it, both at the pivot (inverse bind: minus the pivot)
-        prim0 = mesh.primitives[0]
-        y = _gltf_accessor(g, prim0.attributes.POSITION)[:, 1].astype(np.float64)
+        y = read_accessor(g, mesh["primitives"][0]["attributes"]["POSITION"])[:, 1].astype(np.float64)
         chin = stored.get("chin")
         wh = neck_weights(y, used_pivot[1], None if chin is None else float(chin[1]))
         bending = int(((wh > 0) & (wh < 1)).sum())
         head_b = np.rint(wh * 255).astype(np.uint8)
         zero = np.zeros_like(head_b)
         # the head's weight first; a joint without weight is joint 0 (the validator's rule)
-        iw_ = add_raw(np.stack([head_b, 255 - head_b, zero, zero], 1), gl.UNSIGNED_BYTE, gl.VEC4, normalized=True)
-        ij_ = add_raw(np.stack([(head_b > 0).astype(np.uint8), zero, zero, zero], 1), gl.UNSIGNED_BYTE, gl.VEC4)
-        for pr in mesh.primitives:
-            pr.attributes.JOINTS_0, pr.attributes.WEIGHTS_0 = ij_, iw_
+        iw_ = buf.add(np.stack([head_b, 255 - head_b, zero, zero], 1), ARRAY_BUFFER, "VEC4", UNSIGNED_BYTE,
+                      normalized=True)
+        ij_ = buf.add(np.stack([(head_b > 0).astype(np.uint8), zero, zero, zero], 1), ARRAY_BUFFER, "VEC4",
+                      UNSIGNED_BYTE)
+        for pr in mesh["primitives"]:
+            pr["attributes"]["JOINTS_0"], pr["attributes"]["WEIGHTS_0"] = ij_, iw_
         q = head_quaternions(weights["headYaw"], weights["headPitch"], weights["headRoll"])
-        g.nodes.append(gl.Node(name="neck", translation=used_pivot, children=[len(g.nodes) + 1]))
-        g.nodes.append(gl.Node(name="head", rotation=q[0].tolist()))
-        neck, turn = len(g.nodes) - 2, len(g.nodes) - 1
+        neck, turn = len(doc["nodes"]), len(doc["nodes"]) + 1
+        doc["nodes"] += [{"name": "neck", "translation": used_pivot, "children": [turn]},
+                         {"name": "head", "rotation": q[0].tolist()}]
         ibm = np.tile(np.eye(4, dtype=np.float32), (2, 1, 1))
         ibm[:, 3, :3] = -np.asarray(used_pivot, np.float32)           # column-major: translation last
-        g.skins = [gl.Skin(name="neck", joints=[neck, turn], skeleton=neck,
-                           inverseBindMatrices=add(ibm.reshape(2, 16), kind=gl.MAT4))]
-        nd.skin = 0
-        for sc in g.scenes:
-            sc.nodes = list(sc.nodes) + [neck]
-        samplers.append(gl.AnimationSampler(input=it, output=add(q, kind=gl.VEC4), interpolation="LINEAR"))
-        channels.append(gl.AnimationChannel(sampler=1, target=gl.AnimationChannelTarget(node=turn, path="rotation")))
-    g.animations = [gl.Animation(name=Path(out).stem, samplers=samplers, channels=channels)]
-    blob.extend(b"\0" * ((-len(blob)) % 4))
-    for a in g.accessors:          # pygltflib reads a missing byteOffset as 0: sparse accessors have none
-        if a.bufferView is None:
-            a.byteOffset = None
-    g.buffers[0].byteLength = len(blob)
-    g.set_binary_blob(bytes(blob))
-    g.save_binary(str(out))
+        doc.setdefault("skins", []).append({"name": "neck", "joints": [neck, turn], "skeleton": neck,
+                                            "inverseBindMatrices": buf.add(ibm.reshape(2, 16), None, "MAT4", FLOAT)})
+        node["skin"] = len(doc["skins"]) - 1
+        for sc in doc.get("scenes", []):
+            sc["nodes"] = list(sc.get("nodes", [])) + [neck]
+        samplers.append({"input": it, "output": buf.add(q, None, "VEC4", FLOAT), "interpolation": "LINEAR"})
+        channels.append({"sampler": len(samplers) - 1, "target": {"node": turn, "path": "rotation"}})
+    # the file's own animations stay; the take is one more
+    doc.setdefault("animations", []).append({"name": Path(out).stem, "samplers": samplers, "channels": channels})
+    save_edited(doc, buf, out, binary=Path(out).suffix.lower() != ".gltf")
     return {"driven": len(driven), "pivot": used_pivot, "bending": bending}

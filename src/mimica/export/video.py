@@ -59,45 +59,26 @@ class LandmarkBasis:
 def landmark_basis(head_glb) -> LandmarkBasis:
     """Read the head's landmarks and their motion in its morph targets from a GLB written by
     `blendshapes` (which stores the landmarks, LANDMARKS_KEY)."""
-    import pygltflib as gl
-    from ..mesh.io import VERTEX_MAP, _gltf_accessor, _gltf_buffer
+    from ..mesh.io import UNITS, read_morph_targets
     head_glb = Path(head_glb)
-    try:
-        g = gl.GLTF2().load(str(head_glb))
-        mesh = g.meshes[0]
-        prim = mesh.primitives[0]
-        extras = mesh.extras or {}
-        names = list(extras.get("targetNames") or [])
-        stored = extras.get(LANDMARKS_KEY)
-        pos = _gltf_accessor(g, prim.attributes.POSITION).astype(np.float64)
-        targets = prim.targets or []
-        v_of = None
-        if isinstance(prim.extras, dict) and VERTEX_MAP in prim.extras:
-            view = g.bufferViews[int(prim.extras[VERTEX_MAP])]
-            v_of = np.frombuffer(_gltf_buffer(g, view.buffer), np.uint32, len(pos), view.byteOffset or 0)
-    except Exception as e:
-        raise MimicaError(f"{head_glb}: not a readable glTF file ({type(e).__name__}: {e})") from None
-    if not names or not targets or not set(ARKIT_52) <= set(names):
+    mesh, targets, unit = read_morph_targets(head_glb)
+    stored = mesh.layout.extras.get(LANDMARKS_KEY)
+    if not set(ARKIT_52) <= set(targets):
         raise MimicaError(f"{head_glb}: not a head with the 52 ARKit morph targets (make it with `blendshapes`)")
     if not stored:
         raise MimicaError(f"{head_glb}: no landmarks stored (made by an older mimica, or the head's 68 landmarks "
                           "were not all found): make it again with `blendshapes`, giving its landmarks")
     tri = np.asarray(stored["vertices"], np.int64)
     bary = np.asarray(stored["bary"], np.float64)
-    if v_of is not None:                         # the user's vertices -> the file's (its first copy)
-        first = np.full(int(v_of.max()) + 1, -1, np.int64)
-        first[v_of[::-1]] = np.arange(len(v_of))[::-1]
-        tri = first[tri]
-    if tri.shape != (68, 3) or (tri < 0).any() or (tri >= len(pos)).any():
+    if tri.shape != (68, 3) or (tri < 0).any() or (tri >= mesh.n_vertices).any():
         raise MimicaError(f"{head_glb}: its stored landmarks do not match its vertices")
+    k = UNITS[unit]                                  # metres, as the file holds them
 
     def at(p):
-        return np.einsum("ij,ijk->ik", bary, p[tri])
-    motion = np.zeros((len(ARKIT_52), 68, 3))
-    for j, n in enumerate(names):
-        if n in ARKIT_52:
-            motion[ARKIT_52.index(n)] = at(_gltf_accessor(g, targets[j]["POSITION"]).astype(np.float64))
-    return LandmarkBasis(at(pos), motion, list(ARKIT_52))
+        return k * np.einsum("ij,ijk->ik", bary, p[tri])
+    rest = at(mesh.vertices)
+    motion = np.stack([at(targets[n]) - rest for n in ARKIT_52])
+    return LandmarkBasis(rest, motion, list(ARKIT_52))
 
 
 def _pose(model: np.ndarray, image: np.ndarray, rows=RIGID):

@@ -38,6 +38,8 @@ class Mesh:
     face_indices (the OBJ model: a corner has its own uv index).
     groups: optional (n_faces,) index into group_names: each face's material or group (OBJ
     `usemtl`, else `g`/`o`), kept through submesh, with_vertices and OBJ writing.
+    layout: where a file of another tool put these vertices (mesh.io.gltf.GltfLayout), so that a
+    result can be written back into that file; None for OBJ and PLY.  Kept by with_vertices.
     """
 
     vertices: np.ndarray
@@ -48,6 +50,7 @@ class Mesh:
     name: str = ""
     groups: np.ndarray | None = None
     group_names: tuple = ()
+    layout: object = field(default=None, repr=False)
     _cache: dict = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -90,7 +93,7 @@ class Mesh:
         if v.shape != self.vertices.shape:
             raise ValueError(f"expected vertices of shape {self.vertices.shape}, got {v.shape}")
         m = Mesh(v, self.face_indices, self.face_starts, self.uv, self.face_uv_indices,
-                 self.name if name is None else name, self.groups, self.group_names)
+                 self.name if name is None else name, self.groups, self.group_names, self.layout)
         for k in ("triangles", "tri_face", "_fan_corners", "uv_triangles", "edges", "adjacency", "face_sizes",
                   "outward_oriented"):
             if k in self.__dict__:

@@ -45,7 +45,8 @@ class ExpressionTransfer:
                  target_landmarks: Landmarks | None = None, method: str = "vtc",
                  static: np.ndarray | None = None, solver_kind: str | None = None, parts: bool = True,
                  cut_mouth: bool = True, inward: np.ndarray | None = None, weld: bool = True,
-                 lids: bool = True, match: str = "nicp", fill: bool = True, stabilize: bool = True):
+                 lids: bool = True, match: str = "nicp", fill: bool = True, stabilize: bool = True,
+                 relayout: bool = True):
         """Across topologies (target landmarks given):
 
         - a target whose seams are saved as copies of a vertex (uv splits) is solved welded;
@@ -65,15 +66,38 @@ class ExpressionTransfer:
           a non-rigid registration of the source onto the target, or "cylinder", Song et
           al.'s cylinder map.
 
+        relayout: a target that is the source's own mesh in another vertex layout (a DCC's export,
+        correspond.layout) is solved on the source's topology (`relaid`); off, its correspondence
+        is found as for any other head.
+
         inward: (n_target, 3) offsets of where each target vertex's correspondence is looked
         up (the two sides of a cut seam look inside their own lip)."""
         self.source, self.method, self.match = source, method, match
         self.basis_report = {"used": False, "why": "not applied yet"}
         same = source.same_topology(target)
         self.parts = self._parts = self.mouth = self._lids = self._fill = None
+        self.mouth_uncut = None           # sealed lips whose seam was not found (correspond.mouth.MouthCut.why)
         self.output_mesh = target
         # user vertex -> solved vertex, and the solved vertices appended after the user's
         self._copies, self._appended = None, 0
+        self.relaid = False
+        if not same and relayout:
+            # the source's own mesh in another vertex layout (a DCC's export): solved on the
+            # source's topology, each user vertex taking its source vertex's result
+            from ..correspond.layout import same_mesh
+            of = same_mesh(source, target)
+            if of is not None:
+                at = np.full(source.n_vertices, -1)
+                at[of[::-1]] = np.arange(len(of))[::-1]
+                twins = np.nonzero(at < 0)[0]            # a source vertex the file welded to its twin
+                if len(twins):
+                    from scipy.spatial import cKDTree
+                    reached = np.nonzero(at >= 0)[0]
+                    at[twins] = at[reached[cKDTree(source.vertices[reached]).query(source.vertices[twins])[1]]]
+                target = source.with_vertices(target.vertices[at])
+                self._copies, same, self.relaid = of, True, True
+                if target_landmarks is not None:          # the source's, now on the same topology
+                    target_landmarks = source_landmarks
         if not same and weld:
             # an unwelded seam (copies of a vertex, e.g. a uv split) would open under the solve
             welded, index = target.welded()
@@ -84,6 +108,7 @@ class ExpressionTransfer:
         if not same and cut_mouth and target_landmarks is not None:
             from ..correspond.mouth import cut_mouth as cut
             mc = cut(target, target_landmarks.positions(target))
+            self.mouth_uncut = mc if mc.why else None
             if mc.cut:
                 self.mouth = mc
                 self._appended = len(mc.copies_of)
@@ -241,9 +266,9 @@ class ExpressionTransfer:
     def vertex_report(self) -> dict:
         """Per vertex of `output_mesh`, for pictures and reports: 'role' (index into
         correspond.parts.ROLES; all skin without parts), 'matched' (skin with a source partner),
-        'seam' (the cut mouth's two sides), 'rim' (the lid rims the contacts pair), 'confidence'
-        (of the skin's correspondence, in [0, 1]; 1 elsewhere and on the same topology; 0 where
-        unmatched)."""
+        'seam' (the cut mouth's two sides), 'looked' (where sealed lips were looked for a seam
+        and none was cut), 'rim' (the lid rims the contacts pair), 'confidence' (of the skin's
+        correspondence, in [0, 1]; 1 elsewhere and on the same topology; 0 where unmatched)."""
         from ..correspond.parts import ROLES
         n = self.target.n_vertices
         role = np.full(n, ROLES.index("skin"))
@@ -262,10 +287,13 @@ class ExpressionTransfer:
                 rim[idx[np.r_[eye.upper, eye.lo0, eye.lo1]]] = True
         if self.mouth is not None:
             seam[np.r_[self.mouth.seam, np.arange(n - self._appended, n)]] = True
+        looked = np.zeros(n, bool)
+        if self.mouth_uncut is not None:
+            looked[self.mouth_uncut.seam] = True
         def user(a):                     # solved vertices -> the user's, as _to_user
             return a if self._copies is None else np.r_[a[self._copies], a[n - self._appended:]]
-        return {"role": user(role), "matched": user(matched), "seam": user(seam), "rim": user(rim),
-                "confidence": user(confidence)}
+        return {"role": user(role), "matched": user(matched), "seam": user(seam), "looked": user(looked),
+                "rim": user(rim), "confidence": user(confidence)}
 
     def _user_parts(self, pt):
         """The target's parts on the user's vertices (and a cut's copies after them)."""
@@ -302,4 +330,5 @@ def _user_cut(user: Mesh, welded: Mesh, mc) -> Mesh:
     fi = mc.mesh.face_indices
     new = np.where(fi >= n_w, n_u + fi - n_w, user.face_indices)
     v = np.vstack([user.vertices, mc.mesh.vertices[n_w:]])
-    return Mesh(v, new, user.face_starts, user.uv, user.face_uv_indices, user.name, user.groups, user.group_names)
+    return Mesh(v, new, user.face_starts, user.uv, user.face_uv_indices, user.name, user.groups, user.group_names,
+                user.layout)

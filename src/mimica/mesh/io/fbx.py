@@ -1,0 +1,212 @@
+"""FBX, read and written through Blender (fbx_blender, run by Blender's Python).
+
+No Python FBX library does what a character head needs here: the ufbx binding (0.0.5) hands
+out its scene's objects without a reference of their own, so a read node name or material
+crashes the interpreter when the scene is freed (measured: 3 of 8 ordinary accesses); Assimp's
+bindings need the system's libassimp and split every vertex at its seams; neither writes FBX.
+Blender's importer and exporter are the FBX path DCC heads are kept on, so FBX needs Blender:
+the `blender` command on PATH, or MIMICA_BLENDER_PYTHON naming a Python with the bpy package
+(Python 3.11: `pip install bpy`, in a venv of its own: bpy needs numpy < 2).
+
+Reading: every mesh object, placed in the world by Blender's import of the file (its unit to
+metres, its axes to mimica's y up), polygons, uv and materials as the file has them (FBX keeps
+one vertex per control point), shape keys; seams between objects welded (weld.weld_seams).
+`FbxLayout` remembers where each object's vertices went; writing back adds shape keys (and a
+cut mouth's vertices) to the user's objects and exports the file again through Blender.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ...errors import MimicaError
+from ..core import Mesh
+from .weld import half_edges, weld_seams
+
+SCRIPT = Path(__file__).with_name("fbx_blender.py")
+# Blender's z up -> mimica's y up: (x, y, z) -> (x, z, -y)
+Z_UP_TO_Y_UP = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]])
+
+
+@dataclass
+class FbxPiece:
+    """One mesh object of the file."""
+
+    name: str
+    world: np.ndarray              # (4, 4) the object's vertices -> work space
+    vertex: np.ndarray             # (n,) work vertex of each of the object's vertices
+    first_face: int                # its first polygon in the work mesh
+    n_faces: int
+    keys: list = field(default_factory=list)     # its shape keys' names (Basis first)
+
+    def vectors_to_local(self, d: np.ndarray) -> np.ndarray:
+        """(k, 3) work-space displacements -> the object's own space (shape keys)."""
+        return np.linalg.solve(self.world[:3, :3], np.asarray(d, np.float64).T).T
+
+    def to_local(self, points: np.ndarray) -> np.ndarray:
+        return np.linalg.solve(self.world[:3, :3], (np.asarray(points, np.float64) - self.world[:3, 3]).T).T
+
+
+@dataclass
+class FbxLayout:
+    """Where an FBX file's vertices went in the work mesh read_fbx made of it."""
+
+    path: Path
+    pieces: list
+    n_vertices: int
+    n_faces: int
+    notes: list = field(default_factory=list)
+    extras: dict = field(default_factory=dict)
+    unit: str = "m"
+
+
+def blender_command(script: Path) -> list:
+    """The command that runs `script` in Blender's Python, or a one-line MimicaError saying how
+    to get one."""
+    exe = os.environ.get("MIMICA_BLENDER_PYTHON")
+    if exe:
+        if not Path(exe).is_file():
+            raise MimicaError(f"MIMICA_BLENDER_PYTHON={exe}: no such file (a Python with Blender's bpy package)")
+        return [exe, str(script), "--"]
+    blender = shutil.which("blender")
+    if blender:
+        return [blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python", str(script), "--"]
+    raise MimicaError("FBX is read and written through Blender: put the `blender` command on PATH, or set "
+                      "MIMICA_BLENDER_PYTHON to a Python with the bpy package (pip install bpy, Python 3.11, "
+                      "in a venv of its own)")
+
+
+def _blender(path: Path, *args, what="read") -> None:
+    cmd = blender_command(SCRIPT) + [str(a) for a in args]
+    try:
+        run = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, stdin=subprocess.DEVNULL)
+    except (OSError, subprocess.TimeoutExpired) as e:
+        raise MimicaError(f"{path}: Blender could not be run to {what} it ({e})") from None
+    if run.returncode != 0:
+        last = [ln for ln in (run.stderr + run.stdout).splitlines() if ln.strip()]
+        why = next((ln for ln in reversed(last) if "Error" in ln or "error" in ln), last[-1] if last else "")
+        raise MimicaError(f"{path}: Blender could not {what} it as FBX ({why.strip()[:200]})")
+
+
+def read_fbx_layout(path) -> tuple[Mesh, FbxLayout]:
+    """The work mesh of an FBX file (every mesh object in world space, y up, metres) and where
+    its vertices came from; its shape keys as `targets` on the layout."""
+    path = Path(path)
+    with tempfile.TemporaryDirectory(prefix="mimica-fbx-") as d:
+        _blender(path, "read", path, Path(d) / "scene")
+        spec = json.loads((Path(d) / "scene.json").read_text())
+        with np.load(Path(d) / "scene.npz") as z:
+            arrays = {k: z[k] for k in z.files}
+    try:
+        return _build(path, spec["objects"], arrays)
+    except MimicaError:
+        raise
+    except Exception as e:
+        raise MimicaError(f"{path}: not a readable FBX file ({type(e).__name__}: {e})") from None
+
+
+def _build(path: Path, objects: list, a: dict) -> tuple[Mesh, FbxLayout]:
+    if not objects:
+        raise MimicaError(f"{path}: no mesh objects in its scene")
+    pieces, pos, fi, sizes, uv, mats, names, notes = [], [], [], [], [], [], [], []
+    n_v = n_f = 0
+    for i, ob in enumerate(objects):
+        world = Z_UP_TO_Y_UP @ np.asarray(ob["matrix"], np.float64)
+        v = a[f"v{i}"]
+        s = a[f"s{i}"]
+        pieces.append(FbxPiece(ob["name"], world, np.arange(n_v, n_v + len(v)), n_f, len(s), ob["shape_keys"]))
+        pos.append(v @ world[:3, :3].T + world[:3, 3])
+        fi.append(a[f"c{i}"] + n_v)
+        sizes.append(s)
+        uv.append(a.get(f"u{i}", np.zeros((len(a[f"c{i}"]), 2))))
+        slots = [m or ob["name"] for m in ob["materials"]] or [ob["name"]]
+        gid = np.array([names.index(m) if m in names else names.append(m) or len(names) - 1 for m in slots])
+        mats.append(gid[np.minimum(a[f"m{i}"], len(gid) - 1)])
+        n_v += len(v)
+        n_f += len(s)
+    if sum(ob["armature"] for ob in objects):
+        notes.append("skinned objects read in the bind pose (the armature's pose is not applied)")
+    raw = np.vstack(pos)
+    flat = np.concatenate(fi)
+    st = np.r_[0, np.cumsum(np.concatenate(sizes))]
+    set_of = np.repeat(np.arange(len(pieces)), [len(p) for p in pos])
+    label = weld_seams(raw, half_edges(flat, st), set_of, np.arange(len(raw)))
+    uniq, first = np.unique(label, return_index=True)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty(len(uniq), np.int64)
+    rank[order] = np.arange(len(uniq))
+    work = rank[np.searchsorted(uniq, label)]
+    mesh = Mesh(raw[first[order]], work[flat], st)
+    for p in pieces:
+        p.vertex = work[p.vertex]
+    mesh.uv, mesh.face_uv_indices = np.vstack(uv), np.arange(len(flat))
+    mesh.groups, mesh.group_names = np.concatenate(mats).astype(np.int32), tuple(names)
+    layout = FbxLayout(path, pieces, mesh.n_vertices, mesh.n_faces, notes)
+    # the shape keys, as work positions (a vertex takes its first object's move)
+    targets = {}
+    for i, (p, ob) in reversed(list(enumerate(zip(pieces, objects)))):
+        base = a[f"v{i}"]
+        for j, name in enumerate(ob["shape_keys"][1:], start=1):
+            d = (a[f"k{i}_{j}"] - base) @ p.world[:3, :3].T
+            targets.setdefault(name, np.zeros_like(mesh.vertices))[p.vertex[::-1]] = d[::-1]
+    layout.extras["targets"] = {n: mesh.vertices + d for n, d in targets.items()}
+    mesh.layout = layout
+    return mesh, layout
+
+
+def read_fbx(path) -> Mesh:
+    return read_fbx_layout(path)[0]
+
+
+def read_fbx_shapes(path) -> tuple[Mesh, dict, str]:
+    """(the work mesh, {shape key name: (n, 3) world positions}, "m") of an FBX file."""
+    from .checks import validate
+    path = Path(path)
+    mesh = validate(read_fbx(path), str(path))
+    mesh.name = path.stem
+    targets = mesh.layout.extras.pop("targets")
+    if not targets:
+        raise MimicaError(f"{path}: no shape keys")
+    return mesh, targets, "m"
+
+
+def write_fbx_layout(path, layout: FbxLayout, mesh: Mesh, targets: dict | None = None) -> dict:
+    """The FBX file `layout` was read from, exported again through Blender to `path` with the
+    result's shape keys {name: (n, 3) positions of `mesh`'s vertices} added to each object (and
+    a cut mouth's vertices added to the objects it cut, its corners re-pointed).  Returns
+    {"appended": vertices added}."""
+    if mesh.n_faces != layout.n_faces:
+        raise ValueError(f"the result has {mesh.n_faces} faces; the file was read with {layout.n_faces}")
+    targets = targets or {}
+    spec, arrays, appended = [], {}, 0
+    fs, fi = mesh.face_starts, mesh.face_indices
+    for i, p in enumerate(layout.pieces):
+        rows_f = np.arange(p.first_face, p.first_face + p.n_faces)
+        corners = np.concatenate([np.arange(fs[f], fs[f + 1]) for f in rows_f]) if len(rows_f) else np.zeros(0, int)
+        w_out = fi[corners]
+        poly = np.repeat(np.arange(p.n_faces), np.diff(fs[p.first_face: p.first_face + p.n_faces + 1]))
+        within = corners - fs[p.first_face + poly]
+        # a corner whose work vertex is past the read ones: a cut's copy, added to this object
+        cut = w_out >= layout.n_vertices
+        new_w, k = np.unique(w_out[cut], return_inverse=True)
+        work = np.r_[p.vertex, new_w]
+        if len(new_w):
+            arrays[f"a{i}"] = p.to_local(mesh.vertices[new_w])
+            arrays[f"r{i}"] = np.stack([poly[cut], within[cut], k.ravel()], 1)
+            appended += len(new_w)
+        for j, q in enumerate(targets.values()):
+            arrays[f"k{i}_{j}"] = p.vectors_to_local(np.asarray(q)[work] - mesh.vertices[work])
+        spec.append({"name": p.name, "keys": list(targets)})
+    with tempfile.TemporaryDirectory(prefix="mimica-fbx-") as d:
+        (Path(d) / "edits.json").write_text(json.dumps({"objects": spec}))
+        np.savez(Path(d) / "edits.npz", **arrays)
+        _blender(layout.path, "write", layout.path, Path(d) / "edits", Path(path), what="write")
+    return {"appended": appended}

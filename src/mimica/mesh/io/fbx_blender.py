@@ -1,0 +1,112 @@
+"""Run by Blender's Python (bpy); mimica runs it, never uses it (it imports without Blender): FBX read and written through
+Blender's own FBX importer and exporter, the one FBX path kept up for character heads that a
+Python program can drive.  (Blender's Python carries numpy < 2 and mimica numpy >= 2: the two
+talk through files.)
+
+    read  FILE.fbx OUT      OUT.json: each mesh object's name, world matrix (Blender's z up),
+                            materials, shape key names; OUT.npz: per object i its vertices
+                            (v{i}), polygon sizes (s{i}), corners (c{i}), uv per corner (u{i}),
+                            material per polygon (m{i}), shape keys (k{i}_{j}), all local
+    write FILE.fbx IN OUT   IN.json / IN.npz: per object, shape keys to add (k{i}_{j}: each vertex's
+                            move, local, the object's vertices then the added ones) and vertices to add
+                            (a{i}: positions; r{i}: (polygon, corner, new vertex) rows re-pointing
+                            corners to them); the file imported, edited and exported to OUT
+"""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def objects():
+    import bpy
+    return [o for o in bpy.context.scene.objects if o.type == "MESH"]
+
+
+def import_fbx(path):
+    import bpy
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.import_scene.fbx(filepath=path)
+
+
+def read(path, out):
+    import_fbx(path)
+    report, arrays = [], {}
+    for i, o in enumerate(objects()):
+        me = o.data
+        v = np.zeros(len(me.vertices) * 3)
+        me.vertices.foreach_get("co", v)
+        sizes = np.zeros(len(me.polygons), np.int64)
+        me.polygons.foreach_get("loop_total", sizes)
+        corners = np.zeros(len(me.loops), np.int64)
+        me.loops.foreach_get("vertex_index", corners)
+        mats = np.zeros(len(me.polygons), np.int64)
+        me.polygons.foreach_get("material_index", mats)
+        arrays[f"v{i}"], arrays[f"s{i}"], arrays[f"c{i}"], arrays[f"m{i}"] = v.reshape(-1, 3), sizes, corners, mats
+        if me.uv_layers.active is not None:
+            uv = np.zeros(len(me.loops) * 2)
+            me.uv_layers.active.data.foreach_get("uv", uv)
+            arrays[f"u{i}"] = uv.reshape(-1, 2)
+        keys = []
+        if me.shape_keys is not None:
+            for j, kb in enumerate(me.shape_keys.key_blocks):
+                k = np.zeros(len(kb.data) * 3)
+                kb.data.foreach_get("co", k)
+                arrays[f"k{i}_{j}"] = k.reshape(-1, 3)
+                keys.append(kb.name)
+        report.append({"name": o.name, "matrix": [list(r) for r in o.matrix_world],
+                       "materials": [s.material.name if s.material else "" for s in o.material_slots],
+                       "shape_keys": keys, "parent": o.parent.name if o.parent else None,
+                       "armature": any(m.type == "ARMATURE" for m in o.modifiers)})
+    np.savez(out + ".npz", **arrays)
+    Path(out + ".json").write_text(json.dumps({"objects": report}))
+
+
+def write(path, edits, out):
+    import bpy
+    import bmesh                                  # (bpy's package brings bmesh: bpy first)
+    import_fbx(path)
+    spec = json.loads(Path(edits + ".json").read_text())
+    z = np.load(edits + ".npz")
+    obs = {o.name: o for o in objects()}
+    for i, ob in enumerate(spec["objects"]):
+        o = obs[ob["name"]]
+        if f"a{i}" in z.files and len(z[f"a{i}"]):            # the cut's vertices, after the object's own
+            bm = bmesh.new()
+            bm.from_mesh(o.data)
+            bm.verts.ensure_lookup_table()
+            bm.faces.ensure_lookup_table()
+            uv = bm.loops.layers.uv.active
+            new = [bm.verts.new(p) for p in z[f"a{i}"]]
+            rows = z[f"r{i}"]
+            faces = {int(f): bm.faces[int(f)] for f in np.unique(rows[:, 0])}      # before any is replaced
+            for f, face in faces.items():
+                verts = [lp.vert for lp in face.loops]
+                uvs = [lp[uv].uv.copy() for lp in face.loops] if uv is not None else None
+                for _, c, k in rows[rows[:, 0] == f]:
+                    verts[int(c)] = new[int(k)]
+                nf = bm.faces.new(verts, face)
+                if uvs is not None:
+                    for lp, t in zip(nf.loops, uvs):
+                        lp[uv].uv = t
+                bm.faces.remove(face)
+            bm.to_mesh(o.data)
+            bm.free()
+        if ob["keys"] and o.data.shape_keys is None:
+            o.shape_key_add(name="Basis", from_mix=False)
+        base = np.zeros(len(o.data.vertices) * 3)
+        o.data.vertices.foreach_get("co", base)
+        for j, name in enumerate(ob["keys"]):
+            kb = o.shape_key_add(name=name, from_mix=False)
+            kb.data.foreach_set("co", (base + z[f"k{i}_{j}"].ravel()).astype(np.float32))
+    bpy.ops.export_scene.fbx(filepath=out)
+
+
+if __name__ == "__main__":
+    args = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
+    if args[0] == "read":
+        read(args[1], args[2])
+    else:
+        write(args[1], args[2], args[3])

@@ -1,0 +1,49 @@
+"""The seams a writer split between the pieces of a file (a material's primitive in glTF,
+an object in FBX), made one again for the work."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+
+def half_edges(face_indices: np.ndarray, face_starts: np.ndarray) -> np.ndarray:
+    """(k, 2) each polygon's edges in its winding (flat polygons as Mesh keeps them)."""
+    nxt = np.arange(1, len(face_indices) + 1)
+    nxt[face_starts[1:] - 1] = face_starts[:-1]          # each polygon's last corner back to its first
+    return np.stack([face_indices, face_indices[nxt]], 1)
+
+
+def weld_seams(wpos, e, set_of, label) -> np.ndarray:
+    """Across vertex sets: a boundary edge a -> b of one set that meets exactly one boundary edge
+    b' -> a' of another at the same points (the two sides of a seam a writer split, one oriented
+    surface) has its ends made one.  wpos: (n, 3) positions of the labels; e: (k, 2) the faces'
+    half-edges in labels (half_edges); set_of / label: (raw,) each raw vertex's set and label.
+    Returns the raw vertices' labels."""
+    lab_set = np.zeros(len(wpos), np.int64)
+    lab_set[label] = set_of
+    _, inv, cnt = np.unique(np.sort(e, 1), axis=0, return_inverse=True, return_counts=True)
+    b = e[cnt[inv.ravel()] == 1]
+    if not len(b) or len(np.unique(lab_set)) < 2:
+        return label
+    _, pid = np.unique(wpos, axis=0, return_inverse=True)
+    pid = pid.ravel().astype(np.int64)
+    n_p = int(pid.max()) + 1
+    fwd = pid[b[:, 0]] * n_p + pid[b[:, 1]]
+    rev = pid[b[:, 1]] * n_p + pid[b[:, 0]]
+    keys, kcount = np.unique(fwd, return_counts=True)
+    order = np.argsort(fwd, kind="stable")
+    partner = order[np.minimum(np.searchsorted(fwd[order], rev), len(b) - 1)]
+    found = fwd[partner] == rev
+    once = kcount[np.searchsorted(keys, fwd)] == 1          # no third edge at the same points
+    ok = found & once & once[partner] & (lab_set[b[:, 0]] != lab_set[b[partner, 0]])
+    i = np.nonzero(ok)[0]
+    if not len(i):
+        return label
+    a = np.r_[b[i, 0], b[i, 1]]
+    c = np.r_[b[partner[i], 1], b[partner[i], 0]]
+    n = len(wpos)
+    graph = coo_matrix((np.ones(len(a)), (a, c)), shape=(n, n))
+    _, root = connected_components(graph, directed=False)
+    return root[label]

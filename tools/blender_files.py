@@ -1,0 +1,53 @@
+"""Run inside Blender's Python (bpy), by tests/test_foreign_files.py and bench/foreign_files.py:
+Blender as the other tool a user's files come from and go back to.
+
+    python-with-bpy blender_files.py export HEAD.obj OUT.glb|OUT.fbx
+        Blender's OBJ importer, then its glTF or FBX exporter, both with their defaults.
+    python-with-bpy blender_files.py import FILE.glb|FILE.fbx OUT.json
+        the file imported as a user imports it; OUT.json: each mesh object's name, world matrix,
+        vertex count, world-space vertices (OUT.json's .npz beside it), materials, shape keys and
+        the largest move of each key.
+"""
+
+import json
+import sys
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+mode, src, out = sys.argv[-3:]
+bpy.ops.wm.read_factory_settings(use_empty=True)
+if mode == "export":
+    bpy.ops.wm.obj_import(filepath=src)
+    if out.lower().endswith(".fbx"):
+        bpy.ops.export_scene.fbx(filepath=out)
+    else:
+        bpy.ops.export_scene.gltf(filepath=out)
+    sys.exit(0)
+
+if src.lower().endswith(".fbx"):
+    bpy.ops.import_scene.fbx(filepath=src)
+else:
+    bpy.ops.import_scene.gltf(filepath=src)
+report, arrays = {"objects": []}, {}
+for obj in bpy.data.objects:
+    if obj.type != "MESH":
+        continue
+    m = np.array(obj.matrix_world)
+    co = np.zeros(len(obj.data.vertices) * 3)
+    obj.data.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    world = co @ m[:3, :3].T + m[:3, 3]
+    keys = {}
+    if obj.data.shape_keys:
+        for kb in obj.data.shape_keys.key_blocks:
+            a = np.zeros(len(kb.data) * 3)
+            kb.data.foreach_get("co", a)
+            keys[kb.name] = float(np.linalg.norm((a.reshape(-1, 3) - co) @ m[:3, :3].T, axis=1).max())
+    arrays[obj.name] = world
+    report["objects"].append({"name": obj.name, "matrix": m.tolist(), "vertices": len(co),
+                              "materials": [s.material.name if s.material else None for s in obj.material_slots],
+                              "shape_keys": keys})
+np.savez(str(Path(out).with_suffix(".npz")), **arrays)
+Path(out).write_text(json.dumps(report))
