@@ -16,6 +16,12 @@ vertices shuffled, for the rigid parts.  Figures (the issue's):
   stretched past 2.5x or shrunk under 0.4x, exceeds max(0.5%, 1.5x) ICT's own shape's share
 - rigid residual: teeth and eyeballs, distance from their best rigid motion / their size
 - rel_err_remeshed: bench/transfer.py's remeshed figure (held-out identity, 12k vertices)
+- watertight_jaw_min: jaw (as above) on heads that are one closed surface (held-out identities
+  remeshed, lips and lids sealed, nostrils and the back capped: tools/hard_heads.py), and the
+  shared real head capped the same way
+- closed_eye_blink_min: blink (as above) on heads whose eyes are one surface with the lids,
+  shaped open (held-out identities' heads and eyeballs remeshed together at 20k vertices, one
+  of them also watertight); none of their seeds was used to develop the eyes' cut (13-16 were)
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ from mimica.mesh import Mesh, read_mesh  # noqa: E402
 from mimica.transfer import ExpressionTransfer, relative_error, static_vertices  # noqa: E402
 from mimica.transfer.contacts import closure  # noqa: E402
 sys.path.insert(0, str(ROOT / "tools"))
-from hard_heads import carried_landmarks  # noqa: E402
+from hard_heads import capped, carried_landmarks, one_surface_eyes, watertight_head  # noqa: E402
 import mimica  # noqa: E402
 mimica.keep_memory()
 
@@ -167,6 +173,41 @@ def main():
         damaged += len(bad)
         print(line + f"; damaged shapes {len(bad)}" + (": " + ", ".join(bad[:6]) + (" ..." if len(bad) > 6 else "")
                                                        if bad else ""))
+    # one closed surface; eyes that are one surface with the lids
+    wt_jaws, ce_blinks = [], []
+    sh = shared_head()
+    wt_shared = capped(sh[1])
+    hard = [("watertight, seed 31", *watertight_head(31)[:2], False),
+            ("watertight, seed 32", *watertight_head(32)[:2], False),
+            ("shared real head, capped", wt_shared, Landmarks(sh[2].triangle, sh[2].bary), False),
+            ("one-surface eyes, seed 33", *one_surface_eyes(33)[:2], True),
+            ("one-surface eyes, seed 34", *one_surface_eyes(34)[:2], True),
+            ("one-surface eyes, watertight, seed 35", *one_surface_eyes(35, watertight=True)[:2], True)]
+    for name, mesh, lm, eyes in hard:
+        t = time.perf_counter()
+        shapes = arkit_blendshapes(mesh, lm)
+        el = time.perf_counter() - t
+        out_mesh = shapes.mesh
+        rest = lm.positions(mesh)
+        pos = {a: lm.positions(out_mesh, shapes[a]) for a in ("eyeBlinkLeft", "eyeBlinkRight", "jawOpen")}
+        jaw = jaw_ratio(pos["jawOpen"])
+        line = f"[{name}] {mesh.n_vertices} vertices, {el:.1f}s: jaw ratio {jaw:.3f}"
+        if eyes:
+            bl, br = closure(rest, pos["eyeBlinkLeft"], "left"), closure(rest, pos["eyeBlinkRight"], "right")
+            ce_blinks += [bl, br]
+            cut = shapes.transfer.eye_cut
+            line += (f", blink closure left {bl:.3f} right {br:.3f} (eyes cut loose: "
+                     f"{', '.join(cut.eyes) if cut is not None else 'none'})")
+        else:
+            wt_jaws.append(jaw)
+        bad = []
+        for a in ARKIT_52:
+            f, s = damage(out_mesh, shapes[a])
+            of, os_ = own["damage"][a]
+            if f > max(0.005, 1.5 * of) or s > max(0.005, 1.5 * os_):
+                bad.append(a)
+        damaged += len(bad)
+        print(line + f"; damaged shapes {len(bad)}" + (": " + ", ".join(bad[:6]) if bad else ""))
     big = heads[1][1]
     detect_s = np.inf
     for _ in range(3):                              # best of 3, landmark detection included
@@ -178,7 +219,8 @@ def main():
     print(f"whole ICT mesh, shuffled (parts: {parts}): rigid residual {rigid:.1e} of the part's size")
     rel = rel_err_remeshed(model)
     print(f"blink_min={min(blinks):.3f} jaw_min={min(jaws):.3f} damaged_shapes={damaged} "
-          f"rigid_residual={rigid:.1e} rel_err_remeshed={rel:.4f}")
+          f"rigid_residual={rigid:.1e} rel_err_remeshed={rel:.4f} watertight_jaw_min={min(wt_jaws):.3f} "
+          f"closed_eye_blink_min={min(ce_blinks):.3f}")
 
 
 if __name__ == "__main__":

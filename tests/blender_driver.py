@@ -53,6 +53,7 @@ report["height_z"] = float(np.ptp(rest[:, 2]))                 # standing: its h
 
 select(head)
 report["arkit"] = list(bpy.ops.mimica.arkit_shape_keys())
+report["vertices_after"] = len(head.data.vertices)            # the sealed lips cut apart in Blender too
 k = keys(head)
 report["arkit_keys"] = len(k)
 jaw = k["jawOpen"] - k["Basis"]

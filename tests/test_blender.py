@@ -52,6 +52,27 @@ def test_blendshapes_as_arrays_in_the_heads_order(tmp_path):
         assert np.abs(z["jawOpen"] - head.vertices).max() > 0.5
 
 
+def test_the_cut_comes_with_the_arrays(tmp_path):
+    """The sealed head's mouth cut as the add-on applies it: copies of the listed vertices after
+    the head's own, the listed polygon corners moved onto them, give the faces mimica solved on."""
+    from mimica.mesh import read_mesh
+    head = read_mesh(HEAD)
+    assert main(["blendshapes", str(HEAD), "--out", str(tmp_path / "s.npz")]) == 0
+    with np.load(tmp_path / "s.npz") as z:
+        k = len(z["cut_copies"])
+        assert k > 0 and z["vertices"].shape[0] == head.n_vertices + k
+        np.testing.assert_allclose(z["vertices"][:head.n_vertices], head.vertices)
+        np.testing.assert_allclose(z["vertices"][head.n_vertices:], head.vertices[z["cut_copies"]])
+        fi = head.face_indices.copy()
+        for f, c, a in z["cut_corners"]:
+            fi[head.face_starts[f] + c] = head.n_vertices + a
+        jaw, copies = z["jawOpen"], z["cut_copies"]
+    # the corners moved are the lower lip's: they open away from the upper lip's copies
+    lower = np.unique(fi[fi >= head.n_vertices])
+    upper = copies[lower - head.n_vertices]
+    assert np.linalg.norm(jaw[lower] - jaw[upper], axis=1).mean() > 0.05 * np.ptp(head.vertices[:, 1])
+
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -99,6 +120,7 @@ def test_the_addon_inside_blender(tmp_path, full_model, head_glb):
     assert run.returncode == 0 and out.is_file(), run.stderr[-3000:] + run.stdout[-2000:]
     r = json.loads(out.read_text())
     assert r["arkit"] == ["FINISHED"] and r["arkit_keys"] == 53
+    assert r["vertices_after"] > r["vertices"]          # its sealed lips cut apart, as mimica cut them
     assert r["height_z"] == pytest.approx(17.665, abs=0.01)       # the head stands in Blender's z
     assert r["jaw_moves_down"] < -0.5 and r["jaw_largest"] < 0.5 * r["height_z"]
     assert r["take"] == ["FINISHED"] and r["fps"] == 24

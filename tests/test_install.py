@@ -108,3 +108,28 @@ def test_wheel_outside_the_repository_view_serves_its_page(outside):
     finally:
         p.terminate()
         p.wait(10)
+
+
+def test_the_wheel_alone_names_the_extra_it_lacks(outside):
+    """`pip install mimica` and nothing else, in a venv of its own outside the repository: the
+    ICT head's blendshapes are made; a head of another topology, whose landmarks need the photo
+    extra's detector, is refused in one line that names the extra; nothing is written."""
+    import glob
+    d, env, _ = outside
+    wheels = sorted(glob.glob(str(REPO / "dist" / "mimica-*.whl")))
+    assert wheels, "make builds the wheel into dist/"
+    venv = d / "bare"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
+    r = subprocess.run([str(venv / "bin" / "pip"), "install", "-q", "-c", str(REPO / "constraints" / "ci.txt"),
+                        wheels[-1]], capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    exe = str(venv / "bin" / "mimica")
+    head = Path(os.environ["MIMICA_DATA"]) / "real-heads" / "mediapipe-canonical" / "head.obj"
+    r = subprocess.run([exe, "blendshapes", str(head), "--out", "other.glb"], cwd=d, env=env, capture_output=True,
+                       text=True, timeout=600)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and "mimica[photo]" in lines[-1] and lines[-1].startswith("mimica: error"), r.stderr
+    assert not (d / "other.glb").exists()
+    r = subprocess.run([exe, "blendshapes", "head.obj", "--out", "ict.glb"], cwd=d, env=env, capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]

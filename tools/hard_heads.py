@@ -95,6 +95,18 @@ def carried_landmarks(rs, original) -> Landmarks:
     ids[60:68] = -1
     snapped = Landmarks.snap(rs.mesh, pts)
     exact = Landmarks.from_vertex_indices(rs.mesh, np.maximum(ids, 0))
+    # a lid's point on a triangle of its lid, outside the eye (a one-surface eye cut open keeps
+    # the lid's vertices; the eye takes copies): the triangle at it farthest from the eye's centre
+    tris = rs.mesh.triangles
+    cent = rs.mesh.vertices[tris].mean(1)
+    for rim in (range(36, 42), range(42, 48)):
+        centre = pts[list(rim)].mean(0)
+        for k in rim:
+            if ids[k] >= 0:
+                at = np.nonzero((tris == ids[k]).any(1))[0]
+                best = at[np.argmax(np.linalg.norm(cent[at] - centre, axis=1))]
+                exact.triangle[k] = best
+                exact.bary[k] = (tris[best] == ids[k]).astype(float)
     keep = ids >= 0
     return Landmarks(np.where(keep, exact.triangle, snapped.triangle), np.where(keep[:, None], exact.bary, snapped.bary))
 
@@ -110,7 +122,7 @@ def watertight_head(seed: int, n_vertices: int = 10000):
     return mesh, carried_landmarks(rs, head.mesh.with_vertices(tv)), tv
 
 
-def one_surface_eyes(seed: int, n_vertices: int = 10000, watertight: bool = False):
+def one_surface_eyes(seed: int, n_vertices: int = 20000, watertight: bool = False):
     """(a head whose eyes are one surface with its lids, shaped open, its landmarks, the
     identity's vertices): a held-out ICT identity's head and eyeballs remeshed together, the
     triangulation running on from the lids over the eyeball's front (as Basel- or Surrey-style

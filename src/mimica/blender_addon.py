@@ -97,17 +97,29 @@ def run_mimica(args, progress=None) -> list[str]:
     return lines
 
 
+class Shapes(dict):
+    """{name: (n, 3) positions}; `cut`: where mimica cut the head (sealed lips, one-surface eyes)
+    -- {"copies": (k,) the vertex each added one copies, "corners": (m, 3) rows (polygon, corner,
+    added vertex)} -- to apply to the mesh before the shape keys, or None."""
+    cut = None
+
+
 def arkit_shapes(vertices, polygons, exe: str, progress=None) -> dict:
-    """{ARKit name: (n, 3) positions} for a head given as Blender's vertices and polygons."""
+    """{ARKit name: (n, 3) positions} for a head given as Blender's vertices and polygons (a
+    Shapes: with the cut of sealed lips or eyes mimica made, whose vertices come after the head's)."""
     import numpy as np
     with tempfile.TemporaryDirectory(prefix="mimica-blender-") as d:
         obj, out = Path(d) / "head.obj", Path(d) / "shapes.npz"
         write_obj(obj, vertices, polygons)
-        run_mimica([exe, "blendshapes", str(obj), "--cut-mouth", "off", "--out", str(out)], progress)
+        run_mimica([exe, "blendshapes", str(obj), "--out", str(out)], progress)
         with np.load(out) as z:
-            if z["vertices"].shape[0] != len(vertices):
+            added = z["vertices"].shape[0] - len(vertices)
+            if added < 0 or (added and "cut_copies" not in z.files):
                 raise AddonError(f"mimica gave {z['vertices'].shape[0]} vertices for a head of {len(vertices)}")
-            return {n: to_blender(z[n]) for n in ARKIT if n in z}
+            shapes = Shapes((n, to_blender(z[n])) for n in ARKIT if n in z)
+            if added:
+                shapes.cut = {"copies": z["cut_copies"].copy(), "corners": z["cut_corners"].copy()}
+            return shapes
 
 
 def read_obj_vertices(path):
@@ -276,9 +288,44 @@ if bpy is not None:  # pragma: no cover - runs inside Blender (tests/test_blende
         except AddonError as e:
             op.report({"ERROR"}, str(e))
             return {"CANCELLED"}
+        cut = getattr(shapes, "cut", None)
+        if cut is not None:
+            _split(obj, cut)
         _shape_keys_from(obj, shapes)
-        op.report({"INFO"}, f"{len(shapes)} {what} shape keys on {obj.name}")
+        op.report({"INFO"}, f"{len(shapes)} {what} shape keys on {obj.name}"
+                  + (f"; its sealed lips or eyes cut apart, {len(cut['copies'])} vertices added after its own "
+                     "(Edit > Undo takes it back)" if cut is not None else ""))
         return {"FINISHED"}
+
+    def _split(obj, cut) -> None:
+        """mimica's cut applied to the mesh: copies of the listed vertices added after its own,
+        the listed polygon corners moved onto them (materials, smoothing and uv kept)."""
+        import bmesh
+        bm = bmesh.new()
+        bm.from_mesh(obj.data)
+        bm.verts.ensure_lookup_table()
+        bm.faces.ensure_lookup_table()
+        uv = bm.loops.layers.uv.active
+        old = [bm.verts[int(i)] for i in cut["copies"]]       # (before any is added: the table goes stale)
+        new = [bm.verts.new(v.co) for v in old]
+        for layer in bm.verts.layers.shape.values():          # the mesh's own shape keys: the copies too
+            for v, o in zip(new, old):
+                v[layer] = o[layer]
+        rows = cut["corners"]
+        faces = {int(f): bm.faces[int(f)] for f in set(rows[:, 0].tolist())}
+        for f, face in faces.items():
+            verts = [lp.vert for lp in face.loops]
+            uvs = [lp[uv].uv.copy() for lp in face.loops] if uv is not None else None
+            for _, c, k in rows[rows[:, 0] == f]:
+                verts[int(c)] = new[int(k)]
+            nf = bm.faces.new(verts, face)
+            if uvs is not None:
+                for lp, t in zip(nf.loops, uvs):
+                    lp[uv].uv = t
+            bm.faces.remove(face)
+        bm.to_mesh(obj.data)
+        bm.free()
+        obj.data.update()
 
     class MIMICA_OT_arkit_shape_keys(bpy.types.Operator):
         """Put the 52 ARKit shapes on the active mesh as shape keys (mimica blendshapes)"""

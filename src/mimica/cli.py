@@ -135,13 +135,16 @@ def _units_line(mesh, unit: str, asked: str) -> str:
 
 
 def _head_options(p, what: str) -> None:
-    """--show, --match and --cut-mouth, the same on transfer and blendshapes."""
+    """--show, --match, --cut-mouth and --cut-eyes, the same on transfer and blendshapes."""
     p.add_argument("--show", help=f"PNG: the {what} as the transfer sees it (parts, unmatched skin, the mouth "
                                   "seam, the paired lid rims, the correspondence's confidence)")
     p.add_argument("--match", choices=["nicp", "cylinder"], default="nicp", help=MATCH_HELP)
     p.add_argument("--cut-mouth", choices=["auto", "off"], default="auto",
                    help=f"auto: a {what} whose lips are sealed has them cut apart, so the mouth (jawOpen) can "
                         "open (its vertices keep their order; the cut's copies come after them)")
+    p.add_argument("--cut-eyes", choices=["auto", "off"], default="auto",
+                   help=f"auto: a {what} whose eyes are one surface with the lids has each eye cut loose along "
+                        "the lid margin, so the lids close over it (eyeBlink); copies come after the mouth's")
 
 
 def _correspondence_line(xfer) -> str:
@@ -168,9 +171,20 @@ def _say_uncut_mouth(xfer, what, landmarks_flag: str) -> None:
              "(--show draws where the seam was looked for)")
 
 
-def _warn_sealed_eyes(mesh, lm, what):
-    """One line when a face's eyes are closed surfaces (blinks then move the lids over them)."""
-    if lm is None:
+def _warn_sealed_eyes(xfer, mesh, lm, what):
+    """One line on eyes that are one surface with the lids: cut open, or why not (blinks then
+    move the lids over them)."""
+    if xfer.eye_cut is not None:
+        ec = xfer.eye_cut
+        _say(f"{what}: the {' and '.join(ec.eyes)} eye{'s were' if len(ec.eyes) > 1 else ' was'} one surface with "
+             f"the lids: cut loose along the lid margins, {len(ec.copies_of)} vertices added after the others "
+             "(--cut-eyes off to keep them whole)")
+    if xfer.eyes_uncut:
+        whys = "; ".join(dict.fromkeys(xfer.eyes_uncut.values()))
+        sides = " and ".join(xfer.eyes_uncut)
+        _say(f"note: {what}: the {sides} eye{'s stay' if len(xfer.eyes_uncut) > 1 else ' stays'} one surface with "
+             f"the lids ({whys}); blinks move the lids over {'them' if len(xfer.eyes_uncut) > 1 else 'it'}")
+    if lm is None or xfer.eye_cut is not None or xfer.eyes_uncut:
         return
     from .correspond.mouth import sealed_eyes
     shut = sealed_eyes(mesh, lm.positions(mesh))
@@ -243,13 +257,14 @@ def cmd_transfer(a):
     t1 = time.perf_counter()
     xfer = ExpressionTransfer(source, target, ls, lt, method=a.method,
                               static=static_vertices(source.vertices, frames), cut_mouth=a.cut_mouth == "auto",
+                              cut_eyes=a.cut_eyes == "auto",
                               match=a.match)
     t2 = time.perf_counter()
     if xfer.mouth is not None:
         _say(f"{a.target}: the lips were sealed; cut apart along {len(xfer.mouth.seam)} vertices, "
              f"{len(xfer.mouth.copies_of)} added after the target's own (--cut-mouth off to keep them sealed)")
     _say_uncut_mouth(xfer, a.target, "--target-landmarks")
-    _warn_sealed_eyes(target, lt, a.target)
+    _warn_sealed_eyes(xfer, target, lt, a.target)
     target = xfer.output_mesh
     if len(frames) >= BASIS_FRAMES:                    # a long sequence: through its basis, if it holds
         out = xfer.apply(frames, basis=True)
@@ -265,6 +280,12 @@ def cmd_transfer(a):
     t3 = time.perf_counter()
     outdir = Path(a.out)
     from .outputs import staged_dir
+    from .mesh.io import GltfLayout
+    if isinstance(target.layout, GltfLayout):          # each result back in the target's own file
+        suffix = Path(a.target).suffix.lower()
+        names = [str(Path(nm).with_suffix(suffix)) for nm in names]
+        _say(f"results written as {Path(a.target).name} with the expression: its nodes, materials and vertex "
+             f"layout ({suffix})")
     with staged_dir(outdir, {"command": "transfer"}) as d:
         for name, v in zip(names, out):
             write_mesh(d / name, target.with_vertices(v))
@@ -1043,11 +1064,12 @@ def cmd_blendshapes(a):
     t0 = time.perf_counter()
     head = _read_head(a.head)
     lm = read_landmarks(a.landmarks, head) if a.landmarks else None
-    shapes = arkit_blendshapes(head, lm, progress=_say, cut_mouth=a.cut_mouth == "auto", match=a.match)
+    shapes = arkit_blendshapes(head, lm, progress=_say, cut_mouth=a.cut_mouth == "auto", match=a.match,
+                               cut_eyes=a.cut_eyes == "auto")
     if line := _correspondence_line(shapes.transfer).lstrip("; "):
         _say(line)
     _say_uncut_mouth(shapes.transfer, a.head, "--landmarks")
-    _warn_sealed_eyes(head, shapes.landmarks, a.head)
+    _warn_sealed_eyes(shapes.transfer, head, shapes.landmarks, a.head)
     if out.suffix.lower() == ".fbx":
         from .mesh.io import write_fbx_layout
         with atomic_path(out) as tmp:
@@ -1056,10 +1078,14 @@ def cmd_blendshapes(a):
              + (f" ({info['appended']} vertices added by the mouth's cut)" if info["appended"] else "")
              + f", {out.stat().st_size / 1e6:.1f} MB")
     elif out.suffix.lower() == ".npz":
+        from .export.blendshapes import cut_corners
+        cut = cut_corners(head, shapes.mesh)
         with atomic_path(out) as tmp:
             with open(tmp, "wb") as fh:
-                np.savez(fh, vertices=shapes.mesh.vertices, **{n: shapes[n] for n in ARKIT_52})
-        _say(f"{out}: the rest and the 52 shapes' positions, {shapes.mesh.n_vertices} vertices in the head's order")
+                np.savez(fh, vertices=shapes.mesh.vertices, **{n: shapes[n] for n in ARKIT_52}, **cut)
+        _say(f"{out}: the rest and the 52 shapes' positions, {shapes.mesh.n_vertices} vertices in the head's order"
+             + (f" ({len(cut['cut_copies'])} added by the cuts after the head's own; cut_copies and cut_corners "
+                "say where)" if cut else ""))
     elif out.suffix.lower() in (".usd", ".usda", ".usdc"):
         from .export.usd import write_usd
         info = write_usd(out, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, units=a.units)

@@ -146,9 +146,12 @@ def _split_mouth(mesh, lm, idx, role):
     role[idx] = np.where(lower, ROLES.index(JAW), ROLES.index(SKULL))
 
 
-def split_parts(mesh: Mesh, landmarks=None) -> Parts:
-    """The parts of `mesh` (landmarks: its 68 positions, (68, 3), used to place eyes and mouth)."""
+def split_parts(mesh: Mesh, landmarks=None, eyes: dict | None = None) -> Parts:
+    """The parts of `mesh` (landmarks: its 68 positions, (68, 3), used to place eyes and mouth;
+    eyes: {"left"/"right": vertices} of eyes cut loose from their lids (correspond.eyes), each
+    the eye of its side whatever its shape)."""
     from ..data import ICT_HEAD_VERTICES, is_ict_topology
+    given_eyes = eyes
     lm = None if landmarks is None else np.asarray(landmarks, float)
     if lm is not None and not (np.isfinite(lm[[8, 36, 45]]).all() and np.isfinite(lm[17:27]).any()):
         lm = None
@@ -168,10 +171,14 @@ def split_parts(mesh: Mesh, landmarks=None) -> Parts:
     frame = _mouth_frame(lm) if lm is not None else None          # once for every component
     width = frame[4] if frame is not None else None
     mouth = []
+    cut_eye = {int(comp[v[0]]): side for side, v in (given_eyes or {}).items() if len(v)}
     for c in range(nc):
         idx = np.nonzero(comp == c)[0]
         kind = group_of[c]
-        if c == skin_c:
+        if c in cut_eye and c != skin_c:
+            kind = f"eyeball.{cut_eye[c]} (cut from the lids)"
+            role_c[c] = ROLES.index(f"eye.{cut_eye[c]}")
+        elif c == skin_c:
             kind = "skin"
             role_c[c] = ROLES.index(SKIN)
         elif kind == "eyeball" or (kind is None and eyes and len(idx) >= 8):

@@ -49,8 +49,9 @@ class Blendshapes(dict):
 
 
 def arkit_blendshapes(head, landmarks=None, progress=None, store=None, cut_mouth=True, match="nicp",
-                      relayout=True) -> Blendshapes:
-    """The 52 ARKit shapes on `head` (a Mesh of any topology; relayout: see ExpressionTransfer)."""
+                      relayout=True, cut_eyes=True) -> Blendshapes:
+    """The 52 ARKit shapes on `head` (a Mesh of any topology; cut_mouth, cut_eyes, relayout: see
+    ExpressionTransfer)."""
     from ..data import ICT_N_VERTICES
     from ..landmarks import ict_landmarks, landmarks_for
     from ..mesh import read_mesh
@@ -73,7 +74,7 @@ def arkit_blendshapes(head, landmarks=None, progress=None, store=None, cut_mouth
     say("transferring 52 shapes")
     xfer = ExpressionTransfer(src, head, ict_landmarks(src), lt, method="vtc",
                               static=static_vertices(src.vertices, frames), cut_mouth=cut_mouth, match=match,
-                              relayout=relayout)
+                              relayout=relayout, cut_eyes=cut_eyes)
     if xfer.mouth is not None:
         say(f"the lips were sealed: cut apart along {len(xfer.mouth.seam)} vertices "
             f"({len(xfer.mouth.copies_of)} added after the head's own)")
@@ -84,3 +85,19 @@ def arkit_blendshapes(head, landmarks=None, progress=None, store=None, cut_mouth
     res.mesh, res.mouth, res.landmarks, res.transfer = xfer.output_mesh, xfer.mouth, lt, xfer
     res["tongueOut"] = res.mesh.vertices.copy()
     return res
+
+
+def cut_corners(head, mesh) -> dict:
+    """Where a cut (the mouth's, the eyes') changed `head` into `mesh` (the same polygons, its
+    vertices first, the cut's copies after them): {"cut_copies": (k,) the head's vertex each added
+    vertex copies, "cut_corners": (m, 3) rows (polygon, corner in the polygon, added vertex)} --
+    what a DCC applies to its own mesh to cut it as mimica did; {} where nothing was cut."""
+    n = head.n_vertices
+    if mesh.n_vertices == n:
+        return {}
+    moved = np.nonzero(mesh.face_indices != head.face_indices)[0]
+    poly = np.searchsorted(head.face_starts, moved, side="right") - 1
+    added = mesh.face_indices[moved] - n
+    copies = np.full(mesh.n_vertices - n, -1, np.int64)
+    copies[added] = head.face_indices[moved]
+    return {"cut_copies": copies, "cut_corners": np.stack([poly, moved - head.face_starts[poly], added], 1)}

@@ -46,7 +46,7 @@ class ExpressionTransfer:
                  static: np.ndarray | None = None, solver_kind: str | None = None, parts: bool = True,
                  cut_mouth: bool = True, inward: np.ndarray | None = None, weld: bool = True,
                  lids: bool = True, match: str = "nicp", fill: bool = True, stabilize: bool = True,
-                 relayout: bool = True):
+                 relayout: bool = True, cut_eyes: bool = True):
         """Across topologies (target landmarks given):
 
         - a target whose seams are saved as copies of a vertex (uv splits) is solved welded;
@@ -66,6 +66,9 @@ class ExpressionTransfer:
           a non-rigid registration of the source onto the target, or "cylinder", Song et
           al.'s cylinder map.
 
+        cut_eyes: a target whose eyes are one surface with its lids has each eye cut loose along
+          its lid margin (correspond.eyes), the inside then its eye, rigid, which the lids close
+          over; the copies follow the mouth's (`eye_cut`).
         relayout: a target that is the source's own mesh in another vertex layout (a DCC's export,
         correspond.layout) is solved on the source's topology (`relaid`); off, its correspondence
         is found as for any other head.
@@ -77,6 +80,7 @@ class ExpressionTransfer:
         same = source.same_topology(target)
         self.parts = self._parts = self.mouth = self._lids = self._fill = None
         self.mouth_uncut = None           # sealed lips whose seam was not found (correspond.mouth.MouthCut.why)
+        self.eye_cut, self.eyes_uncut = None, {}  # one-surface eyes cut open (correspond.eyes), or why not
         self.output_mesh = target
         # user vertex -> solved vertex, and the solved vertices appended after the user's
         self._copies, self._appended = None, 0
@@ -115,11 +119,25 @@ class ExpressionTransfer:
                 self.output_mesh = _user_cut(self.output_mesh, target, mc)
                 inward = mc.inward             # the landmarks stay: the cut keeps every triangle
                 target = mc.mesh
+        self._mouth_appended = self._appended
+        if not same and cut_eyes and target_landmarks is not None:
+            from ..correspond.eyes import cut_eyes as cut_e
+            ec = cut_e(target, target_landmarks.positions(target))
+            self.eyes_uncut = ec.why
+            if ec.cut:
+                self.eye_cut = ec
+                self._appended += len(ec.copies_of)
+                self.output_mesh = _user_cut(self.output_mesh, target, ec)
+                if inward is not None:
+                    inward = np.vstack([inward, np.zeros((len(ec.copies_of), 3))])
+                target_landmarks = _off_the_eyes(ec, target_landmarks.positions(target))
+                target = ec.mesh
         self.target = target
         if parts and not same and source_landmarks is not None and target_landmarks is not None:
             from ..correspond.parts import split_parts
             ls_pos, lt_pos = source_landmarks.positions(source), target_landmarks.positions(target)
-            ps, pt = split_parts(source, ls_pos), split_parts(target, lt_pos)
+            eyes = self.eye_cut.eyes if self.eye_cut is not None else None
+            ps, pt = split_parts(source, ls_pos), split_parts(target, lt_pos, eyes=eyes)
             if not (ps.only_skin and pt.only_skin):
                 self._init_parts(ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward, lids, match, fill,
                                  stabilize)
@@ -177,7 +195,7 @@ class ExpressionTransfer:
         st = None if static is None else np.asarray(static, bool)[s_idx]
         self._skin = ExpressionTransfer(s_skin, t_skin, Landmarks.snap(s_skin, ls_pos), Landmarks.snap(t_skin, lt_pos),
                                         method, st, solver_kind, parts=False, cut_mouth=False, weld=False, lids=lids,
-                                        match=match, fill=fill, stabilize=stabilize,
+                                        match=match, fill=fill, stabilize=stabilize, relayout=False, cut_eyes=False,
                                         inward=None if inward is None else np.asarray(inward)[t_idx])
         self._source_skin, self._target_skin = s_idx, t_idx
         self.similarity = self._skin.similarity
@@ -286,7 +304,12 @@ class ExpressionTransfer:
             for eye in inner._lids.eyes.values():
                 rim[idx[np.r_[eye.upper, eye.lo0, eye.lo1]]] = True
         if self.mouth is not None:
-            seam[np.r_[self.mouth.seam, np.arange(n - self._appended, n)]] = True
+            seam[self.mouth.seam] = True
+            seam[n - self._appended: n - self._appended + self._mouth_appended] = True
+        if self.eye_cut is not None:
+            for loop in self.eye_cut.rims.values():
+                rim[loop] = True
+            rim[n - self._appended + self._mouth_appended:] = True
         looked = np.zeros(n, bool)
         if self.mouth_uncut is not None:
             looked[self.mouth_uncut.seam] = True
@@ -319,6 +342,24 @@ def _longest(d: np.ndarray) -> float:
     6.8 against 0.4 ms on 16 frames)."""
     d = d * d
     return float(np.sqrt((d[..., 0] + d[..., 1] + d[..., 2]).max())) if d.size else 0.0
+
+
+def _off_the_eyes(ec, points) -> Landmarks:
+    """The landmarks on the cut mesh, those of the lids (36-47) on the lids' faces, not the eyes'."""
+    lm = Landmarks.snap(ec.mesh, points)
+    inside = np.zeros(ec.mesh.n_vertices, bool)
+    for v in ec.eyes.values():
+        inside[v] = True
+    tri = ec.mesh.triangles
+    on_eye = inside[tri].all(1)
+    lids = np.arange(36, 48)
+    bad = lids[on_eye[lm.triangle[lids]]]
+    if len(bad):
+        keep = np.nonzero(~on_eye)[0]
+        sub = Mesh.from_faces(ec.mesh.vertices, tri[keep])
+        snapped = Landmarks.snap(sub, points[bad])
+        lm.triangle[bad], lm.bary[bad] = keep[snapped.triangle], snapped.bary
+    return lm
 
 
 def _user_cut(user: Mesh, welded: Mesh, mc) -> Mesh:

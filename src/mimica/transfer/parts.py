@@ -39,7 +39,11 @@ class PartMotion:
                 continue
             centres = None
             if role != JAW:                       # rotate about each eyeball's own centre
-                centres = (fit_sphere(similarity.apply(target.vertices[tv]))[0], fit_sphere(source.vertices[sv])[0])
+                cs, rs, _ = fit_sphere(source.vertices[sv])
+                ct, rt, res = fit_sphere(similarity.apply(target.vertices[tv]))
+                if not (0.5 * rs < rt < 2 * rs) or res > 0.1:      # an eye's front only (cut from its lids):
+                    ct = cs                                        # about where the source's turns
+                centres = (ct, cs)
             self.bodies.append((tv, sv, centres))
         self.follow = pt.of(FOLLOW)
         self.skin_index = skin_index

@@ -1,0 +1,60 @@
+"""Heads that are one closed surface, and eyes that are one surface with the lids
+(correspond.mouth, correspond.eyes): made from held-out ICT identities (tools/hard_heads.py),
+where the truth is known."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hard_heads import one_surface_eyes, watertight_head
+from mimica.export import arkit_blendshapes
+from mimica.transfer.contacts import closure
+
+
+def jaw_ratio(p):
+    return float(np.linalg.norm(p[62] - p[66]) / np.linalg.norm(p[27] - p[8]))
+
+
+def test_a_watertight_head_opens_its_mouth():
+    """One closed surface (lips and lids sealed, the back capped): the mouth is cut and opens."""
+    mesh, lm, _ = watertight_head(41, n_vertices=6000)
+    assert not mesh.boundary_vertices().any()
+    shapes = arkit_blendshapes(mesh, lm)
+    assert shapes.mouth is not None and shapes.mouth.cut
+    assert np.array_equal(shapes.mesh.vertices[:mesh.n_vertices], mesh.vertices)     # the user's order kept
+    assert jaw_ratio(lm.positions(shapes.mesh, shapes["jawOpen"])) >= 0.18
+
+
+@pytest.fixture(scope="module")
+def eyes_head():
+    return one_surface_eyes(42)
+
+
+def test_eyes_that_are_one_surface_are_cut_loose_and_blink(eyes_head):
+    """The skin runs on from the lids over the eyeballs: each eye is cut loose along its lid
+    margin (copies after the user's vertices), becomes a rigid eye, and the lids close over it."""
+    mesh, lm, _ = eyes_head
+    shapes = arkit_blendshapes(mesh, lm)
+    cut = shapes.transfer.eye_cut
+    assert cut is not None and set(cut.eyes) == {"left", "right"}
+    n = mesh.n_vertices
+    assert np.array_equal(shapes.mesh.vertices[:n], mesh.vertices)
+    assert shapes.mesh.n_vertices >= n + len(cut.copies_of)
+    rest = lm.positions(mesh)
+    for side, key in (("left", "eyeBlinkLeft"), ("right", "eyeBlinkRight")):
+        assert closure(rest, lm.positions(shapes.mesh, shapes[key]), side) >= 0.7, side
+    # the eye moves rigidly: its vertices keep their distances in a look up
+    eye = cut.eyes["left"]
+    look = shapes["eyeLookUpLeft"][eye]
+    d0 = np.linalg.norm(shapes.mesh.vertices[eye][:, None] - shapes.mesh.vertices[eye][None], axis=2)
+    d1 = np.linalg.norm(look[:, None] - look[None], axis=2)
+    assert np.abs(d1 - d0).max() < 1e-6 * np.ptp(mesh.vertices)
+
+
+def test_cut_eyes_off_keeps_the_surface(eyes_head):
+    mesh, lm, _ = eyes_head
+    shapes = arkit_blendshapes(mesh, lm, cut_eyes=False)
+    assert shapes.transfer.eye_cut is None
+    rest = lm.positions(mesh)
+    assert closure(rest, lm.positions(shapes.mesh, shapes["eyeBlinkLeft"]), "left") < 0.5      # the lid creases
