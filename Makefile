@@ -44,8 +44,9 @@ $(GLTF_STAMP): tools/gltf/package.json tools/gltf/package-lock.json
 	else echo "note: npm not found; the glTF-Validator test will be skipped"; fi
 
 # Blender as a Python module (bpy, Python 3.11 only, about 800 MB) in a venv of its own, for the
-# add-on's test inside Blender: bpy needs numpy < 2, mimica numpy >= 2.  Made under CI; elsewhere
-# `make blender` makes it and the test then runs, else it is skipped.
+# add-on's test inside Blender and FBX (read and written through Blender): bpy needs numpy < 2,
+# mimica numpy >= 2.  Made under CI; elsewhere `make blender` makes both and the tests then run,
+# else they are skipped.
 BLENDER_STAMP := .venv-blender/.installed
 $(BLENDER_STAMP):
 	$(PY) -m venv .venv-blender
@@ -53,11 +54,19 @@ $(BLENDER_STAMP):
 	.venv-blender/bin/pip install -q "bpy==4.5.15"
 	touch $(BLENDER_STAMP)
 
-blender: $(BLENDER_STAMP)
+# the current Blender 5.x too (bpy 5.0.1, Python 3.11): the add-on and mimica's files are tested in both
+BLENDER5_STAMP := .venv-blender5/.installed
+$(BLENDER5_STAMP):
+	$(PY) -m venv .venv-blender5
+	.venv-blender5/bin/pip install -q --upgrade pip
+	.venv-blender5/bin/pip install -q "bpy==5.0.1"
+	touch $(BLENDER5_STAMP)
+
+blender: $(BLENDER_STAMP) $(BLENDER5_STAMP)
 
 TEST_NEEDS := $(WHEEL_STAMP) $(GLTF_STAMP)
 ifneq ($(CI),)
-TEST_NEEDS += $(BLENDER_STAMP)
+TEST_NEEDS += $(BLENDER_STAMP) $(BLENDER5_STAMP)
 endif
 
 demo: $(WHEEL_STAMP)

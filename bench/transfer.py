@@ -4,6 +4,14 @@ Run from the project root with the project's interpreter:  .venv/bin/python benc
 Data: ICT-FaceKit from the data directory ($MIMICA_DATA, default ../shared/data).  The model
 is linear, so the truth of expression e on target T is T + (E_e - N); relative error =
 mean |result - truth| / mean |truth - T| over the face area (vertices 0-9408).
+
+Remeshed mixes (remeshed_mix_median / remeshed_mix_worst): 20 held-out identities (seeds
+300-319, none tuned on) remeshed at 6k-15k vertices, each with three random mixes of 2-4 of
+ICT's shapes at weights 0.5-1 (the first of each mouth-heavy: two or more jaw and mouth shapes);
+a case's error is its three mixes' pooled (relative_error over all of them at once: a
+mix that barely moves the face does not weigh as much as one that opens the jaw).  In the same run: the same identities and mixes on
+ICT's own topology, and (on the first `--peer` cases) trimesh's `registration.nricp_amberg`,
+the same Amberg et al. method in a well-kept library, in place of mimica's registration.
 """
 
 from __future__ import annotations
@@ -55,12 +63,87 @@ def sequence(model, n_frames, seed=0):
     return model.neutral + np.einsum("fk,knd->fnd", w, d), w @ d.reshape(len(names), -1)
 
 
+MOUTH_SHAPES = ("jaw", "mouth")
+
+
+def mixes(model, rng, n=3):
+    """n random mixes of 2-4 of ICT's shapes at weights 0.5-1, the first mouth-heavy: (n, V, 3)."""
+    from mimica.data import ict_expression_names
+    names = ict_expression_names()
+    mouth = [s for s in names if s.startswith(MOUTH_SHAPES)]
+    out = []
+    for k in range(n):
+        m = int(rng.integers(2, 5))
+        pick = list(rng.choice(mouth, 2, replace=False)) if k == 0 else []
+        pick += list(rng.choice([s for s in names if s not in pick], m - len(pick), replace=False))
+        out.append(model.neutral + model.delta({s: float(rng.uniform(0.5, 1.0)) for s in pick}))
+    return np.stack(out)
+
+
+def trimesh_registered(source, source_lm, target, target_lm, lookup, contours=False):
+    """mimica.correspond._registered with trimesh's nricp_amberg as the registration (the peer)."""
+    import trimesh
+    from trimesh.registration import nricp_amberg
+    from mimica.correspond import Correspondence
+    from mimica.correspond.register import on_boundary
+    from mimica.mesh.query import TriangleLocator
+    both = np.isfinite(source_lm).all(1) & np.isfinite(target_lm).all(1)
+    tri, bary, _, _ = TriangleLocator(source.vertices, source.triangles).closest(source_lm[both])
+    src = trimesh.Trimesh(source.vertices, source.triangles, process=False)
+    tgt = trimesh.Trimesh(target.vertices, target.triangles, process=False)
+    reg = nricp_amberg(src, tgt, source_landmarks=(tri, bary), target_positions=target_lm[both])
+    t2, b2, _, dist = TriangleLocator(reg, source.triangles).closest(lookup)
+    h = float(np.median(np.linalg.norm(reg[source.edges[:, 0]] - reg[source.edges[:, 1]], axis=1)))
+    beyond = on_boundary(source, t2, b2) & (dist > h)
+    conf = np.exp(-0.5 * (dist / h) ** 2)
+    conf[beyond] = 0.0
+    return Correspondence(np.where(beyond, -1, t2), np.where(beyond[:, None], 0.0, b2), source.n_vertices, conf)
+
+
+def remeshed_mixes(model, peer_cases: int):
+    """(ours per case, same topology per case, peer per case on the first peer_cases, seconds)."""
+    import mimica.correspond as corr
+    S = model.mesh
+    ls = ict_landmarks(S)
+    ours, same, peer = [], [], []
+    t0 = time.perf_counter()
+    for k in range(20):
+        seed = 300 + k
+        rng = np.random.default_rng(seed)
+        tv = held_out_identity(model, seed)
+        mx = mixes(model, rng)
+        static = static_vertices(S.vertices, mx)
+        face, _ = S.with_vertices(tv).submesh(np.arange(ICT_FACE_AREA_FACES))
+        rs = resample_face(face, tv[ICT_LANDMARKS_68], n_vertices=(6000, 9000, 12000, 15000)[k % 4], seed=seed)
+        lt = Landmarks.snap(rs.mesh, tv[ICT_LANDMARKS_68])
+        truth = [rs.carry(tv[FACE] + m[FACE] - S.vertices[FACE]) for m in mx]
+        out = ExpressionTransfer(S, rs.mesh, ls, lt, "vtc", static).apply(mx)
+        ours.append(relative_error(out, np.stack(truth), rs.mesh.vertices))            # the case's mixes pooled
+        T = S.with_vertices(tv)
+        o2 = ExpressionTransfer(S, T, ls, ict_landmarks(T), "vtc", static).apply(mx)
+        same.append(relative_error(o2, tv + mx - S.vertices, tv, FACE))
+        if k < peer_cases:
+            saved, corr._registered = corr._registered, trimesh_registered
+            try:
+                o3 = ExpressionTransfer(S, rs.mesh, ls, lt, "vtc", static).apply(mx)
+            finally:
+                corr._registered = saved
+            peer.append(relative_error(o3, np.stack(truth), rs.mesh.vertices))
+    return np.array(ours), np.array(same), np.array(peer), time.perf_counter() - t0
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--targets", type=int, default=3)
+    ap.add_argument("--peer", type=int, default=5, help="remeshed cases also run with trimesh's nricp_amberg")
+    ap.add_argument("--only-mixes", action="store_true", help="only the remeshed mixes")
     a = ap.parse_args()
+    if a.only_mixes:
+        mix, mix_same, mix_peer, secs = remeshed_mixes(ICTModel(ICT_HEAD_VERTICES), a.peer)
+        _print_mixes(mix, mix_same, mix_peer, secs)
+        return
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
           f"python {platform.python_version()}, sparse solver: {backend()}")
 
@@ -147,11 +230,24 @@ def main():
         ta, _ = best_of(lambda: xk.apply(frames, basis=False), a.repeat)
         print(f"solver {kind}: precompute {tp:.3f}s, {a.frames / ta:.0f} frames/s")
 
+    mix, mix_same, mix_peer, secs = remeshed_mixes(model, a.peer)
+    _print_mixes(mix, mix_same, mix_peer, secs)
     v, d = res["vtc"], res["dt"]
     print(f"ours vs dt: speed x{v['fps'] / d['fps']:.2f}, error {v['err_seq']:.4f} vs {d['err_seq']:.4f} "
           f"(same topology), {np.mean(rem['vtc']):.4f} vs {np.mean(rem['dt']):.4f} (remeshed)")
     print(f"frames_per_s={v['fps']:.0f} precompute_s={v['precompute']:.3f} correspondence_s={tc:.3f} "
-          f"rel_err_same={v['err_seq']:.4f} rel_err_remeshed={np.mean(rem['vtc']):.4f}")
+          f"rel_err_same={v['err_seq']:.4f} rel_err_remeshed={np.mean(rem['vtc']):.4f} "
+          f"remeshed_mix_median={np.median(mix):.4f} remeshed_mix_worst={mix.max():.4f}")
+
+
+def _print_mixes(mix, same, peer, secs):
+    print(f"remeshed mixes, 20 held-out identities at 6k-15k vertices, 3 mixes each ({secs:.0f}s): relative "
+          f"error median {np.median(mix):.4f} worst {mix.max():.4f} (case {int(np.argmax(mix))}); same topology "
+          f"on the same mixes: median {np.median(same):.4f} worst {same.max():.4f}")
+    if len(peer):
+        print(f"on the first {len(peer)} cases: mimica's registration {np.mean(mix[:len(peer)]):.4f} (mean), "
+              f"trimesh's nricp_amberg {np.mean(peer):.4f}; per case ours "
+              + " ".join(f"{x:.3f}" for x in mix[:len(peer)]) + ", trimesh " + " ".join(f"{x:.3f}" for x in peer))
 
 
 if __name__ == "__main__":

@@ -76,17 +76,24 @@ def test_the_cut_comes_with_the_arrays(tmp_path):
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def blender_python() -> str:
-    exe = os.environ.get("MIMICA_BLENDER_PYTHON") or str(ROOT / ".venv-blender" / "bin" / "python")
+# the Blenders the tests run: 4.5 LTS and the current 5.x, each bpy in a venv of its own
+BLENDERS = {"4.5": ".venv-blender", "5.0": ".venv-blender5"}
+
+
+def blender_python(version: str = "4.5") -> str:
+    exe = (os.environ.get("MIMICA_BLENDER_PYTHON") if version == "4.5" else None) or \
+        str(ROOT / BLENDERS[version] / "bin" / "python")
     if not Path(exe).is_file():
         if os.environ.get("CI"):
-            pytest.fail("Blender's bpy is missing in CI: `make test` installs it into .venv-blender under CI")
-        pytest.skip("no Python with Blender's bpy (.venv-blender, or MIMICA_BLENDER_PYTHON)")
+            pytest.fail(f"Blender {version}'s bpy is missing in CI: `make test` installs it into "
+                        f"{BLENDERS[version]} under CI")
+        pytest.skip(f"no Python with Blender {version}'s bpy ({BLENDERS[version]}; make blender)")
     return exe
 
 
-def test_the_addon_inside_blender(tmp_path, full_model, head_glb):
-    """Headless Blender (bpy 4.5): ARKit shape keys on an imported head (z up, as Blender has
+@pytest.mark.parametrize("version", list(BLENDERS))
+def test_the_addon_inside_blender(tmp_path, full_model, head_glb, version):
+    """Headless Blender (bpy 4.5 and 5.0): ARKit shape keys on an imported head (z up, as Blender has
     it: the jaw opens down Blender's z), a Live Link take keyed onto them (values at sampled
     frames equal the CSV's), shape keys moved onto another mesh, muscle-simulated shape keys,
     and an error as a Blender report.  And mimica's GLBs imported as a user imports them: ICT's
@@ -95,7 +102,7 @@ def test_the_addon_inside_blender(tmp_path, full_model, head_glb):
     keys' values at sampled frames the take's."""
     from mimica.mesh import write_glb, write_mesh
     from mimica.mesh.io import SPARSE_TOLERANCE
-    exe = blender_python()
+    exe = blender_python(version)
     cmd = tmp_path / "mimica"                       # the add-on runs this mimica command
     cmd.write_text(f"#!/bin/sh\nexec {sys.executable} -m mimica.cli \"$@\"\n")
     cmd.chmod(0o755)

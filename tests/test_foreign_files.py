@@ -16,7 +16,7 @@ from mimica.cli import main
 from mimica.errors import MimicaError
 from mimica.mesh import read_mesh
 from mimica.mesh.io.gltf import open_for_edit, read_gltf_layout, read_morph_targets, save_edited, write_gltf_layout
-from test_blender import blender_python
+from test_blender import BLENDERS, blender_python
 from test_gltf import validate
 
 DATA = Path(os.environ["MIMICA_DATA"])
@@ -116,18 +116,23 @@ def test_files_it_cannot_read_are_refused_in_one_line(tmp_path, capsys):
 
 
 # ------------------------------------------------------------------- Blender's files
-def _blender(*args, timeout=600):
-    run = subprocess.run([blender_python(), str(ROOT / "tools" / "blender_files.py"), *map(str, args)],
+def _blender(*args, timeout=600, version="4.5"):
+    run = subprocess.run([blender_python(version), str(ROOT / "tools" / "blender_files.py"), *map(str, args)],
                          stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout)
     assert run.returncode == 0, run.stderr[-3000:] + run.stdout[-2000:]
 
 
+def _exported(tmp_path_factory, suffix):
+    """ICT-FaceKit's identity001 through Blender's OBJ importer and its glTF or FBX exporter."""
+    d = tmp_path_factory.mktemp("blender_head")
+    _blender("export", ICT_HEAD, d / f"head{suffix}")
+    return d / f"head{suffix}"
+
+
 @pytest.fixture(scope="module")
 def blender_head(tmp_path_factory):
-    """ICT-FaceKit's identity001 through Blender's OBJ importer and glTF exporter (defaults)."""
-    d = tmp_path_factory.mktemp("blender_head")
-    _blender("export", ICT_HEAD, d / "head.glb")
-    return d / "head.glb"
+    """Blender's GLB (defaults)."""
+    return _exported(tmp_path_factory, ".glb")
 
 
 def test_a_blender_glb_is_read_whole_and_standing(blender_head):
@@ -161,6 +166,7 @@ def test_blendshapes_go_back_into_blenders_file(blender_head, tmp_path):
     _blender("import", blender_head, tmp_path / "before.json")
     _blender("import", out, tmp_path / "after.json")
     before, after = (json.loads((tmp_path / f).read_text())["objects"] for f in ("before.json", "after.json"))
+    _imports_in_every_blender(out, tmp_path, after)
     assert [o["name"] for o in after] == [o["name"] for o in before]
     [b], [a] = before, after
     assert a["matrix"] == b["matrix"] and a["materials"] == b["materials"]
@@ -176,6 +182,15 @@ def test_blendshapes_go_back_into_blenders_file(blender_head, tmp_path):
     # the shapes move the head as `blendshapes` on the same head's OBJ does
     dev = _shape_deviation(out, tmp_path)
     assert np.median(dev) <= 0.04 and dev.max() <= 0.10, (np.median(dev), dev.max())
+
+
+def _imports_in_every_blender(path, tmp_path, objects) -> None:
+    """The other Blenders (5.x) import the file as 4.5 does: the same objects, vertices, keys."""
+    for version in list(BLENDERS)[1:]:
+        _blender("import", path, tmp_path / f"b{version}.json", version=version)
+        other = json.loads((tmp_path / f"b{version}.json").read_text())["objects"]
+        assert [(o["name"], o["vertices"], sorted(o["shape_keys"])) for o in other] == \
+            [(o["name"], o["vertices"], sorted(o["shape_keys"])) for o in objects], version
 
 
 def _shape_deviation(result, tmp_path) -> np.ndarray:
@@ -204,10 +219,8 @@ def _shape_deviation(result, tmp_path) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def blender_fbx(tmp_path_factory):
-    """ICT-FaceKit's identity001 through Blender's OBJ importer and FBX exporter (defaults)."""
-    d = tmp_path_factory.mktemp("blender_fbx")
-    _blender("export", ICT_HEAD, d / "head.fbx")
-    return d / "head.fbx"
+    """Blender's FBX (defaults)."""
+    return _exported(tmp_path_factory, ".fbx")
 
 
 def test_a_blender_fbx_is_read_whole(blender_fbx):
@@ -229,6 +242,7 @@ def test_blendshapes_go_back_into_blenders_fbx(blender_fbx, tmp_path):
     _blender("import", blender_fbx, tmp_path / "before.json")
     _blender("import", out, tmp_path / "after.json")
     before, after = (json.loads((tmp_path / f).read_text())["objects"] for f in ("before.json", "after.json"))
+    _imports_in_every_blender(out, tmp_path, after)
     [b], [a] = before, after
     assert a["name"] == b["name"] and a["materials"] == b["materials"] and a["vertices"] == b["vertices"]
     vb = np.load(tmp_path / "before.npz")[b["name"]]

@@ -81,6 +81,7 @@ def write(path, edits, out):
             uv = bm.loops.layers.uv.active
             new = [bm.verts.new(p) for p in z[f"a{i}"]]
             rows = z[f"r{i}"]
+            # (as blender_addon._split does: each runs alone in Blender, neither can import mimica)
             faces = {int(f): bm.faces[int(f)] for f in np.unique(rows[:, 0])}      # before any is replaced
             for f, face in faces.items():
                 verts = [lp.vert for lp in face.loops]
