@@ -326,3 +326,14 @@ def test_a_seam_not_found_is_said_with_what_to_do(tmp_path, capsys):
     line = next(ln for ln in err.splitlines() if "stay so" in ln)
     assert "--target-landmarks" in line and "--cut-mouth off" in line
     assert (tmp_path / "show.png").is_file()
+
+
+def test_a_take_on_an_fbx_head_says_what_to_make(blender_fbx, tmp_path, capsys):
+    """A take plays on a glTF head's morph targets: an FBX head is told, in one line, the command
+    that makes one."""
+    (tmp_path / "take.csv").write_text("time,jawOpen\n0,0\n")
+    capsys.readouterr()
+    assert main(["animate", str(blender_fbx), "--arkit", str(tmp_path / "take.csv"), "--out",
+                 str(tmp_path / "t.glb")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "blendshapes" in err[0] and not (tmp_path / "t.glb").exists()

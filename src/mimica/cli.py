@@ -968,6 +968,9 @@ def cmd_animate(a):
     head = Path(a.head)
     if not head.is_file():
         raise MimicaError(f"{head}: no such file")
+    if head.suffix.lower() not in (".glb", ".gltf"):
+        raise MimicaError(f"{head}: a take plays on a glTF head with ARKit morph targets; make one with "
+                          f"`mimica blendshapes {head.name} --out {head.stem}_arkit.glb`")
     if (a.arkit is None) == (a.video is None):
         raise MimicaError("animate: give the take as --arkit take.csv or as --video take.mp4 (one of them)")
     pivot = _floats(a.pivot, 3, "--pivot") if a.pivot else None
