@@ -78,6 +78,15 @@ def _eye_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | Non
     under, _, _, _ = TriangleLocator(mesh.vertices, mesh.triangles).closest(pts)
     lid_faces = mesh.tri_face[under]
     inside[lid_faces] = False
+    # ... and the margin runs through them: a landmark's nearest vertex gets the face at it
+    # nearest the eye's centre, where none of its faces is the eye's
+    face_of = np.repeat(np.arange(mesh.n_faces), mesh.face_sizes)
+    for p in pts:
+        v = int(np.argmin(np.linalg.norm(mesh.vertices - p, axis=1)))
+        fan = np.unique(face_of[mesh.face_indices == v])
+        fan = fan[near[fan] & ~np.isin(fan, lid_faces)]
+        if len(fan) and not inside[fan].any():
+            inside[fan[np.argmin(np.linalg.norm(cent[fan] - centre, axis=1))]] = True
     # the eye runs on from the lids, one piece of surface with them; a head with an eyeball of
     # its own in the opening (behind which the lids run on into a socket) has nothing to cut
     _, piece = connected_components(_face_adjacency(mesh), directed=False)
