@@ -47,20 +47,19 @@ $(GLTF_STAMP): tools/gltf/package.json tools/gltf/package-lock.json
 # add-on's test inside Blender and FBX (read and written through Blender): bpy needs numpy < 2,
 # mimica numpy >= 2.  Made under CI; elsewhere `make blender` makes both and the tests then run,
 # else they are skipped.
+# the LTS the tests have used (4.5) and the current 5.x: the add-on and mimica's files in both.
+# $(1): the venv, $(2): bpy's version
+define bpy_venv
+$(1)/.installed:
+	$$(PY) -m venv $(1)
+	$(1)/bin/pip install -q --upgrade pip
+	$(1)/bin/pip install -q "bpy==$(2)"
+	touch $(1)/.installed
+endef
 BLENDER_STAMP := .venv-blender/.installed
-$(BLENDER_STAMP):
-	$(PY) -m venv .venv-blender
-	.venv-blender/bin/pip install -q --upgrade pip
-	.venv-blender/bin/pip install -q "bpy==4.5.15"
-	touch $(BLENDER_STAMP)
-
-# the current Blender 5.x too (bpy 5.0.1, Python 3.11): the add-on and mimica's files are tested in both
 BLENDER5_STAMP := .venv-blender5/.installed
-$(BLENDER5_STAMP):
-	$(PY) -m venv .venv-blender5
-	.venv-blender5/bin/pip install -q --upgrade pip
-	.venv-blender5/bin/pip install -q "bpy==5.0.1"
-	touch $(BLENDER5_STAMP)
+$(eval $(call bpy_venv,.venv-blender,4.5.15))
+$(eval $(call bpy_venv,.venv-blender5,5.0.1))
 
 blender: $(BLENDER_STAMP) $(BLENDER5_STAMP)
 
