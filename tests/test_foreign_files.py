@@ -62,7 +62,7 @@ def test_a_sample_written_back_keeps_the_file(tmp_path):
     assert info["appended"] == 0
     [report] = validate([out])
     assert report["errors"] == 0, report["messages"]
-    before, after = json.loads(src.read_text()), open_for_edit(out)[0]
+    before, after = json.loads(src.read_text()), open_for_edit(out)[1]
     assert after["nodes"] == before["nodes"]
     assert after["meshes"][0]["extras"]["targetNames"] == ["target0", "target1", "lift"]
     anim = after["animations"][0]["samplers"][0]
@@ -93,7 +93,7 @@ def test_points_and_lines_are_kept_as_they_are(tmp_path):
     write_gltf_layout(tmp_path / "out.glb", m.layout, m, {"up": m.vertices + [0, 0, 1]})
     [report] = validate([tmp_path / "out.glb"])
     assert report["errors"] == 0, report["messages"]
-    out = open_for_edit(tmp_path / "out.glb")[0]
+    out = open_for_edit(tmp_path / "out.glb")[1]
     assert out["meshes"][0]["primitives"][1]["mode"] == 1 and len(out["meshes"][0]["primitives"][1]["targets"]) == 1
     assert out["asset"]["generator"] == "a test" and out["nodes"][0]["translation"] == [5, 0, 0]
 

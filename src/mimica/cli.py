@@ -241,7 +241,7 @@ def cmd_transfer(a):
 
     t0 = time.perf_counter()
     source = read_mesh(a.source_neutral)
-    target = read_mesh(a.target)
+    target = _read_head(a.target)
     paths = _expand_frames(a.source_expr)
     names = [p.name for p in paths]
     dup = {n for n in names if names.count(n) > 1}
@@ -1078,7 +1078,7 @@ def cmd_blendshapes(a):
         with atomic_path(out) as tmp:
             info = write_fbx_layout(tmp, head.layout, shapes.mesh, {n: shapes[n] for n in ARKIT_52})
         _say(f"written into {Path(a.head).name}'s own objects through Blender's FBX exporter"
-             + (f" ({info['appended']} vertices added by the mouth's cut)" if info["appended"] else "")
+             + (f" ({info['appended']} vertices added by the cuts)" if info["appended"] else "")
              + f", {out.stat().st_size / 1e6:.1f} MB")
     elif out.suffix.lower() == ".npz":
         from .export.blendshapes import cut_corners
@@ -1108,15 +1108,15 @@ def cmd_blendshapes(a):
         targets = {n: shapes[n] for n in ARKIT_52}
         binary = out.suffix.lower() == ".glb"
         with atomic_path(out) as tmp:
-            if isinstance(layout, GltfLayout):          # back into the user's own file
+            if layout is not None:                      # back into the user's own file
                 from .mesh.io import write_gltf_layout
                 info = write_gltf_layout(tmp, layout, shapes.mesh, targets, binary=binary, extras=extras)
             else:
                 info = write_glb(tmp, shapes.mesh, targets, binary=binary, units=a.units, sparse=SPARSE_TOLERANCE,
                                  quantize=a.quantize, extras=extras)
-        if isinstance(layout, GltfLayout):
+        if layout is not None:
             _say(f"written into {Path(a.head).name}'s own nodes, materials and vertices"
-                 + (f" ({info['appended']} vertices added by the mouth's cut)" if info["appended"] else "")
+                 + (f" ({info['appended']} vertices added by the cuts)" if info["appended"] else "")
                  + f"; units as the file's; {info['sparse']} of {info['accessors']} morph target accessors sparse "
                  f"(moves under {SPARSE_TOLERANCE * 1e3:g} mm left out), {out.stat().st_size / 1e6:.1f} MB")
             for n in info["notes"]:

@@ -15,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from ..mesh import Mesh
@@ -89,7 +88,7 @@ def _eye_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | Non
             inside[fan[np.argmin(np.linalg.norm(cent[fan] - centre, axis=1))]] = True
     # the eye runs on from the lids, one piece of surface with them; a head with an eyeball of
     # its own in the opening (behind which the lids run on into a socket) has nothing to cut
-    _, piece = connected_components(_face_adjacency(mesh), directed=False)
+    piece = _pieces(mesh)
     own = np.isin(piece, piece[lid_faces])
     if (inside & ~own).any():
         return None
@@ -98,25 +97,15 @@ def _eye_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | Non
         return None
     # the one piece: faces inside that share edges with each other, around the centre
     faces = np.nonzero(inside)[0]
-    sub, _ = mesh.submesh(faces)
-    nc, comp = connected_components(_face_adjacency(sub), directed=False)
+    comp = _pieces(mesh.submesh(faces)[0])
     middle = int(np.argmin(np.linalg.norm(cent[faces] - centre, axis=1)))
     return faces[comp == comp[middle]]
 
 
-def _face_adjacency(mesh: Mesh) -> sp.csr_matrix:
-    """Faces that share an edge."""
-    fi, st = mesh.face_indices, mesh.face_starts
-    face_of = np.repeat(np.arange(mesh.n_faces), np.diff(st))
-    nxt = np.arange(1, len(fi) + 1)
-    nxt[st[1:] - 1] = st[:-1]
-    n = mesh.n_vertices
-    key = np.minimum(fi, fi[nxt]) * n + np.maximum(fi, fi[nxt])
-    order = np.argsort(key, kind="stable")
-    ks, fs = key[order], face_of[order]
-    same = ks[1:] == ks[:-1]
-    return sp.coo_matrix((np.ones(int(same.sum())), (fs[1:][same], fs[:-1][same])),
-                         shape=(mesh.n_faces,) * 2).tocsr()
+def _pieces(mesh: Mesh) -> np.ndarray:
+    """(n_faces,) the connected piece of the surface each face is in."""
+    _, comp = connected_components(mesh.adjacency, directed=False)
+    return comp[mesh.face_indices[mesh.face_starts[:-1]]]
 
 
 def _closed_over(mesh: Mesh, lm: np.ndarray) -> list[str]:

@@ -151,7 +151,6 @@ def split_parts(mesh: Mesh, landmarks=None, eyes: dict | None = None) -> Parts:
     eyes: {"left"/"right": vertices} of eyes cut loose from their lids (correspond.eyes), each
     the eye of its side whatever its shape)."""
     from ..data import ICT_HEAD_VERTICES, is_ict_topology
-    given_eyes = eyes
     lm = None if landmarks is None else np.asarray(landmarks, float)
     if lm is not None and not (np.isfinite(lm[[8, 36, 45]]).all() and np.isfinite(lm[17:27]).any()):
         lm = None
@@ -167,11 +166,11 @@ def split_parts(mesh: Mesh, landmarks=None, eyes: dict | None = None) -> Parts:
     group_of = _component_groups(mesh, comp, nc)
     names, role_c = [], np.full(nc, ROLES.index(FOLLOW))
     role = np.full(mesh.n_vertices, ROLES.index(FOLLOW))
-    eyes = _eye_centres(lm) if lm is not None else {}
+    centres = _eye_centres(lm) if lm is not None else {}
     frame = _mouth_frame(lm) if lm is not None else None          # once for every component
     width = frame[4] if frame is not None else None
     mouth = []
-    cut_eye = {int(comp[v[0]]): side for side, v in (given_eyes or {}).items() if len(v)}
+    cut_eye = {int(comp[v[0]]): side for side, v in (eyes or {}).items() if len(v)}
     for c in range(nc):
         idx = np.nonzero(comp == c)[0]
         kind = group_of[c]
@@ -181,10 +180,10 @@ def split_parts(mesh: Mesh, landmarks=None, eyes: dict | None = None) -> Parts:
         elif c == skin_c:
             kind = "skin"
             role_c[c] = ROLES.index(SKIN)
-        elif kind == "eyeball" or (kind is None and eyes and len(idx) >= 8):
+        elif kind == "eyeball" or (kind is None and centres and len(idx) >= 8):
             ctr, r, res = fit_sphere(mesh.vertices[idx])
-            side = min(eyes, key=lambda e: np.linalg.norm(ctr - eyes[e])) if eyes else None
-            near = side is not None and np.linalg.norm(ctr - eyes[side]) < 0.5 * width and r < 0.5 * width
+            side = min(centres, key=lambda e: np.linalg.norm(ctr - centres[e])) if centres else None
+            near = side is not None and np.linalg.norm(ctr - centres[side]) < 0.5 * width and r < 0.5 * width
             # an eyeball surrounds its centre (ICT's: resultant of the directions 0.28-0.29);
             # lashes and tear or occlusion shells are caps in front of it (0.77-0.95)
             u = mesh.vertices[idx] - ctr

@@ -94,8 +94,8 @@ class Mesh:
             raise ValueError(f"expected vertices of shape {self.vertices.shape}, got {v.shape}")
         m = Mesh(v, self.face_indices, self.face_starts, self.uv, self.face_uv_indices,
                  self.name if name is None else name, self.groups, self.group_names, self.layout)
-        for k in ("triangles", "tri_face", "_fan_corners", "uv_triangles", "edges", "adjacency", "face_sizes",
-                  "outward_oriented"):
+        for k in ("triangles", "tri_face", "_fan_corners", "uv_triangles", "edges", "half_edges", "adjacency",
+                  "face_sizes", "outward_oriented"):
             if k in self.__dict__:
                 m.__dict__[k] = self.__dict__[k]
         return m
@@ -174,12 +174,18 @@ class Mesh:
         """For each triangle of `triangles`, the polygon it came from."""
         return np.repeat(np.arange(self.n_faces), np.maximum(self.face_sizes - 2, 0))
 
-    def _polygon_edges(self) -> np.ndarray:
-        """Every polygon's boundary edges as sorted pairs, one row per polygon side."""
+    @cached_property
+    def half_edges(self) -> np.ndarray:
+        """(k, 2) every polygon's sides in its winding, one row per face corner (its corner and
+        the next): the same edge of two faces wound alike is an inconsistent orientation."""
         fi, st = self.face_indices, self.face_starts
         nxt = np.arange(fi.size) + 1
         nxt[st[1:] - 1] = st[:-1]
-        e = np.sort(np.stack([fi, fi[nxt]], axis=1), axis=1)
+        return np.stack([fi, fi[nxt]], axis=1)
+
+    def _polygon_edges(self) -> np.ndarray:
+        """Every polygon's boundary edges as sorted pairs, one row per polygon side."""
+        e = np.sort(self.half_edges, axis=1)
         return e[e[:, 0] != e[:, 1]]
 
     @cached_property

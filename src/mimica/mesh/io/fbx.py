@@ -29,7 +29,7 @@ import numpy as np
 
 from ...errors import MimicaError
 from ..core import Mesh
-from .weld import half_edges, weld_seams
+from .weld import weld_seams
 
 SCRIPT = Path(__file__).with_name("fbx_blender.py")
 # Blender's z up -> mimica's y up: (x, y, z) -> (x, z, -y)
@@ -64,7 +64,8 @@ class FbxLayout:
     n_vertices: int
     n_faces: int
     notes: list = field(default_factory=list)
-    extras: dict = field(default_factory=dict)
+    extras: dict = field(default_factory=dict)       # (glTF's mimica keys: an FBX has none)
+    targets: dict = field(default_factory=dict)      # shape key name -> (n, 3) work positions
     unit: str = "m"
 
 
@@ -128,7 +129,8 @@ def _build(path: Path, objects: list, a: dict) -> tuple[Mesh, FbxLayout]:
         sizes.append(s)
         uv.append(a.get(f"u{i}", np.zeros((len(a[f"c{i}"]), 2))))
         slots = [m or ob["name"] for m in ob["materials"]] or [ob["name"]]
-        gid = np.array([names.index(m) if m in names else names.append(m) or len(names) - 1 for m in slots])
+        names += [m for m in dict.fromkeys(slots) if m not in names]
+        gid = np.array([names.index(m) for m in slots])
         mats.append(gid[np.minimum(a[f"m{i}"], len(gid) - 1)])
         n_v += len(v)
         n_f += len(s)
@@ -138,7 +140,7 @@ def _build(path: Path, objects: list, a: dict) -> tuple[Mesh, FbxLayout]:
     flat = np.concatenate(fi)
     st = np.r_[0, np.cumsum(np.concatenate(sizes))]
     set_of = np.repeat(np.arange(len(pieces)), [len(p) for p in pos])
-    label = weld_seams(raw, half_edges(flat, st), set_of, np.arange(len(raw)))
+    label = weld_seams(raw, Mesh(raw, flat, st).half_edges, set_of, np.arange(len(raw)))
     uniq, first = np.unique(label, return_index=True)
     order = np.argsort(first, kind="stable")
     rank = np.empty(len(uniq), np.int64)
@@ -157,7 +159,7 @@ def _build(path: Path, objects: list, a: dict) -> tuple[Mesh, FbxLayout]:
         for j, name in enumerate(ob["shape_keys"][1:], start=1):
             d = (a[f"k{i}_{j}"] - base) @ p.world[:3, :3].T
             targets.setdefault(name, np.zeros_like(mesh.vertices))[p.vertex[::-1]] = d[::-1]
-    layout.extras["targets"] = {n: mesh.vertices + d for n, d in targets.items()}
+    layout.targets = {n: mesh.vertices + d for n, d in targets.items()}
     mesh.layout = layout
     return mesh, layout
 
@@ -172,7 +174,7 @@ def read_fbx_shapes(path) -> tuple[Mesh, dict, str]:
     path = Path(path)
     mesh = validate(read_fbx(path), str(path))
     mesh.name = path.stem
-    targets = mesh.layout.extras.pop("targets")
+    targets = mesh.layout.targets
     if not targets:
         raise MimicaError(f"{path}: no shape keys")
     return mesh, targets, "m"

@@ -91,7 +91,6 @@ def _load(path: Path):
         raise MimicaError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
     if g is None:
         raise MimicaError(f"{path}: not a readable glTF file")
-    g._mimica_path = path                        # external buffers and images are found beside it
     squeezed = [e for e in (g.extensionsRequired or []) if e in COMPRESSED]
     if squeezed:
         raise MimicaError(f"{path}: its geometry is {COMPRESSED[squeezed[0]]}-compressed ({squeezed[0]}); "
@@ -163,7 +162,7 @@ def _vertex_map(g, prim, count) -> np.ndarray | None:
     return np.arange(count) if UNITS_KEY in extras else None
 
 
-def read_gltf_layout(path) -> tuple[Mesh, GltfLayout]:
+def read_gltf_layout(path, g=None) -> tuple[Mesh, GltfLayout]:
     """The work mesh of a glTF file (every mesh of its default scene, every primitive, in world
     space, welded) and where its vertices came from.
 
@@ -171,9 +170,10 @@ def read_gltf_layout(path) -> tuple[Mesh, GltfLayout]:
     first set) stays per face corner.  Vertices a writer split are welded: within a primitive
     every exact copy where the surface stays a manifold (Mesh.welded), across primitives the
     two sides of a seam a writer split at a material (boundary edges that coincide, oriented
-    opposite); a file mimica wrote keeps its own vertices (VERTEX_MAP)."""
+    opposite); a file mimica wrote keeps its own vertices (VERTEX_MAP).  g: the file already
+    parsed (_load), else it is."""
     path = Path(path)
-    g = _load(path)
+    g = _load(path) if g is None else g
     try:
         return _read_layout(g, path)
     except MimicaError:
@@ -308,8 +308,7 @@ def _labels(g, sets, raw, tris, piece) -> tuple[np.ndarray, bool]:
     m.groups, m.group_names = piece.astype(np.int32), tuple(range(int(piece.max()) + 1))
     w, label = m.welded()
     set_of = np.repeat(np.arange(len(sets)), [g.accessors[s.position].count for s in sets])
-    lt = label[tris]
-    return weld_seams(w.vertices, np.concatenate([lt[:, [0, 1]], lt[:, [1, 2]], lt[:, [2, 0]]]), set_of, label), False
+    return weld_seams(w.vertices, label[m.half_edges], set_of, label), False
 
 
 def read_gltf(path) -> Mesh:
@@ -346,9 +345,9 @@ def read_morph_targets(path) -> tuple[Mesh, dict, str]:
     path = Path(path)
     if not path.is_file():
         raise MimicaError(f"{path}: no such file")
-    mesh = validate(read_gltf(path), str(path))
-    mesh.name = path.stem
     g = _load(path)
+    mesh = validate(read_gltf_layout(path, g)[0], str(path))
+    mesh.name = path.stem
     try:
         out = morph_targets(g, mesh.layout, mesh)
     except Exception as e:
@@ -392,9 +391,10 @@ def _json_of(path: Path) -> dict:
 
 
 def open_for_edit(path):
-    """(the file's JSON as a dict, a _Buffers holding all its bytes as one buffer, notes) of a
-    glTF file to add to: its buffers merged (the buffer views re-pointed), its images put
-    inside it (glTF allows that in .gltf too), so the result stands on its own anywhere."""
+    """(the parsed file (pygltflib's, to read accessors from), its JSON as a dict, a _Buffers
+    holding all its bytes as one buffer, notes) of a glTF file to add to: its buffers merged
+    (the buffer views re-pointed), its images put inside it (glTF allows that in .gltf too), so
+    the result stands on its own anywhere."""
     path = Path(path)
     g = _load(path)
     try:
@@ -430,7 +430,7 @@ def open_for_edit(path):
             _MIME.get(Path(im["uri"]).suffix.lower(), "application/octet-stream")
         im["bufferView"] = buf.view(np.frombuffer(data, np.uint8))
         del im["uri"]
-    return doc, buf, notes
+    return g, doc, buf, notes
 
 
 def save_edited(doc: dict, buf: "_Buffers", path, binary: bool = True) -> None:
@@ -456,22 +456,10 @@ def save_edited(doc: dict, buf: "_Buffers", path, binary: bool = True) -> None:
         Path(path).write_text(json.dumps(doc, indent=1))
 
 
-def _raw_accessor(g, index) -> np.ndarray:
-    """An accessor's stored values (sparse ones made whole), not normalized."""
-    acc = g.accessors[index]
-    if not acc.normalized:
-        return read_accessor(g, index)
-    saved, acc.normalized = acc.normalized, None
-    try:
-        return read_accessor(g, index)
-    finally:
-        acc.normalized = saved
-
-
 def _copy_rows(g, buf, index, src, minmax=False) -> int:
     """A new accessor: accessor `index`'s rows `src` (its type, component and normalization)."""
     acc = g.accessors[index]
-    return buf.add(_raw_accessor(g, index)[src], ARRAY_BUFFER, acc.type, acc.componentType, minmax,
+    return buf.add(read_accessor(g, index, normalize=False)[src], ARRAY_BUFFER, acc.type, acc.componentType, minmax,
                    bool(acc.normalized))
 
 
@@ -523,8 +511,7 @@ def write_gltf_layout(path, layout: GltfLayout, mesh: Mesh, targets: dict | None
     many of them sparse, "notes": [...]}."""
     if mesh.n_faces != layout.n_faces:
         raise ValueError(f"the result has {mesh.n_faces} faces; the file was read with {layout.n_faces}")
-    g = _load(layout.path)
-    doc, buf, notes = open_for_edit(layout.path)
+    g, doc, buf, notes = open_for_edit(layout.path)
     targets = targets or {}
     names = list(targets)
     tri = mesh.triangles
@@ -596,8 +583,7 @@ def _set_accessors(g, buf, s: VertexSet, mesh, tri, n_read, targets, sparse) -> 
     local = s.to_local(mesh.vertices[work])
     size = max(float(np.ptp(orig, axis=0).max()), 1e-30)
     moved = bool(len(local)) and np.abs(local - orig[src]).max() > 1e-6 * size
-    out = {"appended": len(src) - len(s.vertex), "src": src, "triangles": tris, "copies": {}, "sparse": 0,
-           "repointed": int((work[:len(s.vertex)] != s.vertex).sum())}
+    out = {"appended": len(src) - len(s.vertex), "src": src, "triangles": tris, "copies": {}, "sparse": 0}
     if moved:
         out["position"] = buf.add(local.astype(np.float32), ARRAY_BUFFER, "VEC3", FLOAT, True)
     elif out["appended"]:
@@ -640,8 +626,9 @@ def buffer_bytes(g, i) -> bytes:
     return g.binary_blob() if g.buffers[i].uri is None else g.get_data_from_buffer_uri(g.buffers[i].uri)
 
 
-def read_accessor(g, index) -> np.ndarray:
-    """The accessor's rows; normalized integers (KHR_mesh_quantization) as the floats they stand for."""
+def read_accessor(g, index, normalize: bool = True) -> np.ndarray:
+    """The accessor's rows (sparse ones made whole); normalized integers (KHR_mesh_quantization)
+    as the floats they stand for, or as stored (normalize=False: to copy them)."""
     acc = g.accessors[index]
     if acc.sparse is not None:                    # zeros (or its buffer view), then the listed rows
         dt, nc = np.dtype(_COMPONENT[acc.componentType]), _NCOMP[acc.type]
@@ -656,7 +643,7 @@ def read_accessor(g, index) -> np.ndarray:
         out = out.squeeze(-1) if nc == 1 else out
     else:
         out = _accessor_raw(g, acc)
-    if acc.normalized and out.dtype.kind in "iu":  # glTF 2.0 3.11: c / (2^b - 1) or max(c / (2^(b-1) - 1), -1)
+    if normalize and acc.normalized and out.dtype.kind in "iu":  # glTF 2.0 3.11: c / (2^b - 1) or max(c / (2^(b-1) - 1), -1)
         top = float(np.iinfo(out.dtype).max)
         out = out / top if out.dtype.kind == "u" else np.maximum(out / top, -1.0)
     return out
@@ -673,8 +660,6 @@ def _accessor_raw(g, acc) -> np.ndarray:
     rows = np.lib.stride_tricks.as_strided(raw, shape=(acc.count, dt.itemsize * nc), strides=(stride, 1))
     return np.ascontiguousarray(rows).view(dt).reshape(acc.count, nc).squeeze(-1) if nc == 1 else \
         np.ascontiguousarray(rows).view(dt).reshape(acc.count, nc)
-
-
 
 
 class _Buffers:

@@ -8,18 +8,11 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 
-def half_edges(face_indices: np.ndarray, face_starts: np.ndarray) -> np.ndarray:
-    """(k, 2) each polygon's edges in its winding (flat polygons as Mesh keeps them)."""
-    nxt = np.arange(1, len(face_indices) + 1)
-    nxt[face_starts[1:] - 1] = face_starts[:-1]          # each polygon's last corner back to its first
-    return np.stack([face_indices, face_indices[nxt]], 1)
-
-
 def weld_seams(wpos, e, set_of, label) -> np.ndarray:
     """Across vertex sets: a boundary edge a -> b of one set that meets exactly one boundary edge
     b' -> a' of another at the same points (the two sides of a seam a writer split, one oriented
     surface) has its ends made one.  wpos: (n, 3) positions of the labels; e: (k, 2) the faces'
-    half-edges in labels (half_edges); set_of / label: (raw,) each raw vertex's set and label.
+    half-edges in labels (Mesh.half_edges); set_of / label: (raw,) each raw vertex's set and label.
     Returns the raw vertices' labels."""
     lab_set = np.zeros(len(wpos), np.int64)
     lab_set[label] = set_of
