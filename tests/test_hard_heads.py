@@ -58,3 +58,27 @@ def test_cut_eyes_off_keeps_the_surface(eyes_head):
     assert shapes.transfer.eye_cut is None
     rest = lm.positions(mesh)
     assert closure(rest, lm.positions(shapes.mesh, shapes["eyeBlinkLeft"]), "left") < 0.5      # the lid creases
+
+
+def test_sealed_lips_are_cut_from_landmarks_found_on_renders():
+    """The shared head capped (one closed surface, 469 vertices): from the landmarks the core
+    detector finds on its renders the seam's first path, between the inner corners where the
+    points say, parts no lips; the seam from the outer corners does, and the mouth opens."""
+    import json
+    import os
+    from pathlib import Path
+    from hard_heads import capped
+    from mimica.correspond.mouth import _cut_along, _seam, cut_mouth
+    from mimica.landmarks import Landmarks
+    from mimica.landmarks.auto import landmarks_for
+    from mimica.mesh import read_mesh
+    d = Path(os.environ["MIMICA_DATA"]) / "real-heads" / "mediapipe-canonical"
+    head = capped(read_mesh(d / "head.obj"))
+    found = landmarks_for(head).positions(head)
+    assert not _cut_along(head, found, _seam(head, found)).cut
+    mc = cut_mouth(head, found)
+    assert mc.cut and len(mc.copies_of) >= 8
+    truth = Landmarks.from_vertex_indices(head, json.loads((d / "head.json").read_text())["landmark_vertices"])
+    shapes = arkit_blendshapes(head, None)
+    p = truth.positions(shapes.mesh, shapes["jawOpen"])
+    assert np.linalg.norm(p[62] - p[66]) / np.linalg.norm(p[27] - p[8]) > 0.18

@@ -171,14 +171,23 @@ def _say_uncut_mouth(xfer, what, landmarks_flag: str) -> None:
              "(--show draws where the seam was looked for)")
 
 
-def _warn_sealed_eyes(xfer, mesh, lm, what):
+def _warn_sealed_eyes(xfer, mesh, lm, what, found_flag=None):
     """One line on eyes that are one surface with the lids: cut open, or why not (blinks then
-    move the lids over them)."""
+    move the lids over them); found_flag: the option that gives landmarks, where none were
+    given (on a head not of ICT-FaceKit's topology they were then found on renders)."""
+    from .data import is_ict_topology
+    if found_flag and is_ict_topology(mesh):
+        found_flag = None
     if xfer.eye_cut is not None:
         ec = xfer.eye_cut
         _say(f"{what}: the {' and '.join(ec.eyes)} eye{'s were' if len(ec.eyes) > 1 else ' was'} one surface with "
              f"the lids: cut loose along the lid margins, {len(ec.copies_of)} vertices added after the others "
              "(--cut-eyes off to keep them whole)")
+        if found_flag:
+            _say(f"note: {what}: the eyes were cut where the landmarks found on its renders put them, and a render "
+                 "barely shows the lids of an eye that is one surface with them (on made heads the points sat "
+                 f"0.1-0.25 of the eye's width above the margin and blinks failed): look with --show, and give the "
+                 f"head's 68 landmarks ({found_flag}) if the cut is not at the lids' margin")
     if xfer.eyes_uncut:
         whys = "; ".join(dict.fromkeys(xfer.eyes_uncut.values()))
         sides = " and ".join(xfer.eyes_uncut)
@@ -264,7 +273,8 @@ def cmd_transfer(a):
         _say(f"{a.target}: the lips were sealed; cut apart along {len(xfer.mouth.seam)} vertices, "
              f"{len(xfer.mouth.copies_of)} added after the target's own (--cut-mouth off to keep them sealed)")
     _say_uncut_mouth(xfer, a.target, "--target-landmarks")
-    _warn_sealed_eyes(xfer, target, lt, a.target)
+    _warn_sealed_eyes(xfer, target, lt, a.target,
+                      found_flag=None if a.target_landmarks else "--target-landmarks")
     target = xfer.output_mesh
     if len(frames) >= BASIS_FRAMES:                    # a long sequence: through its basis, if it holds
         out = xfer.apply(frames, basis=True)
@@ -1048,88 +1058,47 @@ def _weights_from_video(a, head: Path, out: Path):
 
 
 def cmd_blendshapes(a):
-    from .export import ARKIT_52, arkit_blendshapes
-    from .landmarks import read_landmarks
-    from .mesh import atomic_path, write_glb
-    from .mesh.io import SPARSE_TOLERANCE, UNITS, GltfLayout
+    from .export import ARKIT_52
+    from .mesh.io import SPARSE_TOLERANCE
+    from .pipeline import BlendshapesOptions, make_blendshapes
     out = Path(a.out)
     if a.format and not out.suffix:                       # `--format usd --out head`: head.usd
         out = out.with_suffix("." + a.format)
     elif a.format and out.suffix.lower() != "." + a.format:
         raise MimicaError(f"--format {a.format} with --out {out}: say the format once (the suffix, or --format)")
-    if out.suffix.lower() not in (".glb", ".gltf", ".usd", ".usda", ".usdc", ".npz", ".fbx"):
-        raise MimicaError(f"{out}: blendshapes are written as glTF (.glb or .gltf), FBX (an FBX head's own file), "
-                          "USD (.usd, .usda, .usdc) or NumPy arrays (.npz: the positions of each shape, for the "
-                          "Blender add-on)")
-    if out.suffix.lower() == ".fbx" and Path(a.head).suffix.lower() != ".fbx":
-        raise MimicaError(f"{out}: FBX is written back into the FBX head it was read from; write .glb for "
-                          f"{Path(a.head).name} (Blender, Maya and game engines import it)")
-    t0 = time.perf_counter()
-    head = _read_head(a.head)
-    lm = read_landmarks(a.landmarks, head) if a.landmarks else None
-    shapes = arkit_blendshapes(head, lm, progress=_say, cut_mouth=a.cut_mouth == "auto", match=a.match,
-                               cut_eyes=a.cut_eyes == "auto")
+    opts = BlendshapesOptions(landmarks=a.landmarks, cut_mouth=a.cut_mouth == "auto", cut_eyes=a.cut_eyes == "auto",
+                              match=a.match, units=a.units, quantize=a.quantize)
+    r = make_blendshapes(a.head, out, opts, progress=_say)
+    shapes, info, name = r.shapes, r.written, Path(a.head).name
     if line := _correspondence_line(shapes.transfer).lstrip("; "):
         _say(line)
     _say_uncut_mouth(shapes.transfer, a.head, "--landmarks")
-    _warn_sealed_eyes(shapes.transfer, head, shapes.landmarks, a.head)
-    if out.suffix.lower() == ".fbx":
-        from .mesh.io import write_fbx_layout
-        with atomic_path(out) as tmp:
-            info = write_fbx_layout(tmp, head.layout, shapes.mesh, {n: shapes[n] for n in ARKIT_52})
-        _say(f"written into {Path(a.head).name}'s own objects through Blender's FBX exporter"
-             + (f" ({info['appended']} vertices added by the cuts)" if info["appended"] else "")
-             + f", {out.stat().st_size / 1e6:.1f} MB")
-    elif out.suffix.lower() == ".npz":
-        from .export.blendshapes import cut_corners
-        cut = cut_corners(head, shapes.mesh)
-        with atomic_path(out) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, vertices=shapes.mesh.vertices, **{n: shapes[n] for n in ARKIT_52}, **cut)
+    _warn_sealed_eyes(shapes.transfer, r.head, shapes.landmarks, a.head,
+                      found_flag="--landmarks" if r.landmarks_found else None)
+    added = f" ({info['appended']} vertices added by the cuts)" if info.get("appended") else ""
+    if info["kind"] == "fbx":
+        _say(f"written into {name}'s own objects through Blender's FBX exporter{added}, {info['bytes'] / 1e6:.1f} MB")
+    elif info["kind"] == "npz":
         _say(f"{out}: the rest and the 52 shapes' positions, {shapes.mesh.n_vertices} vertices in the head's order"
-             + (f" ({len(cut['cut_copies'])} added by the cuts after the head's own; cut_copies and cut_corners "
-                "say where)" if cut else ""))
-    elif out.suffix.lower() in (".usd", ".usda", ".usdc"):
-        from .export.usd import write_usd
-        info = write_usd(out, shapes.mesh, {n: shapes[n] for n in ARKIT_52}, units=a.units)
-        _say(f"units: {info['units']} (metersPerUnit set, y up); {out.stat().st_size / 1e6:.1f} MB")
+             + (f" ({info['appended']} added by the cuts after the head's own; cut_copies and cut_corners say where)"
+                if info["appended"] else ""))
+    elif info["kind"] == "usd":
+        _say(f"units: {info['units']} (metersPerUnit set, y up); {info['bytes'] / 1e6:.1f} MB")
+    elif info["kind"] == "gltf-layout":
+        _say(f"written into {name}'s own nodes, materials and vertices{added}; units as the file's; "
+             f"{info['sparse']} of {info['accessors']} morph target accessors sparse (moves under "
+             f"{SPARSE_TOLERANCE * 1e3:g} mm left out), {info['bytes'] / 1e6:.1f} MB")
+        for n in info["notes"]:
+            _say(f"{out}: {n}")
     else:
-        from .export.take import HEAD_KEY, head_joint
-        from .mesh.io import glb_units
-        layout = head.layout if isinstance(head.layout, GltfLayout) else None
-        joint = head_joint(shapes.mesh, shapes.landmarks)   # where `animate --head-rotation` turns it
-        k = UNITS[layout.unit] if layout is not None else glb_units(shapes.mesh, a.units)[1]
-        extras = {} if joint is None else {HEAD_KEY: {n: (k * p).tolist() for n, p in joint.items()}}
-        lm = shapes.landmarks
-        if lm.present.all():                            # for `animate --video`: the points it fits
-            from .export.video import LANDMARKS_KEY
-            extras[LANDMARKS_KEY] = {"vertices": shapes.mesh.triangles[lm.triangle].tolist(),
-                                     "bary": np.round(lm.bary, 7).tolist()}
-        targets = {n: shapes[n] for n in ARKIT_52}
-        binary = out.suffix.lower() == ".glb"
-        with atomic_path(out) as tmp:
-            if layout is not None:                      # back into the user's own file
-                from .mesh.io import write_gltf_layout
-                info = write_gltf_layout(tmp, layout, shapes.mesh, targets, binary=binary, extras=extras)
-            else:
-                info = write_glb(tmp, shapes.mesh, targets, binary=binary, units=a.units, sparse=SPARSE_TOLERANCE,
-                                 quantize=a.quantize, extras=extras)
-        if layout is not None:
-            _say(f"written into {Path(a.head).name}'s own nodes, materials and vertices"
-                 + (f" ({info['appended']} vertices added by the cuts)" if info["appended"] else "")
-                 + f"; units as the file's; {info['sparse']} of {info['accessors']} morph target accessors sparse "
-                 f"(moves under {SPARSE_TOLERANCE * 1e3:g} mm left out), {out.stat().st_size / 1e6:.1f} MB")
-            for n in info["notes"]:
-                _say(f"{out}: {n}")
-        else:
-            _say(_units_line(shapes.mesh, info["units"], a.units) + "; " + _sparse_line(out, info, len(ARKIT_52)))
+        _say(_units_line(shapes.mesh, info["units"], a.units) + "; " + _sparse_line(out, info, len(ARKIT_52)))
     if a.show:
         from .render import save_png
         from .render.diagnose import transfer_picture
-        save_png(a.show, transfer_picture(shapes.transfer, f"{Path(a.head).name} as the transfer sees it"))
+        save_png(a.show, transfer_picture(shapes.transfer, f"{name} as the transfer sees it"))
         _say(f"picture -> {a.show}")
     _say(f"{out}: {len(ARKIT_52)} ARKit morph targets on {shapes.mesh.n_vertices} vertices "
-         f"({time.perf_counter() - t0:.1f}s; tongueOut stays at rest: ICT-FaceKit has no tongue shape)")
+         f"({r.seconds:.1f}s; tongueOut stays at rest: ICT-FaceKit has no tongue shape)")
     return 0
 
 

@@ -69,12 +69,13 @@ def sealed_eyes(mesh: Mesh, landmarks) -> list[str]:
     return out
 
 
-def _seam(mesh: Mesh, lm, crease: float = CREASE) -> np.ndarray:
+def _seam(mesh: Mesh, lm, crease: float = CREASE, valley_corners: bool = False, outer: bool = False) -> np.ndarray:
     """The path of vertices between the lips, corner to corner: from the vertex nearest one
     inner corner (iBUG 60) over the deepest valley vertex near each meeting point of the inner
     lips to the other corner (64), by Dijkstra over edge lengths, an edge in a valley costing
     exp(-crease x its concave angle) of its length: sealed lips meet in a crease, which the
-    landmarks (detected ones above all) only come near."""
+    landmarks (detected ones above all) only come near.  valley_corners: the corners too at the
+    deepest valley vertex near them; outer: from the outer corners (48, 54) instead."""
     e = mesh.edges
     v = mesh.vertices
     ang = concave_angles(mesh, e) if crease > 0 else np.zeros(len(e))
@@ -85,11 +86,12 @@ def _seam(mesh: Mesh, lm, crease: float = CREASE) -> np.ndarray:
     tree = cKDTree(v)
     reach = SNAP * float(np.linalg.norm(lm[64] - lm[60]))
     stops = []
-    for k, wp in enumerate(WAYPOINTS):
+    waypoints = [(48,)] + WAYPOINTS[1:-1] + [(54,)] if outer else WAYPOINTS
+    for k, wp in enumerate(waypoints):
         p = lm[list(wp)].mean(0)
         near = np.array(tree.query_ball_point(p, reach), np.int64)
         near = near[depth[near] > VALLEY] if len(near) else near
-        if k in (0, len(WAYPOINTS) - 1) or not len(near):
+        if (k in (0, len(waypoints) - 1) and not valley_corners) or not len(near):
             stops.append(int(tree.query(p)[1]))           # the corners where the landmarks say
         else:
             # between the lips: the deepest valley vertex, the nearer of equally deep ones
@@ -122,7 +124,19 @@ def cut_mouth(mesh: Mesh, landmarks) -> MouthCut:
     none = MouthCut(mesh, np.zeros(0, np.int64), np.zeros(0, np.int64))
     if not np.isfinite(lm[60:68]).all() or mouth_is_open(mesh, lm):
         return none
-    seam = _seam(mesh, lm)
+    first = None
+    # the inner corners where the landmarks say; else in the valley; else from the outer corners
+    # (detected landmarks on remeshed and coarse heads: the first found no seam on 2 of 13 heads)
+    for valley_corners, outer in ((False, False), (True, False), (False, True)):
+        cut = _cut_along(mesh, lm, _seam(mesh, lm, valley_corners=valley_corners, outer=outer))
+        if cut.cut:
+            return cut
+        first = first or cut
+    return first
+
+
+def _cut_along(mesh: Mesh, lm: np.ndarray, seam: np.ndarray) -> MouthCut:
+    """The mesh cut along this seam, or why not."""
     if len(seam) < 3 or len(np.unique(seam)) != len(seam):
         why = "no path over the mesh between the mouth's corners" if len(seam) == 0 else \
             "the mouth's corners are too close on the mesh" if len(seam) < 3 else "the path between the lips crosses itself"

@@ -101,3 +101,89 @@ def cut_corners(head, mesh) -> dict:
     copies = np.full(mesh.n_vertices - n, -1, np.int64)
     copies[added] = head.face_indices[moved]
     return {"cut_copies": copies, "cut_corners": np.stack([poly, moved - head.face_starts[poly], added], 1)}
+
+
+BLENDSHAPE_SUFFIXES = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".npz", ".fbx")
+
+
+def check_blendshapes_path(path) -> None:
+    """Raise MimicaError where `path`'s suffix is not a kind of file `write_blendshapes` writes."""
+    from pathlib import Path
+    if Path(path).suffix.lower() not in BLENDSHAPE_SUFFIXES:
+        raise MimicaError(f"{path}: blendshapes are written as glTF (.glb or .gltf), FBX (an FBX head's own file), "
+                          "USD (.usd, .usda, .usdc) or NumPy arrays (.npz: the positions of each shape, for the "
+                          "Blender add-on)")
+
+
+def write_blendshapes(path, head, shapes: Blendshapes, units: str = "auto", quantize: bool = False) -> dict:
+    """Write a head's 52 ARKit shapes; the kind of file by `path`'s suffix, written whole or not
+    at all.
+
+    - .glb / .gltf: a head read from glTF is written back into its own file (its nodes,
+      materials and vertex layout; mesh.io.write_gltf_layout), else a new one (mesh.io.write_glb:
+      sparse targets, `quantize` for KHR_mesh_quantization); both carry the extras `animate`
+      reads (export.extras: where the head turns, its 68 landmarks).
+    - .fbx: back into the FBX head it was read from, through Blender (mesh.io.write_fbx_layout).
+    - .usd / .usda / .usdc: UsdSkel blend shapes (export.usd).
+    - .npz: the rest and each shape's positions, and where a cut added vertices (`cut_corners`):
+      what the Blender add-on reads.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    head : Mesh
+        The head as read (its `layout` says which file it came from).
+    shapes : Blendshapes
+        `arkit_blendshapes(head, ...)`; `shapes.mesh` is the head with any cut's vertices.
+    units : str
+        The head's unit where the file does not say it ("auto", "m", "cm", "mm").
+    quantize : bool
+        glTF written new: targets as 16-bit moves (KHR_mesh_quantization).
+
+    Returns
+    -------
+    dict
+        {"kind": "gltf-layout" | "gltf" | "fbx" | "usd" | "npz", "bytes": the file's size, and
+        the writer's own figures: "units", "sparse", "accessors", "appended", "notes", ...}.
+    """
+    from pathlib import Path
+
+    from ..mesh import atomic_path
+    from ..mesh.io import SPARSE_TOLERANCE, UNITS, GltfLayout, glb_units, write_glb
+    from .extras import head_extras
+    check_blendshapes_path(path)
+    path = Path(path)
+    suffix = path.suffix.lower()
+    targets = {n: shapes[n] for n in ARKIT_52}
+    if suffix == ".fbx":
+        from ..mesh.io import FbxLayout, write_fbx_layout
+        if not isinstance(head.layout, FbxLayout):
+            raise MimicaError(f"{path}: FBX is written back into the FBX head it was read from; write .glb for this "
+                              "head (Blender, Maya and game engines import it)")
+        with atomic_path(path) as tmp:
+            info = dict(write_fbx_layout(tmp, head.layout, shapes.mesh, targets), kind="fbx")
+    elif suffix == ".npz":
+        cut = cut_corners(head, shapes.mesh)
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, vertices=shapes.mesh.vertices, **targets, **cut)
+        info = {"kind": "npz", "appended": len(cut.get("cut_copies", ()))}
+    elif suffix in (".usd", ".usda", ".usdc"):
+        from .usd import write_usd
+        info = dict(write_usd(path, shapes.mesh, targets, units=units), kind="usd")
+    else:
+        layout = head.layout if isinstance(head.layout, GltfLayout) else None
+        k = UNITS[layout.unit] if layout is not None else glb_units(shapes.mesh, units)[1]
+        extras = head_extras(shapes.mesh, shapes.landmarks, k)
+        binary = suffix == ".glb"
+        with atomic_path(path) as tmp:
+            if layout is not None:                      # back into the user's own file
+                from ..mesh.io import write_gltf_layout
+                info = dict(write_gltf_layout(tmp, layout, shapes.mesh, targets, binary=binary, extras=extras),
+                            kind="gltf-layout")
+            else:
+                info = dict(write_glb(tmp, shapes.mesh, targets, binary=binary, units=units, sparse=SPARSE_TOLERANCE,
+                                      quantize=quantize, extras=extras), kind="gltf")
+    info["bytes"] = path.stat().st_size
+    return info

@@ -18,10 +18,10 @@ import numpy as np
 from ..errors import MimicaError
 from ..mesh.io.gltf import read_accessor
 from .blendshapes import ARKIT_52
+from .extras import HEAD_KEY, stored_head  # noqa: F401  (the key, for readers of this module)
 
 
 HEAD_ROTATION = ["headYaw", "headPitch", "headRoll"]     # Live Link Face: radians (ARKit's Euler angles)
-HEAD_KEY = "mimica_head"     # mesh extras: {"pivot", "chin"}, metres, where the head turns (blendshapes)
 
 
 def _timecode(text: str) -> tuple[float, float]:
@@ -125,23 +125,6 @@ def head_quaternions(yaw, pitch, roll) -> np.ndarray:
     return (q * np.where(np.logical_xor.accumulate(flip), -1.0, 1.0)[:, None]).astype(np.float32)
 
 
-def head_joint(mesh, landmarks) -> dict | None:
-    """Where a head turns, from its 68 landmarks: {"pivot": the top of the neck (near the
-    atlanto-occipital joint): level with the jaw outline under the ears (points 1, 2, 14, 15),
-    a third of the face's width (0 to 16) behind them; "chin": point 8} -- a mimica estimate,
-    not measured on anatomy.  None where those landmarks are missing."""
-    p = landmarks.positions(mesh)
-    if np.isnan(p[[0, 1, 2, 8, 14, 15, 16, 30]]).any():
-        return None
-    ears = p[[1, 2, 14, 15]].mean(0)
-    across = p[16] - p[0]
-    width = float(np.linalg.norm(across))
-    forward = p[30] - (p[0] + p[16]) / 2
-    forward -= forward @ across / width ** 2 * across                  # square to the ears' line
-    forward /= max(np.linalg.norm(forward), 1e-12)
-    return {"pivot": ears - width / 3 * forward, "chin": p[8]}
-
-
 def neck_weights(y: np.ndarray, pivot_y: float, chin_y: float | None) -> np.ndarray:
     """How much each vertex turns with the head (0..1) from its height y: 1 from the chin up,
     easing (smoothstep) to 0 at the mesh's lowest point, so that a neck bends and the shoulders
@@ -199,7 +182,7 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: 
                               "head as `blendshapes` writes it from an OBJ")
         mi, nd = placings[0]
         mesh, node = doc["meshes"][mi], doc["nodes"][nd]
-        stored = (mesh.get("extras") or {}).get(HEAD_KEY) or {}
+        stored = stored_head(mesh.get("extras"))
         pivot = pivot if pivot is not None else stored.get("pivot")
         if pivot is None:
             raise MimicaError(f"{head_glb}: no head pivot stored (made by an older mimica?): say where the head "

@@ -30,8 +30,8 @@ import numpy as np
 
 from ..errors import MimicaError
 from .blendshapes import ARKIT_52
+from .extras import LANDMARKS_KEY, stored_landmarks  # noqa: F401  (the key, for readers of this module)
 
-LANDMARKS_KEY = "mimica_landmarks"      # mesh extras: the 68 landmarks as {"vertices", "bary"} (user's order)
 UNSEEN = tuple(n for n in ARKIT_52 if n.startswith("eyeLook") or n == "tongueOut")
 # the points a face's expressions move least: the nose bridge and its base, the eyes' corners
 RIGID = np.r_[27:31, 31:36, 36, 39, 42, 45]
@@ -62,16 +62,13 @@ def landmark_basis(head_glb) -> LandmarkBasis:
     from ..mesh.io import UNITS, read_morph_targets
     head_glb = Path(head_glb)
     mesh, targets, unit = read_morph_targets(head_glb)
-    stored = mesh.layout.extras.get(LANDMARKS_KEY)
     if not set(ARKIT_52) <= set(targets):
         raise MimicaError(f"{head_glb}: not a head with the 52 ARKit morph targets (make it with `blendshapes`)")
-    if not stored:
+    stored = stored_landmarks(mesh.layout.extras, mesh.n_vertices, str(head_glb))
+    if stored is None:
         raise MimicaError(f"{head_glb}: no landmarks stored (made by an older mimica, or the head's 68 landmarks "
                           "were not all found): make it again with `blendshapes`, giving its landmarks")
-    tri = np.asarray(stored["vertices"], np.int64)
-    bary = np.asarray(stored["bary"], np.float64)
-    if tri.shape != (68, 3) or (tri < 0).any() or (tri >= mesh.n_vertices).any():
-        raise MimicaError(f"{head_glb}: its stored landmarks do not match its vertices")
+    tri, bary = stored
     k = UNITS[unit]                                  # metres, as the file holds them
 
     def at(p):

@@ -16,11 +16,8 @@ def landmarks_for(mesh: Mesh, path=None, what="mesh") -> Landmarks:
         return read_landmarks(path, mesh)
     if is_ict_topology(mesh):
         return ict_landmarks(mesh)
-    import importlib.util
-    if importlib.util.find_spec("dlib") is None or importlib.util.find_spec("face_recognition_models") is None:
-        raise MimicaError(f"{what}: not an ICT-FaceKit topology, so its 68 landmarks are found on renders of it, "
-                          "which needs the photo extra (dlib's face detector): pip install 'mimica[photo]'; "
-                          "or give its landmarks in a file (JSON: {\"scheme\": \"ibug68\", \"points\": [[x,y,z], ...]})")
+    from .detect2d import _models
+    _models()                                    # dlib missing from a broken install: said as such
     try:
         pts, _ = detect_mesh(mesh, what=what)    # render, find the 68 points, cast them back
         return Landmarks.snap(mesh, pts)

@@ -4,7 +4,7 @@ Two detectors (`DETECTORS`), both offline:
 
 - "dlib": dlib's HOG face detector and its 68-point shape predictor (Kazemi &
   Sullivan 2014, trained on iBUG 300-W); the model file ships inside the
-  `face-recognition-models` package (extra `photo`).
+  `face-recognition-models` package (both core dependencies).
 - "mediapipe" (the default for photos): MediaPipe's face mesh (468 points; the `mediapipe`
   0.10.14 wheel ships its model, extras `photo` and `mediapipe`), read at 68 of its points: for each iBUG point the mesh point
   nearest the truth on average over rendered ICT-FaceKit faces of the even identities
@@ -44,8 +44,11 @@ DEFAULT_DETECTOR = "mediapipe"     # the more accurate, consistent and faster on
 
 @lru_cache(maxsize=1)
 def _models():
-    from .._extras import require
-    dlib = require("dlib", "photo", "finding face landmarks automatically (or give a landmark file)")
+    try:
+        import dlib
+    except ImportError:
+        raise MimicaError("finding face landmarks automatically needs dlib (the package dlib-bin), a dependency "
+                          "of mimica that is missing: pip install --force-reinstall mimica") from None
     return dlib.get_frontal_face_detector(), dlib.shape_predictor(str(_predictor_file()))
 
 
@@ -58,8 +61,9 @@ def _predictor_file() -> Path:
     f = (Path(next(iter(spec.submodule_search_locations))) / "models" / "shape_predictor_68_face_landmarks.dat"
          if spec and spec.submodule_search_locations else None)
     if f is None or not f.is_file():
-        raise MimicaError("finding face landmarks automatically needs the optional package "
-                          "'face_recognition_models' (dlib's 68-point model): pip install 'mimica[photo]'")
+        raise MimicaError("finding face landmarks automatically needs dlib's 68-point model (the package "
+                          "face-recognition-models), a dependency of mimica that is missing: "
+                          "pip install --force-reinstall mimica")
     return f
 
 

@@ -1,0 +1,7 @@
+"""The jobs a user runs, one function each, over the stages below: what the command line, the
+viewer, the batch runner and the Blender add-on call.  Each job's options are a dataclass that
+holds its defaults once; progress is a callback given one line of text; nothing here prints."""
+
+from .blendshapes import BlendshapesOptions, BlendshapesResult, make_blendshapes
+
+__all__ = ["BlendshapesOptions", "BlendshapesResult", "make_blendshapes"]
