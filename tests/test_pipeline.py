@@ -50,3 +50,50 @@ def test_the_command_line_takes_its_blendshapes_defaults_from_the_pipeline():
     given = {"landmarks": a.landmarks, "cut_mouth": a.cut_mouth == "auto", "cut_eyes": a.cut_eyes == "auto",
              "match": a.match, "units": a.units, "quantize": a.quantize}
     assert given == {f.name: getattr(d, f.name) for f in fields(d)}
+
+
+def test_the_batch_takes_its_defaults_from_the_pipeline():
+    from mimica.batch.manifest import KINDS
+    from mimica.pipeline import TransferOptions
+    b, t = BlendshapesOptions(), TransferOptions()
+    auto = {True: "auto", False: "off"}
+    assert KINDS["blendshapes"][1] == {"quantize": b.quantize, "cut_mouth": auto[b.cut_mouth],
+                                       "cut_eyes": auto[b.cut_eyes], "match": b.match}
+    assert KINDS["transfer"][1] == {"method": t.method, "cut_mouth": auto[t.cut_mouth], "cut_eyes": auto[t.cut_eyes],
+                                    "match": t.match}
+
+
+def test_the_command_line_takes_its_transfer_defaults_from_the_pipeline():
+    from dataclasses import fields
+    from mimica.cli import build_parser
+    from mimica.pipeline import TransferOptions
+    a = build_parser().parse_args(["transfer", "s.obj", "e.obj", "--target", "t.obj", "--out", "o"])
+    d = TransferOptions()
+    given = {"method": a.method, "match": a.match, "cut_mouth": a.cut_mouth == "auto", "cut_eyes": a.cut_eyes == "auto"}
+    assert given == {f.name: getattr(d, f.name) for f in fields(d)}
+
+
+def test_a_sequence_from_python_equals_the_command_lines(tmp_path):
+    """transfer_sequence on ICT's own files (a remeshed target would be slow): the results are the
+    command line's, file for file."""
+    from mimica.cli import main
+    from mimica.data import ICTModel, ICT_HEAD_VERTICES
+    from mimica.mesh import read_vertices, write_mesh
+    from mimica.pipeline import transfer_sequence
+    model = ICTModel(ICT_HEAD_VERTICES)
+    S = model.mesh
+    write_mesh(tmp_path / "S.obj", S)
+    write_mesh(tmp_path / "T.obj", S.with_vertices(model.identity(np.linspace(-1, 1, 20))))
+    exprs = []
+    for name in ("jawOpen", "mouthSmile_L"):
+        write_mesh(tmp_path / f"{name}.obj", S.with_vertices(model.neutral + model.delta({name: 1.0})))
+        exprs.append(tmp_path / f"{name}.obj")
+    r = transfer_sequence(tmp_path / "S.obj", exprs, tmp_path / "T.obj", tmp_path / "py")
+    assert main(["transfer", str(tmp_path / "S.obj"), *map(str, exprs), "--target", str(tmp_path / "T.obj"),
+                 "--out", str(tmp_path / "cli")]) == 0
+    assert [f.name for f in r.files] == ["jawOpen.obj", "mouthSmile_L.obj"]
+    for f in r.files:
+        assert np.array_equal(read_vertices(f), read_vertices(tmp_path / "cli" / f.name))
+    with pytest.raises(MimicaError, match="exists and is not a folder"):
+        (tmp_path / "file").write_text("x")
+        transfer_sequence(tmp_path / "S.obj", exprs, tmp_path / "T.obj", tmp_path / "file")

@@ -37,12 +37,11 @@ def _muscle_bar(desc):
 def _landmarks(mesh, path, flag, what):
     """A face's landmarks (landmarks_for); where none are found, the flag that gives them."""
     from .landmarks import landmarks_for
+    from .errors import NeedsLandmarks
     try:
         return landmarks_for(mesh, path, what)
-    except MimicaError as e:
-        if path is None:
-            raise MimicaError(f"{e}; pass it with {flag} FILE") from None
-        raise
+    except NeedsLandmarks as e:
+        raise MimicaError(f"{e}; pass it with {flag} FILE") from None
 
 
 QUANTIZE_HELP = ("glTF: morph targets as 16-bit moves and 8-bit normal changes (KHR_mesh_quantization, "
@@ -231,74 +230,33 @@ def _expand_frames(items):
     return out
 
 
-def read_frames(paths, source):
-    """Read expression meshes of the source's topology, (F, n, 3)."""
-    from .mesh import read_vertices
-    frames = np.empty((len(paths), source.n_vertices, 3))
-    for i, p in enumerate(_progress(paths, len(paths), "reading")):
-        v = read_vertices(p)
-        if len(v) != source.n_vertices:
-            raise MimicaError(f"{p}: has {len(v)} vertices but the source neutral has "
-                              f"{source.n_vertices}; an expression must share the neutral's topology")
-        frames[i] = v
-    return frames
-
-
 def cmd_transfer(a):
-    from .mesh import read_mesh, write_mesh
-    from .transfer import BASIS_FRAMES, ExpressionTransfer, static_vertices
-
-    t0 = time.perf_counter()
-    source = read_mesh(a.source_neutral)
-    target = _read_head(a.target)
-    paths = _expand_frames(a.source_expr)
-    names = [p.name for p in paths]
-    dup = {n for n in names if names.count(n) > 1}
-    if dup:
-        raise MimicaError(f"{sorted(dup)[0]}: two source expressions share this file name; "
-                          "outputs would overwrite each other")
-    frames = read_frames(paths, source)
-    same = source.same_topology(target)
-    ls = lt = None
-    if not same or a.source_landmarks or a.target_landmarks:
-        ls = _landmarks(source, a.source_landmarks, "--source-landmarks", str(a.source_neutral))
-        lt = _landmarks(target, a.target_landmarks, "--target-landmarks", str(a.target))
-    t1 = time.perf_counter()
-    xfer = ExpressionTransfer(source, target, ls, lt, method=a.method,
-                              static=static_vertices(source.vertices, frames), cut_mouth=a.cut_mouth == "auto",
-                              cut_eyes=a.cut_eyes == "auto",
-                              match=a.match)
-    t2 = time.perf_counter()
+    from .errors import NeedsLandmarks
+    from .mesh.io import GltfLayout
+    from .pipeline import TransferOptions, transfer_sequence
+    opts = TransferOptions(method=a.method, match=a.match, cut_mouth=a.cut_mouth == "auto",
+                           cut_eyes=a.cut_eyes == "auto")
+    try:
+        r = transfer_sequence(a.source_neutral, _expand_frames(a.source_expr), a.target, a.out, opts,
+                              a.source_landmarks, a.target_landmarks, progress=_say)
+    except NeedsLandmarks as e:
+        raise MimicaError(f"{e}; pass it with --{e.which}-landmarks FILE") from None
+    xfer, sec, n = r.transfer, r.seconds, len(r.files)
     if xfer.mouth is not None:
         _say(f"{a.target}: the lips were sealed; cut apart along {len(xfer.mouth.seam)} vertices, "
              f"{len(xfer.mouth.copies_of)} added after the target's own (--cut-mouth off to keep them sealed)")
     _say_uncut_mouth(xfer, a.target, "--target-landmarks")
-    _warn_sealed_eyes(xfer, target, lt, a.target,
-                      found_flag=None if a.target_landmarks else "--target-landmarks")
-    target = xfer.output_mesh
-    if len(frames) >= BASIS_FRAMES:                    # a long sequence: through its basis, if it holds
-        out = xfer.apply(frames, basis=True)
-        r = xfer.basis_report
-        _say(f"{len(frames)} frames through a basis of their motion ({r['deviation']:.1e} of the motion "
-             f"off on {r['checked']} frames solved one by one)" if r["used"] else
-             f"{len(frames)} frames one by one: {r['why']}")
-    else:
-        out = np.empty((len(frames), target.n_vertices, 3))
-        step = 32
-        for i in _progress(range(0, len(frames), step), (len(frames) + step - 1) // step, "transferring"):
-            out[i:i + step] = xfer.apply(frames[i:i + step])
-    t3 = time.perf_counter()
-    outdir = Path(a.out)
-    from .outputs import staged_dir
-    from .mesh.io import GltfLayout
-    if isinstance(target.layout, GltfLayout):          # each result back in the target's own file
-        suffix = Path(a.target).suffix.lower()
-        names = [str(Path(nm).with_suffix(suffix)) for nm in names]
+    _warn_sealed_eyes(xfer, r.target, r.target_landmarks, a.target,
+                      found_flag="--target-landmarks" if r.target_landmarks_found else None)
+    rep = xfer.basis_report
+    if rep["used"]:
+        _say(f"{n} frames through a basis of their motion ({rep['deviation']:.1e} of the motion off on "
+             f"{rep['checked']} frames solved one by one)")
+    elif "why" in rep and rep["why"] != "frame by frame":
+        _say(f"{n} frames one by one: {rep['why']}")
+    if isinstance(r.target.layout, GltfLayout):
         _say(f"results written as {Path(a.target).name} with the expression: its nodes, materials and vertex "
-             f"layout ({suffix})")
-    with staged_dir(outdir, {"command": "transfer"}) as d:
-        for name, v in zip(names, out):
-            write_mesh(d / name, target.with_vertices(v))
+             f"layout ({Path(a.target).suffix.lower()})")
     if a.show:                                         # after the results: a failed run leaves none
         from .render import save_png
         from .render.diagnose import transfer_picture
@@ -309,8 +267,8 @@ def cmd_transfer(a):
     if xfer.parts is not None:
         _say(f"parts: source {xfer.parts[0].summary()}; target {xfer.parts[1].summary()} (skin to skin; "
              "eyeballs and teeth rigid, lashes and shells with the skin)")
-    _say(f"{len(frames)} expression(s) -> {outdir}/ ({a.method}; read {t1 - t0:.2f}s, "
-         f"precompute {t2 - t1:.2f}s, transfer {t3 - t2:.2f}s = {len(frames) / max(t3 - t2, 1e-9):.0f} frames/s)")
+    _say(f"{n} expression(s) -> {r.out}/ ({a.method}; read {sec['read']:.2f}s, precompute {sec['precompute']:.2f}s, "
+         f"transfer {sec['transfer']:.2f}s = {n / max(sec['transfer'], 1e-9):.0f} frames/s)")
     return 0
 
 

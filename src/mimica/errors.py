@@ -6,3 +6,13 @@ class MimicaError(Exception):
 
     The command line prints it on one line and exits non-zero, without a traceback.
     """
+
+
+class NeedsLandmarks(MimicaError):
+    """A MimicaError for a mesh whose landmarks were neither given nor found: `which` says which
+    of a job's meshes ("source", "target", "head"), so that a front end can name its own way of
+    giving them."""
+
+    def __init__(self, message: str, which: str = "head"):
+        super().__init__(message)
+        self.which = which

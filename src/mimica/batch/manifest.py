@@ -40,11 +40,21 @@ from pathlib import Path
 
 from ..errors import MimicaError
 from ..mesh import MESH_SUFFIXES
+from ..pipeline import BlendshapesOptions, TransferOptions
 
-# job kind -> (what it runs on, the options it takes with their defaults)
+
+
+def _auto(on: bool) -> str:
+    return "auto" if on else "off"
+
+
+_B, _T = BlendshapesOptions(), TransferOptions()
+# job kind -> (what it runs on, the options it takes with their defaults: the pipeline's own)
 KINDS = {
-    "blendshapes": ("head", {"quantize": False, "cut_mouth": "auto", "match": "nicp"}),
-    "transfer": ("frames", {"method": "vtc", "cut_mouth": "auto", "match": "nicp"}),
+    "blendshapes": ("head", {"quantize": _B.quantize, "cut_mouth": _auto(_B.cut_mouth), "cut_eyes": _auto(_B.cut_eyes),
+                             "match": _B.match}),
+    "transfer": ("frames", {"method": _T.method, "cut_mouth": _auto(_T.cut_mouth), "cut_eyes": _auto(_T.cut_eyes),
+                            "match": _T.match}),
     "animate": ("arkit", {"head_rotation": False}),
     "simulate": ("timeline", {"muscles": "kim", "fps": 30.0}),
     "age": ("head", {"ages": [25, 45, 65, 85], "expression": "happiness", "size": 360}),

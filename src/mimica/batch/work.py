@@ -132,19 +132,25 @@ def _with_landmarks(args, lm):
 
 
 def _blendshapes(job, root, out, inputs, said):
+    from ..pipeline import BlendshapesOptions, make_blendshapes
     o = job.options
-    args = ["blendshapes", job.head.mesh, "--out", out, "--cut-mouth", o["cut_mouth"], "--match", o["match"]]
-    _cli(_with_landmarks(args, _landmark_file(job, root)) + (["--quantize"] if o["quantize"] else []), said)
+    opts = BlendshapesOptions(landmarks=_landmark_file(job, root), cut_mouth=o["cut_mouth"] == "auto",
+                              cut_eyes=o["cut_eyes"] == "auto", match=o["match"], quantize=o["quantize"])
+    mesh, _ = _head_mesh(job)
+    r = make_blendshapes(mesh, out, opts, progress=said.append)
+    said.append(f"{out}: 52 ARKit morph targets on {r.shapes.mesh.n_vertices} vertices")
 
 
 def _transfer(job, root, out, inputs, said):
     """Song et al.'s transfer of a performance's frames onto the head; the (neutral, head) pair's
     ExpressionTransfer built once per worker and reused by every performance it fits."""
     from ..landmarks import landmarks_for
-    from ..mesh import read_mesh, read_vertices, write_mesh
-    from ..outputs import staged_dir
-    from ..transfer import ExpressionTransfer, static_vertices
+    from ..mesh import read_mesh
+    from ..pipeline import TransferOptions, prepare_transfer, read_sequence, result_names, write_results
+    from ..transfer import static_vertices
     o = job.options
+    opts = TransferOptions(method=o["method"], match=o["match"], cut_mouth=o["cut_mouth"] == "auto",
+                           cut_eyes=o["cut_eyes"] == "auto")
     perf = job.performance
     nk = _hashes.of(perf.files["neutral"])
     if nk not in _meshes:
@@ -155,32 +161,21 @@ def _transfer(job, root, out, inputs, said):
     if fk not in _frames:
         if len(_frames) > 4:
             _frames.pop(next(iter(_frames)))
-        frames = np.empty((len(files), source.n_vertices, 3))
-        for i, f in enumerate(files):
-            v = read_vertices(f)
-            if len(v) != source.n_vertices:
-                raise MimicaError(f"{f}: has {len(v)} vertices but the performance's neutral has "
-                                  f"{source.n_vertices}; an expression must share the neutral's topology")
-            frames[i] = v
-        _frames[fk] = frames
+        _frames[fk] = read_sequence(files, source)
     frames = _frames[fk]
     target, hk = _head_mesh(job)
     static = static_vertices(source.vertices, frames)
-    key = (nk, hk, str(job.head.landmarks), o["method"], o["cut_mouth"], o["match"],
-           hashlib.sha1(np.packbits(static).tobytes()).hexdigest())
+    key = (nk, hk, str(job.head.landmarks), opts, hashlib.sha1(np.packbits(static).tobytes()).hexdigest())
     xfer = _transfers.get(key)
     if xfer is None:
-        same = source.same_topology(target)
         ls = lt = None
-        if not same or job.head.landmarks is not None:
+        if not source.same_topology(target) or job.head.landmarks is not None:
             if nk not in _source_landmarks:
                 _source_landmarks[nk] = landmarks_for(source, None, f"performance {perf.name}'s neutral "
                                                                     f"({perf.files['neutral']})")
             ls = _source_landmarks[nk]
-            lf = _landmark_file(job, root)
-            lt = landmarks_for(target, lf, f"head {job.head.name} ({job.head.mesh})")
-        xfer = ExpressionTransfer(source, target, ls, lt, method=o["method"], static=static,
-                                  cut_mouth=o["cut_mouth"] == "auto", match=o["match"])
+            lt = landmarks_for(target, _landmark_file(job, root), f"head {job.head.name} ({job.head.mesh})")
+        xfer, _, _ = prepare_transfer(source, target, frames, opts, ls, lt)
         if len(_transfers) >= CACHE_TRANSFERS:
             _transfers.pop(next(iter(_transfers)))
         _transfers[key] = xfer
@@ -188,10 +183,8 @@ def _transfer(job, root, out, inputs, said):
     else:
         said.append(f"{job.head.name}: correspondence and factorization reused")
     result = xfer.apply(frames)
-    mesh = xfer.output_mesh
-    with staged_dir(out, {"command": "batch transfer", "job": job.id}) as d:
-        for f, v in zip(files, result):
-            write_mesh(d / f.name, mesh.with_vertices(v))
+    names = result_names([f.name for f in files], target, job.head.mesh)
+    write_results(out, names, xfer.output_mesh, result, {"command": "batch transfer", "job": job.id})
     said.append(f"{len(files)} frames -> {out}")
 
 

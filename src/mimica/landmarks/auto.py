@@ -4,7 +4,7 @@ renders of the mesh (detect3d)."""
 from __future__ import annotations
 
 from ..data import is_ict_topology
-from ..errors import MimicaError
+from ..errors import MimicaError, NeedsLandmarks
 from ..mesh import Mesh
 from .core import Landmarks, ict_landmarks, read_landmarks
 from .detect3d import detect_mesh
@@ -23,5 +23,5 @@ def landmarks_for(mesh: Mesh, path=None, what="mesh") -> Landmarks:
         return Landmarks.snap(mesh, pts)
     except MimicaError:
         pass
-    raise MimicaError(f"{what}: not an ICT-FaceKit topology and no face was found in its renders; give its "
+    raise NeedsLandmarks(f"{what}: not an ICT-FaceKit topology and no face was found in its renders; give its "
                       f"68 landmarks in a file (JSON: {{\"scheme\": \"ibug68\", \"points\": [[x,y,z], ...]}})")

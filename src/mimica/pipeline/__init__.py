@@ -3,5 +3,8 @@ viewer, the batch runner and the Blender add-on call.  Each job's options are a 
 holds its defaults once; progress is a callback given one line of text; nothing here prints."""
 
 from .blendshapes import BlendshapesOptions, BlendshapesResult, make_blendshapes
+from .transfer import (TransferOptions, TransferResult, prepare_transfer, read_sequence, result_names,
+                       transfer_sequence, write_results)
 
-__all__ = ["BlendshapesOptions", "BlendshapesResult", "make_blendshapes"]
+__all__ = ["BlendshapesOptions", "BlendshapesResult", "make_blendshapes", "TransferOptions", "TransferResult",
+           "prepare_transfer", "read_sequence", "result_names", "transfer_sequence", "write_results"]

@@ -12,7 +12,7 @@ from ..export.blendshapes import Blendshapes, arkit_blendshapes, check_blendshap
 from ..mesh import Mesh
 
 
-@dataclass
+@dataclass(frozen=True)
 class BlendshapesOptions:
     """How `make_blendshapes` works; each default is the one every user of it gets.
 
