@@ -81,10 +81,16 @@ test-lowest:
 	out/venv-lowest/bin/pip install -q -c constraints/lowest.txt ".[test,cholmod]"
 	out/venv-lowest/bin/python -m pytest tests
 
-bench: $(WHEEL_STAMP)
+# every benchmark, one after the other (never while tests run: the timings would mean nothing);
+# each one's output in out/bench/NAME.txt, and at the end each one's line of figures
+BENCHES := $(sort $(wildcard bench/*.py))
+bench: $(WHEEL_STAMP) $(BLENDER_STAMP)
 	$(BIN)/pip install -q -c constraints/ci.txt ".[bench]"
 	$(BIN)/pip install -q --no-deps --force-reinstall dist/mimica-*.whl
-	$(BIN)/python bench/transfer.py
+	@mkdir -p out/bench
+	@for b in $(BENCHES); do n=$$(basename $$b .py); echo "== $$b (out/bench/$$n.txt)"; \
+	  MIMICA_BLENDER_PYTHON=$(CURDIR)/.venv-blender/bin/python $(BIN)/python $$b > out/bench/$$n.txt 2>&1 \
+	    || { tail -20 out/bench/$$n.txt; echo "$$b failed"; exit 1; }; tail -1 out/bench/$$n.txt; done
 
 clean:
 	rm -rf out dist build $(VENV)
