@@ -97,3 +97,31 @@ def test_a_sequence_from_python_equals_the_command_lines(tmp_path):
     with pytest.raises(MimicaError, match="exists and is not a folder"):
         (tmp_path / "file").write_text("x")
         transfer_sequence(tmp_path / "S.obj", exprs, tmp_path / "T.obj", tmp_path / "file")
+
+
+def test_rig_and_simulate_defaults_are_the_pipelines_everywhere():
+    from dataclasses import fields
+    from mimica.batch.manifest import KINDS
+    from mimica.cli import build_parser
+    from mimica.pipeline import RigOptions, SimulateOptions
+    p = build_parser()
+    r = p.parse_args(["rig", "f.obj", "--out", "r.rig"])
+    assert {"muscles": r.muscles, "alpha": r.alpha, "modes": r.modes, "stretch": r.stretch} == \
+        {f.name: getattr(RigOptions(), f.name) for f in fields(RigOptions)}
+    s = p.parse_args(["simulate", "r.rig", "--out", "o"])
+    given = {"expression": s.expression, "timeline": s.timeline, "action": s.action, "duration": s.duration,
+             "fps": s.fps, "gravity": s.gravity, "pulls": tuple(s.pull or ()), "engine": s.engine,
+             "solver": s.solver, "warp": s.warp, "springs": s.springs, "wrinkles": s.wrinkles, "age": s.age,
+             "refine": not s.no_refine, "maps": s.maps, "maps_set": s.maps_set}
+    assert given == {f.name: getattr(SimulateOptions(), f.name) for f in fields(SimulateOptions)}
+    assert KINDS["simulate"][1] == {"muscles": RigOptions().muscles, "fps": SimulateOptions().fps}
+
+
+def test_simulate_refuses_what_its_engine_cannot_do_before_the_work(tmp_path):
+    from mimica.pipeline import SimulateOptions, simulate
+    for o, why in ((SimulateOptions(engine="sprung", gravity=1.0), "shell engine only"),
+                   (SimulateOptions(solver="full", springs="kim"), "full solver simulates the muscles only"),
+                   (SimulateOptions(engine="cloth"), "engine 'cloth'")):
+        with pytest.raises(MimicaError, match=why):
+            simulate(tmp_path / "none.rig", tmp_path / "out", o)
+    assert not (tmp_path / "out").exists()

@@ -56,49 +56,28 @@ MATCH_HELP = ("across topologies, how target vertices find their source partners
 DETECTOR_HELP = ("photos: the 68 points' detector: mediapipe (default: MediaPipe's face mesh at 68 of its points) "
                  "or dlib (its 68-point predictor); compared in docs/benchmarks.md")
 FILE_FORMATS = ("glb", "gltf", "usd", "usda", "usdc")     # --format naming one file's kind
-CLIP_MAX_ERROR_M = 1e-4          # a compact clip's bound: 0.1 mm, in metres
 
 
-def _write_clip(path, rest, names, frames, fps, units="auto", compact=True, binary=True, quantize=False) -> str:
-    """A clip as one GLB: a few basis shapes and per-frame weights where that keeps every
-    vertex within 0.1 mm (export.compact), else one morph target per frame.  Returns what to say."""
-    from .export.compact import compact_clip
-    from .mesh import write_glb
-    from .mesh.io import SPARSE_TOLERANCE, glb_units
-    unit, k = glb_units(rest, units)
-    c = compact_clip(rest.vertices, frames, CLIP_MAX_ERROR_M / k) if compact else None
-    if c is None:
-        info = write_glb(path, rest, dict(zip(names, frames)), binary=binary, fps=fps, units=units,
-                         sparse=SPARSE_TOLERANCE, quantize=quantize)
-        how = f"{len(frames)} frames as morph targets" + (" (no smaller basis within 0.1 mm)" if compact else "")
+def _clip_how(info: dict) -> str:
+    """'120 frames as 9 basis shapes and their weights (largest error ...)'."""
+    n = info["frames"]
+    if info["basis"]:
+        how = (f"{n} frames as {info['shapes']} basis {'blend ' if 'unit' in info else ''}shapes and their weights "
+               f"(largest error {info['max_error_m'] * 1e3:.3f} mm, bound 0.1 mm)")
     else:
-        shapes = {f"basis_{j:02d}": rest.vertices + b for j, b in enumerate(c.basis)}
-        info = write_glb(path, rest, shapes, binary=binary, fps=fps, units=units, weights=c.weights,
-                         extras={"frames": list(names), "maxErrorMetres": c.max_error * k}, quantize=quantize)
-        how = (f"{len(frames)} frames as {len(shapes)} basis shapes and their weights (largest error "
-               f"{c.max_error * k * 1e3:.3f} mm, bound 0.1 mm)")
+        how = f"{n} frames as " + ("blend shapes" if "unit" in info else "morph targets" + (
+            " (no smaller basis within 0.1 mm)" if info.get("compact") else ""))
+    return how
+
+
+def _clip_line(path, rest, info: dict, fps: float, units: str) -> str:
+    """What export.clip.write_clip / write_clip_usd wrote, in one line."""
+    how = _clip_how(info)
+    if "unit" in info:                                 # USD
+        return (f"{how}, a SkelAnimation at {fps:g} fps; units: {info['unit']} (metersPerUnit "
+                f"{info['metres_per_unit']:g}, y up); {info['bytes'] / 1e6:.1f} MB")
     return (f"{how}, one animation at {fps:g} fps; " + _units_line(rest, info["units"], units) + "; "
-            + _quantized_line(info) + f"{Path(path).stat().st_size / 1e6:.1f} MB")
-
-
-def _write_clip_usd(path, rest, names, frames, fps, units="auto", compact=True) -> str:
-    """A clip as USD (UsdSkel): basis shapes and weights as _write_clip makes them, or a blend
-    shape a frame with one weight at 1 in each."""
-    from .export.compact import compact_clip
-    from .export.usd import write_usd
-    from .mesh.io import glb_units
-    unit, k = glb_units(rest, units)
-    c = compact_clip(rest.vertices, frames, CLIP_MAX_ERROR_M / k) if compact else None
-    if c is None:
-        info = write_usd(path, rest, dict(zip(names, frames)), np.eye(len(frames)), fps, units)
-        how = f"{len(frames)} frames as blend shapes"
-    else:
-        info = write_usd(path, rest, {f"basis_{j:02d}": rest.vertices + b for j, b in enumerate(c.basis)},
-                         c.weights, fps, units)
-        how = (f"{len(frames)} frames as {info['shapes']} basis blend shapes and their weights (largest error "
-               f"{c.max_error * k * 1e3:.3f} mm, bound 0.1 mm)")
-    return (f"{how}, a SkelAnimation at {fps:g} fps; units: {unit} (metersPerUnit {k:g}, y up); "
-            f"{Path(path).stat().st_size / 1e6:.1f} MB")
+            + _quantized_line(info) + f"{info['bytes'] / 1e6:.1f} MB")
 
 
 def _floats(text: str, n: int, flag: str) -> list[float]:
@@ -314,21 +293,16 @@ def cmd_error(a):
 
 def cmd_rig(a):
     from .mesh import read_mesh
-    from .physics import precompute
-    from .rig import build_rig
+    from .pipeline import RigOptions, make_rig
     t0 = time.perf_counter()
+    opts = RigOptions(muscles=a.muscles, alpha=a.alpha, modes=a.modes, stretch=a.stretch)
     skin = read_mesh(a.face)
-    lm = _landmarks(skin, a.landmarks, "--landmarks", str(a.face)).positions(skin)
-    rig = build_rig(skin, lm, muscles=a.muscles, alpha=a.alpha, modes=a.modes)
-    if a.stretch == "shell":
-        from .physics.face import shell_stretch_modes
-        shell_stretch_modes(rig)
+    lm = _landmarks(skin, a.landmarks, "--landmarks", str(a.face))
     with _muscle_bar("muscles") as progress:
-        precompute(rig, progress=progress)
-    rig.save(a.out)
+        rig = make_rig(skin, lm, opts, out=a.out, progress=progress)
     drives = sum(m.kind == "drive" for m in rig.muscles)
     _say(f"rig: {len(rig.muscles) - drives} muscles" + (f" and {drives} drives (jaw, lids, cheeks)" if drives else "")
-         + f" on {skin.n_vertices} skin nodes -> {a.out} ({time.perf_counter() - t0:.1f}s)")
+         + f" on {rig.skin.n_vertices} skin nodes -> {a.out} ({time.perf_counter() - t0:.1f}s)")
     return 0
 
 
@@ -422,130 +396,37 @@ def _rig_arkit_shapes(path: Path, rig):
 
 
 def cmd_simulate(a):
-    from .wrinkles import mask_on
-    from .anim import Timeline
-    from .physics.face import FaceSimulator
-    from .rig import Rig
-    tl_file = Timeline.load(a.timeline) if a.timeline else None        # files checked before the work
-    rig = Rig.load(a.rig)
-    names = [m.name for m in rig.muscles]
-    mask = None
-    if a.wrinkles:                                      # the mask checked on this face before the work
-        if a.maps and rig.skin.uv is None:
-            raise MimicaError(f"--maps: the rig's skin has no texture coordinates ({a.rig}); rebuild the rig "
-                              "from a mesh with uv")
-        mask = mask_on(a.wrinkles, rig.skin, a.rig)
-    if a.action:
-        duration = a.duration or 2.0
-        tl = Timeline.action(a.action, names, duration)
-    elif a.timeline:
-        tl = tl_file
-        unknown = sorted(set(tl.channels) - set(names) - {"age", "gravity", "pull"})
-        if unknown:
-            raise MimicaError(f"{a.timeline}: channel {unknown[0]!r} is not a muscle of {a.rig} "
-                              f"(muscles: {', '.join(names)})")
-        duration = a.duration or tl.duration
-    else:
-        tl = Timeline.preset(a.expression, names, duration=a.duration or 2.0)
-        duration = a.duration or 2.0
-    if a.engine == "sprung":
-        from .physics.sprung import SprungFace
-        sim = SprungFace(rig, fps=a.fps)
-        if a.gravity or a.pull or a.solver == "full" or a.springs != "linear":
-            raise MimicaError("--gravity, --pull, --springs and --solver full work with --engine shell only")
-    elif a.solver == "full":
-        from .physics.fullface import FullFaceSimulator
-        if a.gravity or a.pull or a.warp is not None or a.springs != "linear" or {"gravity", "pull"} & set(tl.channels):
-            raise MimicaError("--solver full simulates the muscles only; --gravity, --pull, --warp and "
-                              "--springs work with the modal solver")
-        sim = FullFaceSimulator(rig, fps=a.fps)
-    else:
-        sim = FaceSimulator(rig, fps=a.fps, warp=a.warp, springs=a.springs)
-        if a.gravity or "gravity" in tl.channels:
-            sim.set_gravity(np.array([0.0, -(a.gravity or 1.0), 0.0]))
-        for spec in a.pull or []:
-            center, radius, force = _parse_pull(spec)
-            sim.add_pull(center, radius, force)
-    bar = _progress(range(1), int(duration * a.fps) + 1, "simulating")
-    t0 = time.perf_counter()
-    run_kw = {}
-    if a.engine == "shell" and ({"gravity", "pull"} & set(tl.channels)):
-        def scales(t):
-            g = float(tl.channels["gravity"](t)) if "gravity" in tl.channels else 1.0
-            p = float(tl.channels["pull"](t)) if "pull" in tl.channels else 1.0
-            return g, p
-        run_kw["scales_at"] = scales
-    frames = sim.run(lambda t: tl.values(t, names), duration, progress=lambda f, n: bar.update(1), **run_kw)
+    from .pipeline import SimulateOptions, simulate
+    opts = SimulateOptions(expression=a.expression, timeline=a.timeline, action=a.action, duration=a.duration,
+                           fps=a.fps, gravity=a.gravity, pulls=tuple(_parse_pull(p) for p in a.pull or []),
+                           engine=a.engine, solver=a.solver, warp=a.warp, springs=a.springs, wrinkles=a.wrinkles,
+                           age=a.age, refine=not a.no_refine, maps=a.maps, maps_set=a.maps_set)
+    if a.maps and not a.wrinkles:
+        raise MimicaError("--maps: the maps are the wrinkles'; give the wrinkle mask (--wrinkles MASK)")
+    bar = _progress(range(1), None, "simulating")
+    r = simulate(a.rig, a.out, opts, progress=lambda f, n: (setattr(bar, "total", n), bar.update(1)))
     bar.close()
-    el = time.perf_counter() - t0
-    out = Path(a.out)
-    from .outputs import staged_dir
-    with staged_dir(out, {"command": "simulate"}) as d:
-        note = _write_simulation(a, rig, tl, sim, frames, d, out, mask)
-    steps = (len(frames) - 1) * sim.substeps
-    _say(f"{len(frames)} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {steps} steps in {el:.2f}s"
-         + note)
-    return 0
-
-
-def _write_simulation(a, rig, tl, sim, frames, d, out, mask=None):
-    """frame_*.obj, animation.glb, strip.png (and the wrinkle maps) into the stage `d`."""
-    from .mesh import write_mesh
-    from .render import contact_sheet, render_mesh, save_png, shared_frame
-    skin = rig.skin
+    out = r.out
     note = ""
-    if a.wrinkles:
-        frames, skin, note = _wrinkle_frames(a, rig, tl, frames, d, out, mask)
-    for i, v in enumerate(frames):
-        write_mesh(d / f"frame_{i:04d}.obj", skin.with_vertices(v))
-    clip = _write_clip(d / "animation.glb", skin, [f"frame_{i:04d}" for i in range(len(frames))], np.asarray(frames),
-                       a.fps)
-    note += "; animation.glb: " + clip.split(", one animation")[0]
-    title = a.action or (Path(a.timeline).name if a.timeline else a.expression)
-    solver_note = ", full solver" if a.solver == "full" else ""
-    if a.wrinkles:
-        title += f", wrinkles, age {a.age:g}" if "age" not in tl.channels else ", wrinkles, age curve"
-    pick = np.linspace(0, len(frames) - 1, min(6, len(frames))).round().astype(int)
-    frame = shared_frame([frames[i] for i in pick])
-    tiles = [render_mesh(skin, frames[i], size=(320, 320), frame=frame) for i in pick]
-    save_png(d / "strip.png", contact_sheet(tiles, [f"t = {i / a.fps:.2f}s" for i in pick],
-                                            title=f"{title} ({a.engine}{solver_note})"))
-    if a.solver == "full":
-        st = sim.solver.stats
+    if r.wrinkles is not None:
+        w = r.wrinkles
+        most = np.argsort(w["compression"])[:3]
+        maps = {"engine": f"; engine maps of {w['regions']} regions (normal, displacement, mask, per-frame weights) "
+                          f"-> {out}/wrinkle_maps/",
+                "frames": f"; maps of every frame -> {out}/wrinkles_frame_*",
+                "peak": f"; maps of that frame -> {out}/wrinkles_frame_{w['peak']:04d}_*", None: ""}[w["maps"]]
+        note += (f"; wrinkles: {len(w['names'])} on {w['nodes']} nodes (built in {w['build_s']:.1f}s), "
+                 f"{1000 * w['frame_s']:.2f} ms/frame; most compressed at t={w['peak'] / a.fps:.2f}s: "
+                 + ", ".join(f"{w['names'][i]} {w['compression'][i]:.2f}" for i in most) + maps)
+    note += "; animation.glb: " + _clip_how(r.clip)
+    if r.newton is not None:
+        st = r.newton
         note += f"; Newton: {st['iterations'] / max(st['steps'], 1):.1f} iterations a step"
         if st["unconverged"]:
             note += f", {st['unconverged']} steps stopped at the iteration cap"
-    return note
-
-
-def _wrinkle_frames(a, rig, tl, frames, d, out, mask):
-    """The wrinkle layer on the frames, the maps of the most compressed one, and a note."""
-    from .wrinkles import wrinkle_frames
-    ages = tl.channels["age"](np.arange(len(frames)) / a.fps) if "age" in tl.channels else a.age
-    names = [m.name for m in rig.muscles]
-    # each wrinkle deepened by the muscles its mask names, at their activations frame by frame
-    acts = [dict(zip(names, tl.values(f / a.fps, names))) for f in range(len(frames))]
-    w = wrinkle_frames(rig.skin, mask, frames, ages, refine=not a.no_refine, activations=acts)
-    peak = w.peak
-    maps_line = ""
-    if a.maps and a.maps_set == "engine":
-        from .wrinkles.maps import engine_maps
-        regions = engine_maps(w.skin.layer, rig.skin, w.carried, w.ages, w.emphasis, a.maps, d / "wrinkle_maps")
-        maps_line = (f"; engine maps of {len(regions)} regions (normal, displacement, mask, per-frame weights) -> "
-                     f"{out}/wrinkle_maps/")
-    elif a.maps:
-        from .wrinkles.maps import bake, save_maps
-        for f in range(len(frames)) if a.maps_set == "frames" else [peak]:
-            h, n = bake(w.skin.layer, rig.skin, w.carried[f], float(w.ages[f]), a.maps, w.emphasis[f])
-            save_maps(d / f"wrinkles_frame_{f:04d}", h, n)
-        maps_line = (f"; maps of every frame -> {out}/wrinkles_frame_*" if a.maps_set == "frames" else
-                     f"; maps of that frame -> {out}/wrinkles_frame_{peak:04d}_*")
-    most = np.argsort(w.compression[peak])[:3]
-    wn = w.skin.layer.mask.names()
-    note = (f"; wrinkles: {len(wn)} on {w.skin.mesh.n_vertices} nodes (built in {w.build_s:.1f}s), "
-            f"{1000 * w.frame_s:.2f} ms/frame; most compressed at t={peak / a.fps:.2f}s: "
-            + ", ".join(f"{wn[i]} {w.compression[peak, i]:.2f}" for i in most) + maps_line)
-    return w.frames, w.skin.mesh, note
+    _say(f"{r.frames} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {r.steps} steps in {r.seconds:.2f}s"
+         + note)
+    return 0
 
 
 def cmd_wrinkle_mask(a):
@@ -901,14 +782,16 @@ def cmd_export(a):
         if base.n_vertices != mesh.n_vertices:
             raise MimicaError(f"{a.rest}: not the sequence's topology")
     if suf in (".usd", ".usda", ".usdc"):
-        _say(f"{out}: " + _write_clip_usd(out, base, [p.stem for p in paths], np.stack(frames), a.fps, a.units,
-                                          a.compact == "auto"))
+        from .export.clip import write_clip_usd
+        info = write_clip_usd(out, base, [p.stem for p in paths], np.stack(frames), a.fps, a.units, a.compact == "auto")
+        _say(f"{out}: " + _clip_line(out, base, info, a.fps, a.units))
         return 0
     if suf in (".glb", ".gltf"):
+        from .export.clip import write_clip
         with atomic_path(out) as tmp:
-            line = _write_clip(tmp, base, [p.stem for p in paths], np.stack(frames), a.fps, a.units,
-                               a.compact == "auto", binary=suf == ".glb", quantize=a.quantize)
-        _say(f"{out}: {line}")
+            info = write_clip(tmp, base, [p.stem for p in paths], np.stack(frames), a.fps, a.units,
+                              a.compact == "auto", binary=suf == ".glb", quantize=a.quantize)
+        _say(f"{out}: " + _clip_line(out, base, info, a.fps, a.units))
         return 0
     if suf:
         raise MimicaError(f"{out}: export to .glb/.gltf, .usd/.usda/.usdc, or to a folder (with --format obj|ply)")

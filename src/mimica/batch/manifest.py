@@ -40,7 +40,7 @@ from pathlib import Path
 
 from ..errors import MimicaError
 from ..mesh import MESH_SUFFIXES
-from ..pipeline import BlendshapesOptions, TransferOptions
+from ..pipeline import BlendshapesOptions, RigOptions, SimulateOptions, TransferOptions
 
 
 
@@ -48,7 +48,7 @@ def _auto(on: bool) -> str:
     return "auto" if on else "off"
 
 
-_B, _T = BlendshapesOptions(), TransferOptions()
+_B, _T, _R, _S = BlendshapesOptions(), TransferOptions(), RigOptions(), SimulateOptions()
 # job kind -> (what it runs on, the options it takes with their defaults: the pipeline's own)
 KINDS = {
     "blendshapes": ("head", {"quantize": _B.quantize, "cut_mouth": _auto(_B.cut_mouth), "cut_eyes": _auto(_B.cut_eyes),
@@ -56,7 +56,7 @@ KINDS = {
     "transfer": ("frames", {"method": _T.method, "cut_mouth": _auto(_T.cut_mouth), "cut_eyes": _auto(_T.cut_eyes),
                             "match": _T.match}),
     "animate": ("arkit", {"head_rotation": False}),
-    "simulate": ("timeline", {"muscles": "kim", "fps": 30.0}),
+    "simulate": ("timeline", {"muscles": _R.muscles, "fps": _S.fps}),
     "age": ("head", {"ages": [25, 45, 65, 85], "expression": "happiness", "size": 360}),
     "render": ("from", {"view": "all", "size": 512}),
     "export": ("from", {"fps": 30.0, "format": "glb"}),

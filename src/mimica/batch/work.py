@@ -194,13 +194,15 @@ def _animate(job, root, out, inputs, said):
 
 
 def _simulate(job, root, out, inputs, said):
+    from ..pipeline import RigOptions, SimulateOptions, make_rig, simulate
     o = job.options
-    _, hk = _head_mesh(job)
+    mesh, hk = _head_mesh(job)
     rig = root / ".batch" / "cache" / f"{hk[:24]}-{o['muscles']}.rig"
     if not rig.is_file():                         # one rig per head and muscle set
-        _cli(_with_landmarks(["rig", job.head.mesh, "--muscles", o["muscles"], "--out", rig],
-                             _landmark_file(job, root)), said)
-    _cli(["simulate", rig, "--timeline", job.performance.files["timeline"], "--fps", o["fps"], "--out", out], said)
+        make_rig(mesh, _landmark_file(job, root), RigOptions(muscles=o["muscles"]), out=rig)   # saved whole
+        said.append(f"rig ({o['muscles']}) made for {job.head.name}")
+    r = simulate(rig, out, SimulateOptions(timeline=job.performance.files["timeline"], fps=o["fps"]))
+    said.append(f"{r.frames} frames -> {out}")
 
 
 def _age(job, root, out, inputs, said):

@@ -3,8 +3,10 @@ viewer, the batch runner and the Blender add-on call.  Each job's options are a 
 holds its defaults once; progress is a callback given one line of text; nothing here prints."""
 
 from .blendshapes import BlendshapesOptions, BlendshapesResult, make_blendshapes
+from .rig import RigOptions, make_rig
+from .simulate import SimulateOptions, SimulateResult, simulate
 from .transfer import (TransferOptions, TransferResult, prepare_transfer, read_sequence, result_names,
                        transfer_sequence, write_results)
 
 __all__ = ["BlendshapesOptions", "BlendshapesResult", "make_blendshapes", "TransferOptions", "TransferResult",
-           "prepare_transfer", "read_sequence", "result_names", "transfer_sequence", "write_results"]
+           "RigOptions", "make_rig", "SimulateOptions", "SimulateResult", "simulate", "prepare_transfer", "read_sequence", "result_names", "transfer_sequence", "write_results"]
