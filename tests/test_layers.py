@@ -173,3 +173,35 @@ print(json.dumps({{"same": [a == b for a, b in zip(before, after)], "mallopt": d
     assert r.returncode == 0, r.stderr[-2000:]
     got = json.loads(r.stdout.strip().splitlines()[-1])
     assert got == {"same": [True] * 6, "mallopt": False, "advice": False}, got
+
+
+# the package's own child processes, each with its reason: the Blender add-on runs inside Blender,
+# whose Python cannot import mimica (numpy < 2), so it calls the `mimica` command; FBX is read and
+# written by Blender's own importer and exporter, in Blender's Python
+CHILD_PROCESSES = {"mimica.blender_addon", "mimica.mesh.io.fbx"}
+
+
+# the command line starts the other front ends (`mimica batch`, `mimica view`, `mimica demo`):
+# the one way between users, and never the other way
+LAUNCHES = {"cli": {"batch", "viewer", "demo"}}
+
+
+def test_no_user_calls_another_and_nothing_runs_mimica_in_a_child():
+    """The users of the pipeline (the CLI, batch, viewer, add-on, demo) do not import each other
+    (but the command line starts the others), and no module but those named (with their reason)
+    runs a command in a child process (the batch's pool workers run the pipeline in-process)."""
+    g = graph()
+    users = {u for u in USERS if u}
+    for v, deps in g.items():
+        if stage(v) in users:
+            wrong = sorted(d for d in deps if stage(d) in users and stage(d) != stage(v)
+                           and stage(d) not in LAUNCHES.get(stage(v), ()))
+            assert not wrong, f"{v} imports another user of the pipeline: {wrong}"
+    spawning = set()
+    for name, path in modules().items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        names = {a.name for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom)) for a in n.names}
+        mods = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+        if "subprocess" in names or "subprocess" in mods:          # a pool's workers run library code
+            spawning.add(name)
+    assert spawning <= CHILD_PROCESSES, f"modules that start processes: {sorted(spawning - CHILD_PROCESSES)}"

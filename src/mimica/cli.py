@@ -70,13 +70,13 @@ def _clip_how(info: dict) -> str:
     return how
 
 
-def _clip_line(path, rest, info: dict, fps: float, units: str) -> str:
+def _clip_line(info: dict, fps: float, units: str) -> str:
     """What export.clip.write_clip / write_clip_usd wrote, in one line."""
     how = _clip_how(info)
     if "unit" in info:                                 # USD
         return (f"{how}, a SkelAnimation at {fps:g} fps; units: {info['unit']} (metersPerUnit "
                 f"{info['metres_per_unit']:g}, y up); {info['bytes'] / 1e6:.1f} MB")
-    return (f"{how}, one animation at {fps:g} fps; " + _units_line(rest, info["units"], units) + "; "
+    return (f"{how}, one animation at {fps:g} fps; " + _units_line(info["height"], info["units"], units) + "; "
             + _quantized_line(info) + f"{info['bytes'] / 1e6:.1f} MB")
 
 
@@ -105,9 +105,9 @@ def _quantized_line(info: dict) -> str:
             if info.get("quantized") else "")
 
 
-def _units_line(mesh, unit: str, asked: str) -> str:
+def _units_line(height: float, unit: str, asked: str) -> str:
     """'units: cm (the head is 33.4 units tall; --units to say otherwise), written in metres'."""
-    how = (f"the head is {float(np.ptp(mesh.vertices[:, 1])):.3g} units tall; --units to say otherwise"
+    how = (f"the head is {height:.3g} units tall; --units to say otherwise"
            if asked == "auto" else "as --units says")
     return f"units: {unit} ({how}), written in metres as glTF wants"
 
@@ -447,18 +447,12 @@ def cmd_wrinkle_mask(a):
 
 
 def cmd_age(a):
-    from .wrinkles import mask_for, mask_on
-    from .anim import Timeline
     from .mesh import read_mesh
-    from .physics.face import FaceSimulator
-    from .render import contact_sheet, face_framing, render_mesh, save_png
-    from .physics import precompute
-    from .rig import Rig, build_rig
-    from .wrinkles import WrinkledSkin
+    from .pipeline import AgeOptions, age_sheet
     try:
-        ages = [float(x) for x in a.ages.split(",")]
+        ages = tuple(float(x) for x in a.ages.split(","))
     except ValueError:
-        ages = []
+        ages = ()
     if not ages or not all(0 <= x <= 150 for x in ages):                 # NaN fails too
         raise MimicaError(f"--ages {a.ages!r}: expected ages in years from 0 to 150, e.g. 25,45,65,85")
     if not str(a.out).lower().endswith(".png"):
@@ -467,34 +461,12 @@ def cmd_age(a):
     if a.expression not in PRESETS:
         raise MimicaError(f"--expression {a.expression!r}: one of {', '.join(PRESETS)}")
     face = read_mesh(a.face)
-    lm = _landmarks(face, a.landmarks, "--landmarks", str(a.face)).positions(face)
+    lm = _landmarks(face, a.landmarks, "--landmarks", str(a.face))
     t0 = time.perf_counter()
-    if a.rig:
-        rig = Rig.load(a.rig)
-        if rig.skin.n_vertices != face.n_vertices:
-            raise MimicaError(f"{a.rig}: the rig's skin has {rig.skin.n_vertices} nodes, {a.face} has "
-                              f"{face.n_vertices}; build the rig from this face")
-    else:
-        rig = build_rig(face, lm, muscles="all")
-        with _muscle_bar("rig (all muscles)") as progress:
-            precompute(rig, progress=progress)
-    names = [m.name for m in rig.muscles]
-    tl = Timeline.preset(a.expression, names, duration=1.2)
-    expr = FaceSimulator(rig).run(lambda t: tl.values(t, names), 1.2)[-1]
-    if a.wrinkles:
-        mask = mask_on(a.wrinkles, face, a.face)
-    else:
-        mask, _ = mask_for(face, lm)
-    ws = WrinkledSkin.build(face, mask)
-    frame = face_framing(lm)
-    tiles, labels = [], []
-    for name, X in (("neutral", face.vertices), (a.expression, expr)):
-        for g in ages:
-            tiles.append(render_mesh(ws.mesh, ws.frame(X, g), size=(a.size, a.size), frame=frame))
-            labels.append(f"{name}, age {g:g}")
-    save_png(a.out, contact_sheet(tiles, labels, columns=len(ages),
-                                  title=f"{Path(a.face).name}: wrinkles by age (Viaud & Yahia 1992)"))
-    _say(f"{len(tiles)} renders -> {a.out} ({time.perf_counter() - t0:.1f}s)")
+    opts = AgeOptions(ages=ages, expression=a.expression, size=a.size, rig=a.rig, wrinkles=a.wrinkles)
+    with _muscle_bar("rig (all muscles)") as progress:
+        n = age_sheet(face, a.out, lm, opts, progress=progress)
+    _say(f"{n} renders -> {a.out} ({time.perf_counter() - t0:.1f}s)")
     return 0
 
 
@@ -672,230 +644,71 @@ def _draw_points(img, xy):
     return np.asarray(im)
 
 
-def _read_values(path, n, what="--heatmap"):
-    """Per-vertex values: .npy, a text file with one number per line, or a mesh of the same
-    topology (the distance of each vertex to its partner)."""
-    from .mesh import MESH_SUFFIXES, read_vertices
-    p = Path(path)
-    if not p.is_file():
-        raise MimicaError(f"{p}: no such file ({what})")
-    if p.suffix.lower() in MESH_SUFFIXES:
-        return p, read_vertices(p)
-    try:
-        vals = np.load(p) if p.suffix.lower() == ".npy" else np.loadtxt(p, ndmin=1)
-    except (OSError, ValueError) as e:
-        raise MimicaError(f"{p}: not a list of numbers ({e.__class__.__name__}); {what} takes .npy, .txt "
-                          f"(one value per vertex) or a mesh of the same topology") from None
-    vals = np.asarray(vals, float).ravel()
-    if len(vals) != n or not np.isfinite(vals).all():
-        raise MimicaError(f"{p}: {len(vals)} values{'' if np.isfinite(vals).all() else ' (some not finite)'}; "
-                          f"the mesh has {n} vertices")
-    return p, vals
-
-
 def cmd_render(a):
-    from .mesh import read_mesh, read_vertices
-    from .render import (VIEWS, contact_sheet, heat_colors, render_mesh, render_views, save_png,
-                         turntable_angles, with_legend)
-    from .render.shots import shared_frame_all_views
-
-    src, out = Path(a.face), Path(a.out)
-    kind = out.suffix.lower()
-    if kind not in (".png", ".mp4"):
-        raise MimicaError(f"{out}: the output is a .png picture or an .mp4 video")
-    views = list(VIEWS) if a.view == "all" else [a.view]
-    t0 = time.perf_counter()
-    if src.is_dir():
-        paths = _expand_frames([src])
-        mesh = read_mesh(paths[0])
-        frames = [mesh.vertices] + [read_vertices(p) for p in _progress(paths[1:], len(paths) - 1, "reading")]
-        if any(len(f) != mesh.n_vertices for f in frames):
-            raise MimicaError(f"{src}: the meshes do not all share the first one's topology")
-        names = [p.stem for p in paths]
+    from .pipeline import RenderOptions, render_sequence
+    src = Path(a.face)
+    paths = _expand_frames([src]) if src.is_dir() else [src]
+    opts = RenderOptions(view=a.view, turntable=a.turntable, size=a.size, frames=a.frames, fps=a.fps,
+                         heatmap=a.heatmap)
+    bar = _progress(range(1), None, "rendering")
+    r = render_sequence(paths, a.out, opts, progress=lambda k, n: (setattr(bar, "total", n), bar.update(1)))
+    bar.close()
+    if r["kind"] == "png":
+        if r["shown"] < r["frames"] and not a.turntable:
+            _say(f"{src}: {r['frames']} meshes; the sheet shows {r['shown']} of them, evenly spaced "
+                 "(first and last included; an .mp4 output shows every one)")
+        _say(f"{a.out} ({r['size'][0]}x{r['size'][1]}, {r['seconds']:.2f}s)")
     else:
-        mesh = read_mesh(src)
-        frames, names = [mesh.vertices], [src.stem]
-    colors = legend = None
-    if a.heatmap:
-        hp, vals = _read_values(a.heatmap, mesh.n_vertices)
-        if vals.ndim == 2:
-            if len(vals) != mesh.n_vertices:
-                raise MimicaError(f"{hp}: {len(vals)} vertices; {src} has {mesh.n_vertices}")
-            vals = np.linalg.norm(vals - frames[0], axis=1)
-            label = f"distance to {hp.name}"
-        else:
-            label = hp.name
-        vmax = float(np.max(vals)) if np.max(vals) > 0 else 1.0
-        colors, legend = heat_colors(np.clip(vals, 0, None)), (0.0, vmax, label)
-    frame = shared_frame_all_views(np.concatenate(frames), views if not a.turntable else
-                                   [(y, 0.0) for y in turntable_angles(8)])
-    size = a.size
-    if kind == ".png":
-        if a.turntable:
-            tiles = [render_mesh(mesh, frames[0], size=(size, size), yaw=y, frame=frame, colors=colors)
-                     for y in turntable_angles(8)]
-            img = contact_sheet(tiles, labels=[f"{y:.0f}°" for y in turntable_angles(8)], columns=4)
-        elif len(frames) == 1:
-            tiles = render_views(mesh, frames[0], views, size, colors, frame)
-            img = tiles[0] if len(tiles) == 1 else contact_sheet(tiles, labels=views)
-        else:
-            pick = np.unique(np.linspace(0, len(frames) - 1, min(len(frames), 12)).round().astype(int))
-            if len(pick) < len(frames):
-                _say(f"{src}: {len(frames)} meshes; the sheet shows {len(pick)} of them, evenly spaced "
-                     "(first and last included; an .mp4 output shows every one)")
-            tiles = [render_mesh(mesh, frames[i], size=(size, size), yaw=VIEWS[views[0]][0], frame=frame,
-                                 colors=colors) for i in pick]
-            img = contact_sheet(tiles, labels=[names[i] for i in pick], columns=min(len(pick), 4))
-        if legend:
-            img = with_legend(img, *legend)
-        save_png(out, img)
-        _say(f"{out} ({img.shape[1]}x{img.shape[0]}, {time.perf_counter() - t0:.2f}s)")
-        return 0
-    from .image.video import VideoWriter
-    yaw0 = VIEWS[views[0]][0]
-    jobs = ([(frames[0], y) for y in turntable_angles(a.frames)] if a.turntable or len(frames) == 1
-            else [(f, yaw0) for f in frames])
-    with VideoWriter(out, a.fps) as vw:
-        for v, yaw in _progress(jobs, len(jobs), "rendering"):
-            img = render_mesh(mesh, v, size=(size, size), yaw=yaw, frame=frame, colors=colors)
-            vw.write((with_legend(img, *legend) if legend else img) / 255.0)
-    _say(f"{out}: {len(jobs)} frames at {a.fps:g} fps in {time.perf_counter() - t0:.1f}s")
+        _say(f"{a.out}: {r['shown']} frames at {a.fps:g} fps in {r['seconds']:.1f}s")
     return 0
 
 
 def cmd_export(a):
-    from .mesh import atomic_path, read_mesh, read_vertices, write_mesh
+    from .pipeline import ExportOptions, export_sequence
     paths = _expand_frames([Path(p) for p in a.frames])
-    mesh = read_mesh(paths[0])
-    frames = [read_vertices(p) for p in _progress(paths, len(paths), "reading")]
-    for p, f in zip(paths, frames):
-        if len(f) != mesh.n_vertices:
-            raise MimicaError(f"{p}: {len(f)} vertices; {paths[0]} has {mesh.n_vertices} (one topology per sequence)")
     out = Path(a.out)
     suf = out.suffix.lower()
+    fmt = a.format
     if not suf and a.format in FILE_FORMATS:             # `--format usd --out anim`: anim.usd
         out, suf = out.with_suffix("." + a.format), "." + a.format
     elif suf and a.format in FILE_FORMATS and suf != "." + a.format:
         raise MimicaError(f"--format {a.format} with --out {out}: say the format once (the suffix, or --format)")
-    if suf in (".usd", ".usda", ".usdc", ".glb", ".gltf"):
-        base = read_mesh(a.rest) if a.rest else mesh
-        if base.n_vertices != mesh.n_vertices:
-            raise MimicaError(f"{a.rest}: not the sequence's topology")
-    if suf in (".usd", ".usda", ".usdc"):
-        from .export.clip import write_clip_usd
-        info = write_clip_usd(out, base, [p.stem for p in paths], np.stack(frames), a.fps, a.units, a.compact == "auto")
-        _say(f"{out}: " + _clip_line(out, base, info, a.fps, a.units))
-        return 0
-    if suf in (".glb", ".gltf"):
-        from .export.clip import write_clip
-        with atomic_path(out) as tmp:
-            info = write_clip(tmp, base, [p.stem for p in paths], np.stack(frames), a.fps, a.units,
-                              a.compact == "auto", binary=suf == ".glb", quantize=a.quantize)
-        _say(f"{out}: " + _clip_line(out, base, info, a.fps, a.units))
-        return 0
-    if suf:
-        raise MimicaError(f"{out}: export to .glb/.gltf, .usd/.usda/.usdc, or to a folder (with --format obj|ply)")
-    if a.format not in ("obj", "ply"):
+    if not suf and fmt not in ("obj", "ply"):
         raise MimicaError(f"--format {a.format}: obj or ply for a folder, or {', '.join(FILE_FORMATS)} for one file")
-    from .outputs import staged_dir
-    with staged_dir(out, {"command": "export"}) as d:
-        for p, f in zip(paths, frames):
-            write_mesh(d / f"{p.stem}.{a.format}", mesh.with_vertices(f))
-    _say(f"{out}/: {len(frames)} {a.format.upper()} files")
+    opts = ExportOptions(fps=a.fps, format=fmt if fmt in ("obj", "ply") else "obj", units=a.units,
+                         compact=a.compact == "auto", quantize=a.quantize, rest=a.rest)
+    r = export_sequence(paths, out, opts)
+    if r["kind"] == "folder":
+        _say(f"{out}/: {r['frames']} {opts.format.upper()} files")
+    else:
+        _say(f"{out}: " + _clip_line(r, a.fps, a.units))
     return 0
 
 
 def cmd_animate(a):
-    from .export import ARKIT_52
-    from .export.take import animate_glb, read_take
-    from .mesh import atomic_path
-    from .export.usd import USD_SUFFIXES
-    out = Path(a.out)
-    usd = out.suffix.lower() in USD_SUFFIXES
-    if out.suffix.lower() != ".glb" and not usd:
-        raise MimicaError(f"{out}: an animated take is written as .glb or as USD ({', '.join(USD_SUFFIXES)})")
-    if usd and a.head_rotation:
-        raise MimicaError(f"{out}: the head's rotation is written to .glb only (USD gets the blend shapes' weights)")
-    head = Path(a.head)
-    if not head.is_file():
-        raise MimicaError(f"{head}: no such file")
-    if head.suffix.lower() not in (".glb", ".gltf"):
-        raise MimicaError(f"{head}: a take plays on a glTF head with ARKit morph targets; make one with "
-                          f"`mimica blendshapes {head.name} --out {head.stem}_arkit.glb`")
+    from .pipeline import AnimateOptions, animate
+    opts = AnimateOptions(head_rotation=a.head_rotation, pivot=tuple(_floats(a.pivot, 3, "--pivot")) if a.pivot else None,
+                          fps=a.fps, rest_frame=a.rest_frame)
     if (a.arkit is None) == (a.video is None):
         raise MimicaError("animate: give the take as --arkit take.csv or as --video take.mp4 (one of them)")
-    pivot = _floats(a.pivot, 3, "--pivot") if a.pivot else None
-    csv_out = None
-    if a.video is not None:
-        times, weights, rate, csv_out = _weights_from_video(a, head, out)
-        source = a.video
-    else:
-        times, weights, rate = read_take(a.arkit, fps=a.fps)
-        source = a.arkit
-
-    def weights_csv():
-        if csv_out is not None:
-            from .export.video import write_live_link_csv
-            write_live_link_csv(csv_out, times, np.stack([weights[n] for n in ARKIT_52], 1), rate,
-                                np.stack([weights[n] for n in ("headYaw", "headPitch", "headRoll")], 1))
-    if usd:                                     # write_usd is atomic by itself (its suffix names its format)
-        info = _take_usd(head, out, times, weights, rate)
-        try:
-            weights_csv()
-        except BaseException:
-            out.unlink(missing_ok=True)
-            raise
-    else:
-        with atomic_path(out) as tmp:
-            info = animate_glb(head, tmp, times, weights, head_rotation=a.head_rotation, pivot=pivot)
-            weights_csv()                       # inside: a failure leaves neither file
-    if info["pivot"] is not None:
-        turn = np.degrees(np.abs([weights[n] for n in ("headYaw", "headPitch", "headRoll")]).max(1))
+    r = animate(a.head, a.out, a.arkit, a.video, opts, progress=_say)
+    if r.video:
+        v = r.video
+        _say(f"{a.video}: {v['frames']} frames tracked ({v['track_fps']:.0f} frames/s) and fitted "
+             f"({v['fit_fps']:.0f} frames/s); frame {a.rest_frame} taken as the performer's rest; "
+             f"points misfit median {v['misfit_median'] * 100:.1f} % of the face's width; "
+             f"{v['unseen']} shapes the points cannot see (gaze, tongue) stay 0")
+    w = r.weights
+    if r.pivot is not None:
+        turn = np.degrees(np.abs([w[n] for n in ("headYaw", "headPitch", "headRoll")]).max(1))
         head_line = (f"; the head turns (up to yaw {turn[0]:.0f}, pitch {turn[1]:.0f}, roll {turn[2]:.0f} degrees) "
-                     f"about ({', '.join(f'{x:.3f}' for x in info['pivot'])}) m, "
-                     + (f"{info['bending']} vertices bending with the neck" if info["bending"] else "whole"))
+                     f"about ({', '.join(f'{x:.3f}' for x in r.pivot)}) m, "
+                     + (f"{r.bending} vertices bending with the neck" if r.bending else "whole"))
     else:
-        head_line = "; the head stays still (--head-rotation turns it)" if "headYaw" in weights else ""
-    _say(f"{source}: {len(times)} frames over {times[-1]:.2f}s ({rate:.3g} fps) drive {info['driven']} morph "
-         f"targets of {head.name}{head_line} -> {out}" + (f" (weights: {csv_out})" if csv_out else ""))
+        head_line = "; the head stays still (--head-rotation turns it)" if "headYaw" in w else ""
+    _say(f"{a.video or a.arkit}: {len(r.times)} frames over {r.times[-1]:.2f}s ({r.rate:.3g} fps) drive {r.driven} "
+         f"morph targets of {Path(a.head).name}{head_line} -> {r.out}" + (f" (weights: {r.csv})" if r.csv else ""))
     return 0
-
-
-def _take_usd(head: Path, out, times, weights: dict, rate: float) -> dict:
-    """The take as USD: the head's blend shapes (read from its GLB) and a SkelAnimation of
-    their weights, resampled on the take's own rate (USD keys whole time codes)."""
-    from .export.usd import write_usd
-    from .mesh.io import read_morph_targets
-    mesh, targets, unit = read_morph_targets(head)
-    names = [n for n in targets if n in weights]
-    if not names:
-        raise MimicaError(f"{head}: none of its morph targets is an ARKit shape")
-    rate = rate if rate and rate > 0 else 30.0
-    grid = np.arange(int(np.floor(times[-1] * rate + 1e-6)) + 1) / rate
-    w = np.stack([np.interp(grid, times, weights[n]) for n in names], 1)
-    write_usd(out, mesh, {n: targets[n] for n in names}, w, rate, unit)
-    return {"driven": len(names), "pivot": None, "bending": 0}
-
-
-def _weights_from_video(a, head: Path, out: Path):
-    """(times, {ARKit name and head angles: per frame}, fps, where the weights CSV goes) of a
-    video fitted through the head's blendshapes (export.video)."""
-    from .export import ARKIT_52
-    from .export.video import UNSEEN, fit_weights, head_angles, landmark_basis, track_video
-    basis = landmark_basis(head)
-    t0 = time.perf_counter()
-    fps, pts = track_video(a.video, progress=_say)
-    t1 = time.perf_counter()
-    fit = fit_weights(pts, basis, rest_frame=a.rest_frame)
-    t2 = time.perf_counter()
-    ang = head_angles(fit.rotations)
-    weights = {n: fit.weights[:, j] for j, n in enumerate(ARKIT_52)}
-    weights.update(zip(("headYaw", "headPitch", "headRoll"), ang.T))
-    _say(f"{a.video}: {len(pts)} frames tracked ({len(pts) / max(t1 - t0, 1e-9):.0f} frames/s) and fitted "
-         f"({len(pts) / max(t2 - t1, 1e-9):.0f} frames/s); frame {a.rest_frame} taken as the performer's rest; "
-         f"points misfit median {np.median(fit.residual) * 100:.1f} % of the face's width; "
-         f"{len(UNSEEN)} shapes the points cannot see (gaze, tongue) stay 0")
-    return np.arange(len(pts)) / fps, weights, fps, out.with_suffix(".csv")
 
 
 def cmd_blendshapes(a):
@@ -932,7 +745,7 @@ def cmd_blendshapes(a):
         for n in info["notes"]:
             _say(f"{out}: {n}")
     else:
-        _say(_units_line(shapes.mesh, info["units"], a.units) + "; " + _sparse_line(out, info, len(ARKIT_52)))
+        _say(_units_line(float(np.ptp(shapes.mesh.vertices[:, 1])), info["units"], a.units) + "; " + _sparse_line(out, info, len(ARKIT_52)))
     if a.show:
         from .render import save_png
         from .render.diagnose import transfer_picture

@@ -40,7 +40,8 @@ from pathlib import Path
 
 from ..errors import MimicaError
 from ..mesh import MESH_SUFFIXES
-from ..pipeline import BlendshapesOptions, RigOptions, SimulateOptions, TransferOptions
+from ..pipeline import (AgeOptions, AnimateOptions, BlendshapesOptions, ExportOptions, RenderOptions, RigOptions,
+                        SimulateOptions, TransferOptions)
 
 
 
@@ -49,17 +50,18 @@ def _auto(on: bool) -> str:
 
 
 _B, _T, _R, _S = BlendshapesOptions(), TransferOptions(), RigOptions(), SimulateOptions()
+_A, _N, _V, _E = AgeOptions(), AnimateOptions(), RenderOptions(), ExportOptions()
 # job kind -> (what it runs on, the options it takes with their defaults: the pipeline's own)
 KINDS = {
     "blendshapes": ("head", {"quantize": _B.quantize, "cut_mouth": _auto(_B.cut_mouth), "cut_eyes": _auto(_B.cut_eyes),
                              "match": _B.match}),
     "transfer": ("frames", {"method": _T.method, "cut_mouth": _auto(_T.cut_mouth), "cut_eyes": _auto(_T.cut_eyes),
                             "match": _T.match}),
-    "animate": ("arkit", {"head_rotation": False}),
+    "animate": ("arkit", {"head_rotation": _N.head_rotation}),
     "simulate": ("timeline", {"muscles": _R.muscles, "fps": _S.fps}),
-    "age": ("head", {"ages": [25, 45, 65, 85], "expression": "happiness", "size": 360}),
-    "render": ("from", {"view": "all", "size": 512}),
-    "export": ("from", {"fps": 30.0, "format": "glb"}),
+    "age": ("head", {"ages": list(_A.ages), "expression": _A.expression, "size": _A.size}),
+    "render": ("from", {"view": _V.view, "size": _V.size}),
+    "export": ("from", {"fps": _E.fps, "format": "glb"}),          # a batch exports one clip file
 }
 # which kinds a `from` may name, per kind
 FROM = {"animate": ("blendshapes",), "render": ("transfer", "simulate"), "export": ("transfer", "simulate")}

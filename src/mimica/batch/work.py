@@ -5,8 +5,10 @@ landmarks (detected once, also kept in the batch's cache folder), the meshes and
 read, and every ExpressionTransfer it has built -- the correspondence and the factorization of
 a (source neutral, head) pair -- so that all the performances of one source onto one head pay
 for it once.  The scheduler sends all the jobs of a head to the same worker.  Kinds that gain
-nothing from a warm worker (animate, simulate, age, render, export, blendshapes) run the `mimica`
-command itself in a child process, so a batch's outputs are the commands' outputs.
+nothing from a warm worker (animate, simulate, age, render, export, blendshapes) still reuse
+its read heads and landmarks.
+Every kind runs in-process through the pipeline (mimica.pipeline), as the command line does, so
+a batch's outputs are the commands' outputs.
 """
 
 from __future__ import annotations
@@ -26,7 +28,6 @@ _meshes: dict = {}
 _frames: dict = {}
 _transfers: dict = {}
 _source_landmarks: dict = {}
-_children: set = set()              # the `mimica` commands this worker is running
 CACHE_TRANSFERS = 8                 # ExpressionTransfers a worker keeps (oldest dropped first)
 
 
@@ -39,8 +40,6 @@ def watch_parent(pid: int) -> None:
     def watch():
         while os.getppid() == pid:
             time.sleep(0.5)
-        for p in list(_children):                  # the commands it runs go with it
-            p.kill()
         os._exit(1)
     threading.Thread(target=watch, daemon=True, name="mimica-batch-parent").start()
 
@@ -77,29 +76,6 @@ def run_job(job: dict, root: str) -> dict:
     return rec
 
 
-def _cli(args: list[str], said: list[str]) -> None:
-    """The `mimica` command itself, in a child process (killed with this worker: watch_parent);
-    its one-line error becomes ours.  (A subprocess, not the command's code imported: the
-    command line imports this package, and the library's users do not import each other in a
-    circle.)"""
-    import os
-    import subprocess
-    import sys
-    p = subprocess.Popen([sys.executable, "-m", "mimica.cli", *map(str, args)], stdout=subprocess.DEVNULL,
-                         stderr=subprocess.PIPE, text=True, env=os.environ)
-    _children.add(p)
-    try:
-        _, err = p.communicate()
-    finally:
-        _children.discard(p)
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    said += lines
-    if p.returncode != 0:
-        bad = [ln for ln in lines if ln.startswith("mimica: error:")]
-        raise MimicaError(bad[-1][len("mimica: error:"):].strip() if bad else
-                          f"mimica {args[0]} exited {p.returncode}: {(lines or ['no message'])[-1]}")
-
-
 def _head_mesh(job: Job):
     k = _hashes.of(job.head.mesh)
     if k not in _meshes:
@@ -125,10 +101,6 @@ def _landmark_file(job: Job, root: Path) -> Path | None:
         lm = landmarks_for(mesh, None, f"head {job.head.name} ({job.head.mesh})")
         write_landmarks(p, lm.positions(mesh))
     return p
-
-
-def _with_landmarks(args, lm):
-    return args + (["--landmarks", lm] if lm is not None else [])
 
 
 def _blendshapes(job, root, out, inputs, said):
@@ -189,8 +161,10 @@ def _transfer(job, root, out, inputs, said):
 
 
 def _animate(job, root, out, inputs, said):
-    args = ["animate", inputs[0], "--arkit", job.performance.files["arkit"], "--out", out]
-    _cli(args + (["--head-rotation"] if job.options["head_rotation"] else []), said)
+    from ..pipeline import AnimateOptions, animate
+    r = animate(inputs[0], out, take=job.performance.files["arkit"],
+                options=AnimateOptions(head_rotation=job.options["head_rotation"]))
+    said.append(f"{len(r.times)} frames drive {r.driven} morph targets -> {out}")
 
 
 def _simulate(job, root, out, inputs, said):
@@ -206,18 +180,30 @@ def _simulate(job, root, out, inputs, said):
 
 
 def _age(job, root, out, inputs, said):
+    from ..pipeline import AgeOptions, age_sheet
     o = job.options
-    ages = ",".join(f"{a:g}" for a in o["ages"])
-    _cli(_with_landmarks(["age", job.head.mesh, "--ages", ages, "--expression", o["expression"],
-                          "--size", o["size"], "--out", out], _landmark_file(job, root)), said)
+    mesh, _ = _head_mesh(job)
+    n = age_sheet(mesh, out, _landmark_file(job, root),
+                  AgeOptions(ages=tuple(o["ages"]), expression=o["expression"], size=o["size"]))
+    said.append(f"{n} renders -> {out}")
+
+
+def _frames_of(folder: Path) -> list[Path]:
+    """An upstream job's frames: the folder's meshes of its main format (mesh.io.sequence_files)."""
+    from ..mesh.io import sequence_files
+    return sequence_files(folder)[0] if Path(folder).is_dir() else [Path(folder)]
 
 
 def _render(job, root, out, inputs, said):
-    _cli(["render", inputs[0], "--out", out, "--view", job.options["view"], "--size", job.options["size"]], said)
+    from ..pipeline import RenderOptions, render_sequence
+    r = render_sequence(_frames_of(inputs[0]), out, RenderOptions(view=job.options["view"], size=job.options["size"]))
+    said.append(f"{r['shown']} of {r['frames']} frames -> {out}")
 
 
 def _export(job, root, out, inputs, said):
-    _cli(["export", inputs[0], "--out", out, "--fps", job.options["fps"]], said)
+    from ..pipeline import ExportOptions, export_sequence
+    r = export_sequence(_frames_of(inputs[0]), out, ExportOptions(fps=job.options["fps"]))
+    said.append(f"{r['frames']} frames -> {out}")
 
 
 _RUN = {"blendshapes": _blendshapes, "transfer": _transfer, "animate": _animate, "simulate": _simulate,

@@ -39,7 +39,7 @@ def write_clip(path, rest, names, frames: np.ndarray, fps: float, units: str = "
     dict
         The writer's figures ("units", "quantized", ...) and "frames", "shapes" (morph targets
         written), "basis" (whether they are a basis with weights), "max_error_m" (a basis's largest
-        error, metres) and "bytes".
+        error, metres), "bytes" and "height" (the rest mesh's, in its unit).
     """
     from ..mesh import write_glb
     from ..mesh.io import SPARSE_TOLERANCE, glb_units
@@ -56,7 +56,8 @@ def write_clip(path, rest, names, frames: np.ndarray, fps: float, units: str = "
         info = write_glb(path, rest, shapes, binary=binary, fps=fps, units=units, weights=c.weights,
                          extras={"frames": list(names), "maxErrorMetres": c.max_error * k}, quantize=quantize)
         info.update(shapes=len(shapes), basis=True, max_error_m=c.max_error * k)
-    info.update(frames=len(frames), compact=compact, bytes=Path(path).stat().st_size)
+    info.update(frames=len(frames), compact=compact, bytes=Path(path).stat().st_size,
+                height=float(np.ptp(rest.vertices[:, 1])))
     return info
 
 

@@ -1,0 +1,180 @@
+"""Play a take on a head with ARKit blendshapes: the take's weights from a file (Live Link Face
+CSV, weights CSV or JSON: export.take) or fitted to a video through the head's own shapes
+(export.video), written as an animated GLB (the head's own file, its weights keyed) or USD."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MimicaError
+
+HEAD_ANGLES = ("headYaw", "headPitch", "headRoll")
+
+
+@dataclass(frozen=True)
+class AnimateOptions:
+    """How a take is played; each default is the one every user of it gets.
+
+    Attributes
+    ----------
+    head_rotation : bool
+        Also turn the head by the take's head angles (a GLB written from an OBJ head only).
+    pivot : tuple of 3 float or None
+        Where the head turns, metres in the file's frame; None: the one `blendshapes` stored.
+    fps : float or None
+        The rate of a take's Timecode column (None: read from the take).
+    rest_frame : int
+        A video's frame taken as the performer's rest face.
+    """
+    head_rotation: bool = False
+    pivot: tuple | None = None
+    fps: float | None = None
+    rest_frame: int = 0
+
+
+@dataclass
+class AnimateResult:
+    """What `animate` wrote.
+
+    Attributes
+    ----------
+    out : Path
+        The animated file.
+    times : (F,) array
+        The take's times in seconds.
+    rate : float
+        Its frame rate.
+    weights : dict
+        {ARKit name or head angle: (F,) weights}.
+    driven : int
+        The head's morph targets the take drives.
+    pivot : list or None
+        Where the head turns (metres), when it does.
+    bending : int
+        Vertices bending with the neck.
+    csv : Path or None
+        A video's weights as a Live Link Face CSV, beside `out`.
+    video : dict
+        A video's figures: {"frames", "track_fps", "fit_fps", "misfit_median" (of the face's width),
+        "unseen" (shapes the points cannot see)}.
+    """
+    out: Path
+    times: np.ndarray
+    rate: float
+    weights: dict
+    driven: int
+    pivot: list | None
+    bending: int
+    csv: Path | None = None
+    video: dict = field(default_factory=dict)
+
+
+def _check(head: Path, out: Path, take, video, o: AnimateOptions) -> bool:
+    from ..export.usd import USD_SUFFIXES
+    usd = out.suffix.lower() in USD_SUFFIXES
+    if out.suffix.lower() != ".glb" and not usd:
+        raise MimicaError(f"{out}: an animated take is written as .glb or as USD ({', '.join(USD_SUFFIXES)})")
+    if usd and o.head_rotation:
+        raise MimicaError(f"{out}: the head's rotation is written to .glb only (USD gets the blend shapes' weights)")
+    if not head.is_file():
+        raise MimicaError(f"{head}: no such file")
+    if head.suffix.lower() not in (".glb", ".gltf"):
+        raise MimicaError(f"{head}: a take plays on a glTF head with ARKit morph targets; make one with "
+                          f"`mimica blendshapes {head.name} --out {head.stem}_arkit.glb`")
+    if (take is None) == (video is None):
+        raise MimicaError("animate: give the take as a take file or as a video (one of them)")
+    return usd
+
+
+def weights_from_video(head, video, rest_frame: int = 0, progress=None):
+    """A video fitted through the head's blendshapes (export.video): (times (F,), {ARKit name and
+    head angle: (F,)}, fps, figures)."""
+    from ..export import ARKIT_52
+    from ..export.video import UNSEEN, fit_weights, head_angles, landmark_basis, track_video
+    basis = landmark_basis(head)
+    t0 = time.perf_counter()
+    fps, pts = track_video(video, progress=progress)
+    t1 = time.perf_counter()
+    fit = fit_weights(pts, basis, rest_frame=rest_frame)
+    t2 = time.perf_counter()
+    weights = {n: fit.weights[:, j] for j, n in enumerate(ARKIT_52)}
+    weights.update(zip(HEAD_ANGLES, head_angles(fit.rotations).T))
+    figures = {"frames": len(pts), "track_fps": len(pts) / max(t1 - t0, 1e-9),
+               "fit_fps": len(pts) / max(t2 - t1, 1e-9), "misfit_median": float(np.median(fit.residual)),
+               "unseen": len(UNSEEN)}
+    return np.arange(len(pts)) / fps, weights, fps, figures
+
+
+def take_usd(head: Path, out, times, weights: dict, rate: float) -> dict:
+    """The take as USD: the head's blend shapes (read from its GLB) and a SkelAnimation of
+    their weights, resampled on the take's own rate (USD keys whole time codes)."""
+    from ..export.usd import write_usd
+    from ..mesh.io import read_morph_targets
+    mesh, targets, unit = read_morph_targets(head)
+    names = [n for n in targets if n in weights]
+    if not names:
+        raise MimicaError(f"{head}: none of its morph targets is an ARKit shape")
+    rate = rate if rate and rate > 0 else 30.0
+    grid = np.arange(int(np.floor(times[-1] * rate + 1e-6)) + 1) / rate
+    w = np.stack([np.interp(grid, times, weights[n]) for n in names], 1)
+    write_usd(out, mesh, {n: targets[n] for n in names}, w, rate, unit)
+    return {"driven": len(names), "pivot": None, "bending": 0}
+
+
+def animate(head, out, take=None, video=None, options: AnimateOptions | None = None, progress=None) -> AnimateResult:
+    """Play a take (a file) or a video's performance on a head's ARKit blendshapes.
+
+    Parameters
+    ----------
+    head : str or Path
+        The head's GLB/glTF with ARKit morph targets (`blendshapes` writes it; other tools' too).
+    out : str or Path
+        .glb (the head's own file with its weights keyed) or USD (.usd, .usda, .usdc).
+    take : str or Path, optional
+        A Live Link Face CSV, or weights as CSV/JSON (export.take.read_take).
+    video : str or Path, optional
+        Or a video (or a folder of frames) of a face; its weights also go to a Live Link Face CSV
+        beside `out`.
+    options : AnimateOptions, optional
+    progress : callable, optional
+        Called with one line of text while a video is read.
+
+    Returns
+    -------
+    AnimateResult
+    """
+    from ..export import ARKIT_52
+    from ..export.take import animate_glb, read_take
+    from ..mesh import atomic_path
+    o = options or AnimateOptions()
+    head, out = Path(head), Path(out)
+    usd = _check(head, out, take, video, o)
+    csv_out, figures = None, {}
+    if video is not None:
+        times, weights, rate, figures = weights_from_video(head, video, o.rest_frame, progress)
+        csv_out = out.with_suffix(".csv")
+    else:
+        times, weights, rate = read_take(take, fps=o.fps)
+
+    def weights_csv():
+        if csv_out is not None:
+            from ..export.video import write_live_link_csv
+            write_live_link_csv(csv_out, times, np.stack([weights[n] for n in ARKIT_52], 1), rate,
+                                np.stack([weights[n] for n in HEAD_ANGLES], 1))
+    if usd:                                     # write_usd is atomic by itself (its suffix names its format)
+        info = take_usd(head, out, times, weights, rate)
+        try:
+            weights_csv()
+        except BaseException:
+            out.unlink(missing_ok=True)
+            raise
+    else:
+        with atomic_path(out) as tmp:
+            info = animate_glb(head, tmp, times, weights, head_rotation=o.head_rotation,
+                               pivot=None if o.pivot is None else list(o.pivot))
+            weights_csv()                       # inside: a failure leaves neither file
+    return AnimateResult(out, times, rate, weights, info["driven"], info["pivot"], info["bending"], csv_out, figures)
