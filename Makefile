@@ -11,7 +11,7 @@ MIMICA_DATA ?= $(abspath $(CURDIR)/..)/shared/data
 export MIMICA_DATA
 SOURCES := $(shell find src -type f -not -name '*.pyc' -not -path '*.egg-info*') pyproject.toml README.md
 
-.PHONY: demo test test-lowest bench setup wheel clean blender
+.PHONY: demo test test-lowest bench docs setup wheel clean blender
 
 setup: $(WHEEL_STAMP)
 
@@ -80,6 +80,19 @@ test-lowest:
 	out/venv-lowest/bin/pip install -q --upgrade pip
 	out/venv-lowest/bin/pip install -q -c constraints/lowest.txt ".[test,cholmod]"
 	out/venv-lowest/bin/python -m pytest tests
+
+# the documentation site (MkDocs Material, the API pages from the docstrings by mkdocstrings, which
+# reads the sources without importing them), in a venv of its own; strict: a warning, a broken
+# link or reference fails the build
+DOCS_STAMP := .venv-docs/.installed
+$(DOCS_STAMP): constraints/ci.txt
+	$(PY) -m venv .venv-docs
+	.venv-docs/bin/pip install -q -c constraints/ci.txt mkdocs mkdocs-material "mkdocstrings[python]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 .venv-docs/bin/mkdocs build --strict --quiet
+	@echo "the site: out/site/index.html"
 
 # every benchmark, one after the other (never while tests run: the timings would mean nothing);
 # each one's output in out/bench/NAME.txt, and at the end each one's line of figures
