@@ -125,3 +125,22 @@ def test_simulate_refuses_what_its_engine_cannot_do_before_the_work(tmp_path):
         with pytest.raises(MimicaError, match=why):
             simulate(tmp_path / "none.rig", tmp_path / "out", o)
     assert not (tmp_path / "out").exists()
+
+
+def test_age_render_export_animate_defaults_are_the_pipelines():
+    from mimica.cli import build_parser
+    from mimica.pipeline import AgeOptions, AnimateOptions, ExportOptions, RenderOptions
+    p = build_parser()
+    a = p.parse_args(["age", "f.obj", "--out", "s.png"])
+    assert (tuple(float(x) for x in a.ages.split(",")), a.expression, a.size) == \
+        (AgeOptions().ages, AgeOptions().expression, AgeOptions().size)
+    r = p.parse_args(["render", "f.obj", "--out", "s.png"])
+    d = RenderOptions()
+    assert (r.view, r.turntable, r.size, r.frames, r.fps, r.heatmap) == \
+        (d.view, d.turntable, d.size, d.frames, d.fps, d.heatmap)
+    e = p.parse_args(["export", "d", "--out", "a.glb"])
+    x = ExportOptions()
+    assert (e.fps, e.format, e.units, e.compact == "auto", e.quantize, e.rest) == \
+        (x.fps, x.format, x.units, x.compact, x.quantize, x.rest)
+    n = p.parse_args(["animate", "h.glb", "--arkit", "t.csv", "--out", "t.glb"])
+    assert (n.head_rotation, n.pivot, n.fps, n.rest_frame) == tuple(vars(AnimateOptions()).values())

@@ -1,0 +1,73 @@
+"""`mimica animate`: play an ARKit take (a Live Link Face CSV) on a head's ARKit blendshapes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MimicaError
+from ._common import _say
+from ..pipeline import AnimateOptions as D
+
+
+def _floats(text: str, n: int, flag: str) -> list[float]:
+    """'0,1.5,-0.1' -> [0.0, 1.5, -0.1]: n finite numbers, or a MimicaError naming the flag."""
+    try:
+        vals = [float(x) for x in text.split(",")]
+    except ValueError:
+        vals = []
+    if len(vals) != n or not np.isfinite(vals).all():
+        raise MimicaError(f"{flag} {text!r}: expected {n} finite numbers separated by commas")
+    return vals
+
+
+def cmd_animate(a):
+    from ..pipeline import AnimateOptions, animate
+    opts = AnimateOptions(head_rotation=a.head_rotation, pivot=tuple(_floats(a.pivot, 3, "--pivot")) if a.pivot else None,
+                          fps=a.fps, rest_frame=a.rest_frame)
+    if (a.arkit is None) == (a.video is None):
+        raise MimicaError("animate: give the take as --arkit take.csv or as --video take.mp4 (one of them)")
+    r = animate(a.head, a.out, a.arkit, a.video, opts, progress=_say)
+    if r.video:
+        v = r.video
+        _say(f"{a.video}: {v['frames']} frames tracked ({v['track_fps']:.0f} frames/s) and fitted "
+             f"({v['fit_fps']:.0f} frames/s); frame {a.rest_frame} taken as the performer's rest; "
+             f"points misfit median {v['misfit_median'] * 100:.1f} % of the face's width; "
+             f"{v['unseen']} shapes the points cannot see (gaze, tongue) stay 0")
+    w = r.weights
+    if r.pivot is not None:
+        turn = np.degrees(np.abs([w[n] for n in ("headYaw", "headPitch", "headRoll")]).max(1))
+        head_line = (f"; the head turns (up to yaw {turn[0]:.0f}, pitch {turn[1]:.0f}, roll {turn[2]:.0f} degrees) "
+                     f"about ({', '.join(f'{x:.3f}' for x in r.pivot)}) m, "
+                     + (f"{r.bending} vertices bending with the neck" if r.bending else "whole"))
+    else:
+        head_line = "; the head stays still (--head-rotation turns it)" if "headYaw" in w else ""
+    _say(f"{a.video or a.arkit}: {len(r.times)} frames over {r.times[-1]:.2f}s ({r.rate:.3g} fps) drive {r.driven} "
+         f"morph targets of {Path(a.head).name}{head_line} -> {r.out}" + (f" (weights: {r.csv})" if r.csv else ""))
+    return 0
+
+
+def add_args(sub) -> None:
+    """The command's options on the `mimica` parser."""
+    an = sub.add_parser("animate", help="play an ARKit take (a Live Link Face CSV) on a head's ARKit blendshapes")
+    an.add_argument("head", help="the head's ARKit blendshapes, a .glb (as `mimica blendshapes` writes it)")
+    an.add_argument("--arkit", help="the take: a Live Link Face CSV (Timecode, BlendShapeCount, the "
+                                    "52 weights ...), or a CSV or JSON of the 52 weights with a time column")
+    an.add_argument("--video", help="or the take as a video (or a folder of frames) of a face: its 68 points are "
+                                    "tracked and the 52 weights fitted through the head's blendshapes, written "
+                                    "also as a Live Link-style CSV beside --out")
+    an.add_argument("--rest-frame", type=int, default=D.rest_frame,
+                    help="with --video: a frame where the performer's face is at rest (default: the first)")
+    an.add_argument("--fps", type=float, help="the frame rate of a Timecode column (default: from its frame numbers)")
+    an.add_argument("--head-rotation", action="store_true",
+                    help="also turn the head by the take's HeadYaw, HeadPitch, HeadRoll (radians)")
+    an.add_argument("--pivot", help="x,y,z in metres, in the GLB's frame: the point the head turns about "
+                                    "(default: the one `blendshapes` placed from the landmarks, with the neck "
+                                    "bending below the chin)")
+    an.add_argument("--out", required=True, help="take.glb: the head with the take as an animation (or take.usd / "
+                                                 ".usda / .usdc: its blend shapes and a SkelAnimation)")
+    an.set_defaults(func=cmd_animate)
+
+
+run = cmd_animate

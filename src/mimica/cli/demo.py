@@ -1,0 +1,23 @@
+"""`mimica demo`: transfer bundled ICT-FaceKit expressions; write meshes and a contact sheet."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def cmd_demo(a):
+    from ..demo import run_demo
+    from ..outputs import staged_dir
+    with staged_dir(a.out, {"command": "demo"}) as d:
+        return run_demo(d, quick=a.quick, shown=Path(a.out))
+
+
+def add_args(sub) -> None:
+    """The command's options on the `mimica` parser."""
+    d = sub.add_parser("demo", help="transfer bundled ICT-FaceKit expressions; write meshes and a contact sheet")
+    d.add_argument("--out", default="out/demo")
+    d.add_argument("--quick", action="store_true", help="fewer faces and expressions")
+    d.set_defaults(func=cmd_demo)
+
+
+run = cmd_demo
