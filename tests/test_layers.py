@@ -205,3 +205,14 @@ def test_no_user_calls_another_and_nothing_runs_mimica_in_a_child():
         if "subprocess" in names or "subprocess" in mods:          # a pool's workers run library code
             spawning.add(name)
     assert spawning <= CHILD_PROCESSES, f"modules that start processes: {sorted(spawning - CHILD_PROCESSES)}"
+
+
+def test_the_command_line_only_parses_calls_and_prints():
+    """Each command's module stays small (<= 120 lines, no function over 40): the work is the
+    pipeline's."""
+    for path in sorted((PACKAGE / "cli").glob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        assert text.count("\n") <= 120, f"{path.name}: {text.count(chr(10))} lines"
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.FunctionDef):
+                assert node.end_lineno - node.lineno + 1 <= 40, f"{path.name}: {node.name} is too long"
