@@ -139,3 +139,14 @@ def test_error_map_png(files, tmp_path, capsys):
     img = np.asarray(Image.open(png).convert("RGB")).astype(int)
     green = (img[..., 1] > 150) & (img[..., 0] < 100) & (img[..., 2] < 120)
     assert green.sum() > 5000                                       # the moving part, all < 0.1 %
+
+
+def test_blender_addon_writes_the_addon_to_install(tmp_path, capsys):
+    from pathlib import Path
+    import mimica.blender_addon as addon
+    from mimica.cli import main
+    assert main(["blender-addon", "--out", str(tmp_path / "addons")]) == 0
+    copy = tmp_path / "addons" / "mimica_blender.py"
+    assert copy.read_bytes() == Path(addon.__file__).read_bytes()
+    assert main(["blender-addon", "--out", str(copy)]) == 2
+    assert "name a folder" in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""mimica in Blender (issue 17, part 5): a Blender add-on.
+"""mimica in Blender: a Blender add-on.
 
 Blender's Python carries numpy < 2 (bpy 4.x and 5.0 require it) and mimica numpy >= 2, so the
 two cannot share one interpreter.  The add-on therefore runs the `mimica` command of the

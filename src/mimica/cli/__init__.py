@@ -8,12 +8,12 @@ import argparse
 import sys
 
 from ..errors import MimicaError
-from . import (age, animate, batch, blendshapes, demo, error, export, fit_muscles, landmarks, render, rig, simulate,
+from . import (age, animate, batch, blender_addon, blendshapes, demo, error, export, fit_muscles, landmarks, render, rig, simulate,
                transfer, transfer_image, view, wrinkle_mask)
 from ._checks import check_numbers, check_paths
 
 COMMANDS = (transfer, error, fit_muscles, rig, simulate, wrinkle_mask, age, transfer_image, landmarks, render, export,
-            animate, blendshapes, view, batch, demo)
+            animate, blendshapes, blender_addon, view, batch, demo)
 
 
 class _Parser(argparse.ArgumentParser):
