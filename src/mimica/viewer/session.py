@@ -23,7 +23,8 @@ class ViewerSession:
         self.presets = {k: v for k, v in PRESETS.items()}
         self.values = {n: 0.0 for n in self.muscles}
         self.action_values = {k: 0.0 for k in self.actions}
-        self.age = 40.0
+        from ..pipeline import SimulateOptions
+        self.age = SimulateOptions.age          # the wrinkles' age, as `simulate` and the pipeline default it
         self.layer = None
         if mask is not None:
             from ..wrinkles import WrinkledSkin
@@ -36,7 +37,7 @@ class ViewerSession:
     # -- controls ------------------------------------------------------------------------------
     def controls(self) -> dict:
         return {"muscles": self.muscles, "actions": list(self.actions), "presets": list(self.presets),
-                "age": self.layer is not None}
+                "age": self.layer is not None, "age_value": self.age}
 
     def set(self, name: str, value) -> None:
         if not isinstance(name, str):

@@ -262,6 +262,7 @@ function init(m) {
   if (m.age) {
     document.getElementById('age-box').hidden = false;
     const a = document.getElementById('age');
+    if (typeof m.age_value === 'number') { a.value = m.age_value; document.getElementById('age-out').textContent = a.value; }
     a.addEventListener('input', () => { document.getElementById('age-out').textContent = a.value; send({ type: 'set', name: 'age', value: Number(a.value) }); });
   }
   const sel = document.getElementById('channel');
