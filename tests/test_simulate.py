@@ -446,7 +446,7 @@ def test_every_engine_refuses_non_finite_or_exploded_frames(rig, engine):
     sim = make(rig)
     with pytest.raises(MimicaError, match="not finite"):
         sim.run(lambda t: np.full(len(rig.muscles), np.nan), 2 / sim.fps)
-    from mimica.physics.face import explosion_limit
+    from mimica.physics.engine import explosion_limit
     sim = make(rig)
     try:                          # the linear engines fly off; the full solver's line search holds
         frames = sim.run(lambda t: np.full(len(rig.muscles), 1e30), 2 / sim.fps)
@@ -543,3 +543,22 @@ def test_shell_stretch_mode_of_a_straight_strip_is_its_stretch(face):
     precompute(r)
     with pytest.raises(MimicaError, match="already made"):
         shell_stretch_modes(r)
+
+
+def test_every_engine_is_one_interface(tmp_path):
+    """modal, full and sprung made by name on one rig: each steps, reads its displacement and runs
+    frames of the rig's skin, rest at rest."""
+    from mimica.physics import ENGINES, Engine, make_engine
+    from mimica.errors import MimicaError
+    from mimica.pipeline import RigOptions, make_rig
+    from mimica.data import ICTModel, ICT_HEAD_VERTICES
+    model = ICTModel(ICT_HEAD_VERTICES)
+    rig = make_rig(model.mesh, None, RigOptions(muscles="zygomaticus_major_L"))
+    for name in ENGINES:
+        sim = make_engine(name, rig, fps=30.0)
+        assert isinstance(sim, Engine)
+        frames = sim.run(lambda t: np.zeros(len(rig.muscles)), 2 / 30.0)
+        assert frames.shape == (3,) + rig.skin.vertices.shape
+        assert np.abs(frames - rig.skin.vertices).max() < 1e-9 * np.ptp(rig.skin.vertices)
+    with pytest.raises(MimicaError, match="engine 'cloth'"):
+        make_engine("cloth", rig)

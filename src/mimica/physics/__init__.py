@@ -5,9 +5,24 @@ modal    modal bases (eq. 8), modal warping integration (eq. 10), full-space ref
 face     the muscle-driven face: springs, ROIs, one system per force type (eqs. 11-21);
          precompute(rig) makes those systems (the rig carries them, a .rig file keeps them)
 sprung   Viaud & Yahia 1992's force-field engine (eq. 9), driven by the rig's muscles
+engine   the engines' one interface (Engine), chosen by name (make_engine), and their frame loop
 """
 
-from .face import precompute
+from ..errors import MimicaError
+from .engine import ENGINES, Engine
+from .face import FaceSimulator, precompute
+from .fullface import FullFaceSimulator
 from .shell import ShellEnergy, hinges_of, lumped_mass, rayleigh_damping
+from .sprung import SprungFace
 
-__all__ = ["ShellEnergy", "hinges_of", "lumped_mass", "precompute", "rayleigh_damping"]
+__all__ = ["ENGINES", "Engine", "FaceSimulator", "FullFaceSimulator", "SprungFace", "make_engine", "ShellEnergy",
+           "hinges_of", "lumped_mass", "precompute", "rayleigh_damping"]
+
+
+def make_engine(name: str, rig, fps: float = 60.0, **options) -> Engine:
+    """The engine `name` ("modal", "full" or "sprung") on a rig; `options` are its own
+    (face.FaceSimulator's warp and springs; none for the others)."""
+    kinds = {"modal": FaceSimulator, "full": FullFaceSimulator, "sprung": SprungFace}
+    if name in kinds:
+        return kinds[name](rig, fps=fps, **options)
+    raise MimicaError(f"engine {name!r}: one of {', '.join(ENGINES)}")

@@ -23,6 +23,7 @@ import scipy.sparse as sp
 
 from ..errors import MimicaError
 from ..rig.drives import JAW_CLOSERS, LID_MARGIN, jaw_open_factors, jaw_open_parts, lid_pairs, margin_opening
+from .engine import run_frames
 from .modal import ModalBasis, ModalWarpingSolver, rotation_operator, rotations
 from .shell import ShellEnergy, lumped_mass
 
@@ -136,7 +137,7 @@ class _MuscleSystem:
             # a drive's springs are in its system's stiffness (precompute): its modes are those of
             # the skin held by its anchors, loaded by the anchors' motion K_s u_part
             self.stiff = np.diag(sv.lam)
-            loads = [drive_load(rig, muscle, mo)[uniq] / rho for mo in _drive_motions(muscle)]
+            loads = [drive_load(rig, muscle, mo)[uniq] / rho for mo in drive_motions(muscle)]
             if len(loads) == 2:                      # the jaw: exact rotation of its anchors at any angle
                 self.phi = float(np.radians(muscle.info["angle"]))
         elif springs == "kim":
@@ -382,7 +383,7 @@ def drive_load(rig, muscle, motion=None) -> np.ndarray:
     return f
 
 
-def _drive_motions(m) -> list:
+def drive_motions(m) -> list:
     """A drive's anchor motions whose loads its system must hold: the jaw's opening as its two
     parts (exact rotation at any angle, rig.drives.jaw_open_parts), any other its one motion."""
     if m.info.get("part") == "jaw" and m.info.get("motion") == "open" and "pivot" in m.info:
@@ -499,7 +500,7 @@ def tether_springs(tether: float, k_length: float, mean_edge: float, mass: np.nd
     return tether * 2 * k_length / mean_edge * mass / mass.mean()
 
 
-def _skin_system(rig, rotation: bool = True):
+def skin_system(rig, rotation: bool = True):
     """The skin's shell, lumped masses, stiffness with the tethers, and rotation operator (None
     without `rotation`)."""
     skin, p = rig.skin, rig.params
@@ -524,7 +525,7 @@ def precompute(rig, progress=None):
     todo = [m for m in rig.muscles if not isinstance(m.basis, ModalBasis)]
     if not todo and (isinstance(rig.gravity_basis, ModalBasis) or not gravity) and "k_length" in p:
         return rig
-    energy, mass, K, W = _skin_system(rig)
+    energy, mass, K, W = skin_system(rig)
     p.update(k_area=energy.k_area, k_length=energy.k_length, k_bend=energy.k_bend)
     modes = int(p.get("modes", 8))
     def system(m):
@@ -533,7 +534,7 @@ def precompute(rig, progress=None):
         if m.kind == "drive":
             # the drive's springs join the stiffness; its loads: the anchors' motion
             Kd = (K + sp.diags(np.repeat(drive_springs(rig, m), 3))).tocsr()
-            loads = [drive_load(rig, m, motion) for motion in _drive_motions(m)]
+            loads = [drive_load(rig, m, motion) for motion in drive_motions(m)]
             return ModalBasis.compute(energy, mass, ~m.roi, r=modes, stiffness=Kd, rotation=W,
                                       load_shapes=np.stack([f.ravel() for f in loads], 1))
         # its springs' loads, the Ritz vectors solved with the springs in (its static field exact)
@@ -616,7 +617,7 @@ def region_system(rig, center: np.ndarray, radius: float, reach: float = 3.0):
     if len(nodes) == 0:
         raise MimicaError(f"pull: no skin within {radius:g} of {np.round(center, 3).tolist()}")
     w = (1 - d[nodes] / radius) ** 2
-    energy, mass, K, W = _skin_system(rig)
+    energy, mass, K, W = skin_system(rig)
     basis = ModalBasis.compute(energy, mass, d > reach * radius, r=rig.params.get("modes", 8),
                                load_nodes=nodes[:: max(1, len(nodes) // 24)], stiffness=K, rotation=W)
     return basis, nodes, w / w.sum()
@@ -632,50 +633,6 @@ def follow_activation(q, v, a, h, w):
     frequency w (Kim eq. 13), one implicit Euler step: (q', v').  Scalars or arrays."""
     v = (v + h * w * w * (a - q)) / (1 + 2 * h * w + h * h * w * w)
     return q + h * v, v
-
-
-def explosion_limit(rest: np.ndarray) -> float:
-    """The largest displacement a frame may have: ten times the face's size."""
-    return 10.0 * float(np.linalg.norm(np.ptp(rest, axis=0)))
-
-
-def check_frame(u: np.ndarray, limit: float, t: float) -> None:
-    """Stop before anything is written when a frame's displacement `u` is not finite or has
-    exploded past `limit` (an unstable step, or non-finite input).  Two reductions, no
-    temporary: NaN propagates through min and max, so one comparison catches both."""
-    lo, hi = float(u.min()), float(u.max())
-    if not (-limit <= lo and hi <= limit):
-        what = "is not finite" if not (np.isfinite(lo) and np.isfinite(hi)) else "moved beyond ten face sizes"
-        raise MimicaError(f"the simulation became unstable at t = {t:.3f} s (the skin {what}); nothing "
-                          "was written: use a higher frame rate, or smaller forces")
-
-
-def run_frames(sim, activation_at, duration: float, progress=None, before_step=None) -> np.ndarray:
-    """Frames (F, n, 3) of skin positions from a simulator with rig, fps, substeps, step() and
-    displacement(); activation_at(t) -> (n_muscles,); before_step(t) is called before each step.
-    A non-finite activation or an exploded frame stops the run (MimicaError) before any frame
-    is handed back."""
-    h = 1.0 / (sim.fps * sim.substeps)
-    n_frames = int(round(duration * sim.fps)) + 1
-    rest = sim.rig.skin.vertices
-    limit = explosion_limit(rest)
-    frames = np.empty((n_frames,) + rest.shape)
-    frames[0] = rest + sim.displacement()
-    for f in range(1, n_frames):
-        for k in range(sim.substeps):
-            t = ((f - 1) * sim.substeps + k + 1) * h
-            if before_step is not None:
-                before_step(t)
-            a = activation_at(t)
-            if not np.isfinite(a).all():
-                raise MimicaError(f"the muscle activations at t = {t:.3f} s are not finite; nothing was written")
-            sim.step(a)
-        u = sim.displacement()
-        check_frame(u, limit, f / sim.fps)
-        frames[f] = rest + u
-        if progress:
-            progress(f, n_frames)
-    return frames
 
 
 def skin_density(rig, frequency: float) -> float:

@@ -50,8 +50,8 @@ def muscle_fields(sim) -> np.ndarray:
 def skin_stiffness(rig):
     """The rig's skin stiffness with its tethers (sparse, 3n x 3n), the shell's stiffnesses
     recorded in rig.params as precompute does (the springs are scaled by them)."""
-    from .face import _skin_system
-    energy, _, K, _ = _skin_system(rig, rotation=False)
+    from .face import skin_system
+    energy, _, K, _ = skin_system(rig, rotation=False)
     rig.params.update(k_area=energy.k_area, k_length=energy.k_length, k_bend=energy.k_bend)
     return K
 

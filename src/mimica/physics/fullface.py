@@ -18,8 +18,9 @@ import scipy.sparse as sp
 
 from ..errors import MimicaError
 from ..rig.drives import jaw_open_factors
-from .face import (DRIVE_SPRING, ActivationMap, _drive_motions, follow_activation, precompute, run_frames,
-                   skin_density, spring_stiffness, tether_springs)
+from .engine import run_frames
+from .face import (DRIVE_SPRING, ActivationMap, drive_motions, follow_activation, precompute, skin_density,
+                   spring_stiffness, tether_springs)
 from .modal import FullSolver
 from .shell import ShellEnergy, lumped_mass
 
@@ -93,7 +94,7 @@ class FullFaceSimulator:
                                  springs=self.tether + sum(self.spring_sum))
         self.stretch = [m.stretch for m in rig.muscles]
         # the anchors' displacement at stretch q: q x the stretch, the jaw's exactly turned
-        self.parts = [_drive_motions(m) if m.kind == "drive" else None for m in rig.muscles]
+        self.parts = [drive_motions(m) if m.kind == "drive" else None for m in rig.muscles]
         self.phi = [np.radians(m.info["angle"]) if "angle" in m.info else None for m in rig.muscles]
         self.omega = np.array([m.omega for m in rig.muscles])
         self.q = np.zeros(len(rig.muscles))

@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..solver import SPDSolver
-from .face import run_frames
+from .engine import run_frames
 from .shell import lumped_mass
 
 MAX_DT = 1.0 / 120.0                  # seconds: the longest step of the sprung engine

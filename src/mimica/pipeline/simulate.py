@@ -144,16 +144,18 @@ def timeline_for(rig, o: SimulateOptions):
     return Timeline.preset(o.expression, names, duration=o.duration or 2.0), o.duration or 2.0
 
 
+def engine_name(o: SimulateOptions) -> str:
+    """The physics engine (physics.ENGINES) the options choose."""
+    return "sprung" if o.engine == "sprung" else "full" if o.solver == "full" else "modal"
+
+
 def engine_for(rig, o: SimulateOptions, tl):
-    """The simulator the options name, its forces set."""
-    if o.engine == "sprung":
-        from ..physics.sprung import SprungFace
-        return SprungFace(rig, fps=o.fps)
-    if o.solver == "full":
-        from ..physics.fullface import FullFaceSimulator
-        return FullFaceSimulator(rig, fps=o.fps)
-    from ..physics.face import FaceSimulator
-    sim = FaceSimulator(rig, fps=o.fps, warp=o.warp, springs=o.springs)
+    """The simulator the options name (physics.make_engine), its forces set."""
+    from ..physics import make_engine
+    name = engine_name(o)
+    if name != "modal":
+        return make_engine(name, rig, o.fps)
+    sim = make_engine(name, rig, o.fps, warp=o.warp, springs=o.springs)
     if o.gravity or "gravity" in tl.channels:
         sim.set_gravity(np.array([0.0, -(o.gravity or 1.0), 0.0]))
     for center, radius, force in o.pulls:
