@@ -1,4 +1,4 @@
-"""Batches at studio scale (issue 19): many heads x many performances, on this machine's
+"""Batches at studio scale: many heads x many performances, on this machine's
 cores or a Ray cluster.
 
     report = run_batch("jobs.toml", "out/", workers=2)          # or ray="auto" / "host:port"

@@ -1,5 +1,5 @@
 """A batch manifest (TOML) made into a plan: heads x performances x jobs, each job keyed by
-the contents of its inputs and its options (issue 19, parts 1 and 3).
+the contents of its inputs and its options.
 
     [heads]
     alice = "heads/alice.obj"                                  # a file

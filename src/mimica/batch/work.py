@@ -1,6 +1,6 @@
 """One job of a batch, run in a worker process (a local pool's or a Ray actor's).
 
-A worker keeps what its jobs share in memory for its whole life (issue 19, part 1): a head's
+A worker keeps what its jobs share in memory for its whole life: a head's
 landmarks (detected once, also kept in the batch's cache folder), the meshes and frames it has
 read, and every ExpressionTransfer it has built -- the correspondence and the factorization of
 a (source neutral, head) pair -- so that all the performances of one source onto one head pay

@@ -1,4 +1,4 @@
-"""Lid and lip contours as curves on a face (issue 16, part 2), matched by arc length.
+"""Lid and lip contours as curves on a face, matched by arc length.
 
 Each contour runs through iBUG 68 landmarks (an eye's rim, the outer and the inner lip line,
 all closed).  On a mesh it is traced landmark to landmark as the shortest path over the mesh's

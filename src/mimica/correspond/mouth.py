@@ -1,4 +1,4 @@
-"""Sealed lips (issue 16, part 3): a head whose mouth is one closed surface cannot open it.
+"""Sealed lips: a head whose mouth is one closed surface cannot open it.
 
 `cut_mouth` finds the seam between the lips -- the shortest path over the mesh's edges from one
 inner mouth corner (iBUG 60) through the meeting points of the inner lips (61/67, 62/66,

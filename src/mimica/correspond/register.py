@@ -1,4 +1,4 @@
-"""Non-rigid registration of the source surface onto the target (issue 16, part 2).
+"""Non-rigid registration of the source surface onto the target.
 
 After Amberg, Romdhani and Vetter, "Optimal Step Nonrigid ICP Algorithms for Surface
 Registration" (CVPR 2007): the source is deformed onto the target by a sequence of linear

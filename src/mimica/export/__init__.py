@@ -1,4 +1,4 @@
-"""Take it home: ARKit blendshapes for any head, glTF sequences (issue 5)."""
+"""Take it home: ARKit blendshapes for any head, glTF sequences."""
 
 from .blendshapes import ARKIT_52, arkit_blendshapes, ict_sources
 from ..store import TemplateStore

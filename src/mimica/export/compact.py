@@ -1,4 +1,4 @@
-"""A clip as a few basis shapes and per-frame weights (issue 17, part 2).
+"""A clip as a few basis shapes and per-frame weights.
 
 One morph target per frame makes a 10 s, 60 fps clip on a 26,719-vertex head some 190 MB.  A
 face's motion lies in few dimensions: the clip's displacements from its rest, D (F x 3n), are

@@ -1,4 +1,4 @@
-"""ARKit performances on a head (issue 17, part 4): a Live Link Face take played on the 52
+"""ARKit performances on a head: a Live Link Face take played on the 52
 morph targets of a head mimica made blendshapes for.
 
 A take is a CSV as Apple's Live Link Face app writes it -- `Timecode` (HH:MM:SS:FF.fff at the

@@ -1,4 +1,4 @@
-"""USD (issue 17, part 3): a head with named blend shapes and, for a clip, a SkelAnimation of
+"""USD: a head with named blend shapes and, for a clip, a SkelAnimation of
 their weights (UsdSkel, through Pixar's usd-core: `pip install mimica[usd]`).
 
 Layout: /Head (SkelRoot) > Skel (Skeleton, one root joint at identity, as UsdSkel wants a

@@ -1,4 +1,4 @@
-"""ARKit weights from a video, without an iPhone (issue 17, part 4): the face's 68 points are
+"""ARKit weights from a video, without an iPhone: the face's 68 points are
 tracked frame by frame (the photo pipeline's detector, landmarks.detect2d), and the 52 weights
 fitted to them through the head's own blendshapes.
 

@@ -21,7 +21,7 @@ Step 4 is the paper's appearance step (method "vtc").  The default (method "shad
 image.shading) departs from it: eq. 4 carries the source's shading under the source's light,
 which lost to the warp alone on faces lit otherwise (rendered ICT pairs 24.84 vs 25.30 dB); the
 expression's shading change is made on a generic 3D face under the target's own fitted light
-instead (26.27 dB; docs/benchmarks.md, issue 20).
+instead (26.27 dB; docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -380,7 +380,7 @@ class ImageAnalogy:
 # default), Song's eq. 4 (vtc, the paper's), expression ratio images (eri), none (warp)
 METHODS = ("shading", "vtc", "eri", "warp")
 
-# the face's regions by their feature points, for per-region strengths (issue 20, part 2)
+# the face's regions by their feature points, for per-region strengths
 REGIONS = {"brows": np.arange(17, 27), "eyes": np.arange(36, 48), "nose": np.arange(27, 36),
            "mouth": np.arange(48, 68), "jaw": np.arange(0, 17)}
 

@@ -1,5 +1,5 @@
 """The photo transfer's appearance step: the expression's shading, on a 3D face, under the target
-photo's own light (issue 20, part 1).
+photo's own light.
 
 Song et al. §VI carry the source's luminance change onto the target (eq. 2 per pixel, eq. 4 for
 the luminances).  That change is made of the expression's shading under the *source's* light:

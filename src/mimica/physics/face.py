@@ -7,7 +7,7 @@ Per step and per muscle i (all vectorized over the muscle's spring nodes):
            in the limit of motions large against the layer's thickness, along u_m - u_s (eq. 16's
            S_d - S_ud with the skin's end moving too).  springs="kim": eq. 15's relative elongation
            along the spring's deformation (kim_spring; eq. 16 as printed diverges), linearized
-           at every step; measured against the linear law in docs/benchmarks.md (issue 18), the
+           at every step; measured against the linear law in docs/benchmarks.md, the
            linear one stays the default.
   skin:    the muscle's ROI system driven by R^T F, its displacement warped by the integrated
            rotation (modal warping, eqs. 10, 17-19; warp=False: linear)
@@ -918,7 +918,7 @@ class FaceSimulator:
 
 def displacement_cosine(u: np.ndarray, reference: np.ndarray, moving: float = 0.05) -> float:
     """Cosine between two displacement fields (n, 3) over the reference's moving region
-    (nodes moving more than `moving` of its largest motion): the anatomy check of issue 3."""
+    (nodes moving more than `moving` of its largest motion): the anatomy check."""
     m = np.linalg.norm(reference, axis=1)
     sel = m > moving * m.max()
     a, b = u[sel], reference[sel]

@@ -1,4 +1,4 @@
-"""Performances fitted to muscles (issue 18, part 2): the non-negative activations whose
+"""Performances fitted to muscles: the non-negative activations whose
 simulated skin best matches target shapes.
 
 Kim's force decomposition (eq. 21) makes the modal face linear in the activations: each
@@ -146,8 +146,8 @@ class MuscleFit:
     @classmethod
     def of_rig(cls, rig, sim=None) -> "MuscleFit":
         """The fit for a rig: its muscles' fields, the misfit summed over the vertices some
-        muscle's region of interest covers, each vertex alike -- the measure of a match issue 18
-        states (the cosine over a shape's vertices); weighted by the vertices' area instead, the
+        muscle's region of interest covers, each vertex alike -- the measure of a match as
+        the benchmark states it (the cosine over a shape's vertices); weighted by the vertices' area instead, the
         fit of ICT's shapes on the held-out identities read min 0.682 (mouthDimple: the dense
         lips count less by area) / median 0.888 against 0.797 / 0.895 (docs/benchmarks.md)."""
         from .face import FaceSimulator

@@ -1,4 +1,4 @@
-"""The face without modes: `mimica simulate --solver full` (issue 3, the reference solver).
+"""The face without modes: `mimica simulate --solver full`.
 
 The skin is one nonlinear shell (Kim eq. 4, the rig's stiffnesses), held where no muscle's
 region of interest reaches (eq. 19) and tethered to its rest as in the modal rig; every

@@ -1,4 +1,4 @@
-"""A picture of how a transfer sees its target (issue 16, part 5): the parts in colour, the
+"""A picture of how a transfer sees its target: the parts in colour, the
 skin without a source partner, the cut mouth's seam and the lid rims the contacts pair; and the
 correspondence's confidence per vertex as a map."""
 

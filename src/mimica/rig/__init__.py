@@ -240,7 +240,7 @@ def strip_muscle(mdef: MuscleDef, skin: Mesh, lm: np.ndarray, near, alpha: float
 # skin in streaks between the 9 x 4 nodes where ICT's sculpted shapes are smooth.  Chosen on the
 # training faces (the generic one, seeds 11 and 12) from 0 / 0.5 / 1 / 1.5 / 2 / 3, the library's
 # fit of the 47 coverage shapes: median 0.903 / 0.907 / 0.908 / 0.907 / 0.905 / 0.901, min 0.792 /
-# 0.796 / 0.799 / 0.799 / 0.800 / 0.796 (docs/benchmarks.md, issue 18).
+# 0.796 / 0.799 / 0.799 / 0.800 / 0.796 (docs/benchmarks.md).
 FAN = 1.0
 
 

@@ -1,4 +1,4 @@
-"""Rigid parts that move the skin through its attachments: the jaw and the eyelids (issue 18).
+"""Rigid parts that move the skin through its attachments: the jaw and the eyelids.
 
 A muscle of the library pulls a strip of skin; the jaw and the lids are different: a bone (the
 mandible) or a stiff plate (the tarsal plate of each lid) turns about a joint, and the skin
@@ -299,7 +299,7 @@ def margin_opening(xp, info) -> np.ndarray:
 
 def open_pairs(rest_opening) -> np.ndarray:
     """The margin pairs open at least half the widest at rest (bool): where a closed lid's gap
-    is measured (issue 18's figure; the corners' folds are left out)."""
+    is measured (the figure; the corners' folds are left out)."""
     rest_opening = np.asarray(rest_opening, float)
     return rest_opening >= 0.5 * rest_opening.max()
 

@@ -79,7 +79,7 @@ _RIGHT = [
               origin_depth=0.04),
     MuscleDef("masseter_R", {0: 0.6, 1: 0.4}, {4: 0.7, 5: 0.3}, origin_out=-0.05, width=0.2, origin_depth=0.12,
               insertion_depth=0.1),
-    # issue 18: the rest of what expressions need (the jaw and the lids are drives, rig.drives)
+    # the rest of what expressions need (the jaw and the lids are drives, rig.drives)
     MuscleDef("frontalis_medial_R", {21: 0.6, 20: 0.4}, {21: 0.6, 20: 0.4}, origin_lift=0.9, width=0.4,
               origin_depth=0.06, insertion_depth=0.02, alpha=20),
     MuscleDef("procerus_R", {27: 1.0}, {21: 0.7, 27: 0.3}, origin_lift=-0.1, insertion_lift=0.1, width=0.1,
@@ -117,7 +117,7 @@ ICT_SHAPES = {
 
 
 def coverage_shapes() -> list[str]:
-    """ICT-FaceKit's expression shapes that muscles and the jaw make (issue 18's coverage
+    """ICT-FaceKit's expression shapes that muscles and the jaw make (the coverage
     figure; what calibration's --joint-all fits): all but the gaze (eyeLook*) and the pupils."""
     return [n for n in shape_names() if not n.startswith(("eyeLook", "Pupil", "identity", "generic"))]
 

@@ -1,4 +1,4 @@
-"""Lid contacts (issue 16, part 3): the target's lids close as far as the source's do.
+"""Lid contacts: the target's lids close as far as the source's do.
 
 A transfer carries the source's deformation gradients, not where its lid rims meet: on a
 target of another topology a blink closes the lids part of the way (ICT's own eyeBlink closes

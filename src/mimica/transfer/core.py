@@ -406,7 +406,7 @@ class TransferSolver:
         self._fixed_base = T[fixed_v] - self._vm_fixed @ S
 
     def apply_basis(self, frames: np.ndarray, tol: float = BASIS_TOL, similarity=None, check: int = 0):
-        """Frames (F, n_s, 3) through a basis of their motion (issue 19, part 6): None where the
+        """Frames (F, n_s, 3) through a basis of their motion: None where the
         motion, or its tips' bending, does not lie in few enough shapes, else the target frames
         (F, n_t, 3); `basis_stats` says what was used, or why not.
         check: this many frames are also solved one by one, exactly as `apply` would (in the

@@ -1,4 +1,4 @@
-"""Low-confidence skin takes its motion from the skin around it (issue 16, parts 2 and 3).
+"""Low-confidence skin takes its motion from the skin around it.
 
 Where the correspondence is weak -- a sealed eye's skin across an opening the source has, a
 target reaching past the source's edge -- the source's deformation there is the wrong one

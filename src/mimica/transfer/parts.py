@@ -1,4 +1,4 @@
-"""How the parts of a head that are not skin move in a transfer (issue 16, part 1).
+"""How the parts of a head that are not skin move in a transfer.
 
 The skin is transferred skin to skin (Song et al.); the other target parts take their role's
 motion (correspond.parts): rigid bodies take the rigid motion that best fits the source's

@@ -134,7 +134,7 @@ def profile(t, rho, alpha, skew, iterations=4):
     return 3.0 * u * v * (v * s0 + u * s1)
 
 
-# a wrinkle's depth at its muscle's full contraction, against at rest (issue 18, part 4): a
+# a wrinkle's depth at its muscle's full contraction, against at rest: a
 # mimica choice, not measured (Viaud & Yahia drive the bulge by compression and age alone)
 MUSCLE_EMPHASIS = 0.5
 
@@ -341,8 +341,8 @@ class WrinkleLayer:
     def muscle_emphasis(self, activations: dict) -> np.ndarray:
         """(n_wrinkles,) each wrinkle's emphasis from the muscles its mask names: 1 at rest,
         1 + MUSCLE_EMPHASIS x the most active of them (a departure from Viaud & Yahia, whose
-        bulge follows the skin's compression and age alone: issue 18 asks the folding muscle's
-        pull for it too; contractions only, relaxations leave it at 1)."""
+        bulge follows the skin's compression and age alone: the folding muscle's
+        pull counts for it too; contractions only, relaxations leave it at 1)."""
         return np.array([1.0 + MUSCLE_EMPHASIS * max([0.0] + [max(float(activations.get(m, 0.0)), 0.0)
                                                               for m in w.muscles])
                          for w in self.mask.wrinkles])
