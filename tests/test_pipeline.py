@@ -144,3 +144,17 @@ def test_age_render_export_animate_defaults_are_the_pipelines():
         (x.fps, x.format, x.units, x.compact, x.quantize, x.rest)
     n = p.parse_args(["animate", "h.glb", "--arkit", "t.csv", "--out", "t.glb"])
     assert (n.head_rotation, n.pivot, n.fps, n.rest_frame) == tuple(vars(AnimateOptions()).values())
+
+
+def test_the_demo_runs_on_the_pipeline_and_its_glb_plays(tmp_path):
+    """`make demo` (quick): the contact sheet, the targets' expressions, and the real head's GLB
+    as `blendshapes` writes it -- its landmarks stored, so `animate --video` can fit it."""
+    from mimica.cli import main
+    from mimica.export.video import landmark_basis
+    from mimica.image import read_image
+    out = tmp_path / "demo"
+    assert main(["demo", "--quick", "--out", str(out)]) == 0
+    assert read_image(out / "contact_sheet.png").shape[0] > 300
+    assert len(list((out / "identity_B").glob("*.obj"))) == 4          # neutral and three expressions
+    basis = landmark_basis(out / "real_head" / "arkit_52.glb")
+    assert basis.motion.shape[0] == 52 and np.abs(basis.motion).max() > 0

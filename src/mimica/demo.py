@@ -13,7 +13,7 @@ from .landmarks import Landmarks, ict_landmarks, write_landmarks
 from .mesh import write_mesh
 from .correspond.remesh import resample_face
 from .render import contact_sheet, render_mesh, save_png, shared_frame
-from .transfer import ExpressionTransfer, static_vertices
+from .pipeline import TransferOptions, prepare_transfer
 
 EXPRS = ["happiness", "surprise", "sadness", "anger", "disgust", "jawOpen"]
 TARGETS = [("identity A", {"identity000": -0.9, "identity003": 1.2, "identity006": 1.0}),
@@ -32,7 +32,6 @@ def run_demo(out: Path, quick=False, shown: Path | None = None) -> int:
     for e, v in zip(exprs, frames):
         write_mesh(out / "source" / f"{e}.obj", S.with_vertices(v))
     write_mesh(out / "source" / "neutral.obj", S)
-    static = static_vertices(S.vertices, frames)
     rows = [("source (ICT generic)", S, S.vertices, frames)]
     for label, w in TARGETS[: 2 if quick else 3]:
         tv = model.identity(w)
@@ -49,7 +48,7 @@ def run_demo(out: Path, quick=False, shown: Path | None = None) -> int:
             write_landmarks(out / name / "neutral.landmarks.json", pts)
             lt = Landmarks.snap(T, pts)
         t1 = time.perf_counter()
-        xfer = ExpressionTransfer(S, T, ict_landmarks(S), lt or ict_landmarks(T), static=static)
+        xfer, _, _ = prepare_transfer(S, T, frames, TransferOptions(), ict_landmarks(S), lt or ict_landmarks(T))
         res = xfer.apply(frames)
         log(f"{label}: {T.n_vertices} vertices, precompute {time.perf_counter() - t1:.2f}s")
         write_mesh(out / name / "neutral.obj", T)
@@ -80,8 +79,9 @@ def _real_head_shapes(out: Path, log):
     a glTF of morph targets and one picture of them all.  None without the data."""
     import json
     from .data import data_dir
-    from .export import ARKIT_52, arkit_blendshapes
-    from .mesh import read_mesh, write_glb
+    from .export import ARKIT_52
+    from .mesh import read_mesh
+    from .pipeline import make_blendshapes
     d = data_dir()
     head_dir = d / "real-heads" / "mediapipe-canonical" if d else None
     if head_dir is None or not (head_dir / "head.obj").is_file():
@@ -90,10 +90,11 @@ def _real_head_shapes(out: Path, log):
     t = time.perf_counter()
     head = read_mesh(head_dir / "head.obj")
     ids = json.loads((head_dir / "head.json").read_text())["landmark_vertices"]
-    shapes = arkit_blendshapes(head, Landmarks.from_vertex_indices(head, ids))
-    cut = shapes.mesh                          # its sealed lips cut apart: the cut's vertices appended
     (out / "real_head").mkdir(parents=True, exist_ok=True)
-    write_glb(out / "real_head" / "arkit_52.glb", cut, {n: shapes[n] for n in ARKIT_52})
+    # as `mimica blendshapes` writes it: the GLB carries what `animate` reads (its landmarks, its pivot)
+    shapes = make_blendshapes(head, out / "real_head" / "arkit_52.glb",
+                              landmarks=Landmarks.from_vertex_indices(head, ids)).shapes
+    cut = shapes.mesh                          # its sealed lips cut apart: the cut's vertices appended
     frame = shared_frame([head.vertices])
     tiles = [render_mesh(cut, shapes[n], size=(190, 190), frame=frame) for n in ARKIT_52]
     save_png(out / "real_head" / "arkit_52.png",

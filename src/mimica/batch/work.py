@@ -4,11 +4,9 @@ A worker keeps what its jobs share in memory for its whole life: a head's
 landmarks (detected once, also kept in the batch's cache folder), the meshes and frames it has
 read, and every ExpressionTransfer it has built -- the correspondence and the factorization of
 a (source neutral, head) pair -- so that all the performances of one source onto one head pay
-for it once.  The scheduler sends all the jobs of a head to the same worker.  Kinds that gain
-nothing from a warm worker (animate, simulate, age, render, export, blendshapes) still reuse
-its read heads and landmarks.
-Every kind runs in-process through the pipeline (mimica.pipeline), as the command line does, so
-a batch's outputs are the commands' outputs.
+for it once.  The scheduler sends all the jobs of a head to the same worker.  Every kind runs
+in-process through the pipeline (mimica.pipeline), as the command line does, so a batch's
+outputs are the commands' outputs.
 """
 
 from __future__ import annotations

@@ -67,7 +67,8 @@ class BlendshapesResult:
     seconds: float
 
 
-def make_blendshapes(head, out, options: BlendshapesOptions | None = None, progress=None) -> BlendshapesResult:
+def make_blendshapes(head, out, options: BlendshapesOptions | None = None, progress=None,
+                     landmarks=None) -> BlendshapesResult:
     """The 52 ARKit shapes of a head, written to `out`.
 
     Parameters
@@ -80,6 +81,8 @@ def make_blendshapes(head, out, options: BlendshapesOptions | None = None, progr
     options : BlendshapesOptions, optional
     progress : callable, optional
         Called with one line of text at each step (and with what reading the head's file noted).
+    landmarks : Landmarks, optional
+        The head's landmarks already in hand (instead of `options.landmarks`' file).
 
     Returns
     -------
@@ -97,9 +100,10 @@ def make_blendshapes(head, out, options: BlendshapesOptions | None = None, progr
                           "head (Blender, Maya and game engines import it)")
     t0 = time.perf_counter()
     mesh = head if isinstance(head, Mesh) else read_mesh(head)
+    what = (mesh.name or "the head") if isinstance(head, Mesh) else head
     for note in (mesh.layout.notes if mesh.layout is not None else []):
-        say(f"{head}: {note}")
-    lm = read_landmarks(o.landmarks, mesh) if o.landmarks else None
+        say(f"{what}: {note}")
+    lm = landmarks if landmarks is not None else read_landmarks(o.landmarks, mesh) if o.landmarks else None
     shapes = arkit_blendshapes(mesh, lm, progress=say, cut_mouth=o.cut_mouth, match=o.match, cut_eyes=o.cut_eyes)
     written = write_blendshapes(out, mesh, shapes, units=o.units, quantize=o.quantize)
     return BlendshapesResult(out, mesh, shapes, written, lm is None and not is_ict_topology(mesh),

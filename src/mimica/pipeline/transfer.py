@@ -197,13 +197,15 @@ def transfer_sequence(source, expressions, target, out, options: TransferOptions
     t0 = time.perf_counter()
     src = source if isinstance(source, Mesh) else read_mesh(source)
     tgt = target if isinstance(target, Mesh) else read_mesh(target)
+    what = (tgt.name or "the target") if isinstance(target, Mesh) else target
     for note in (tgt.layout.notes if tgt.layout is not None else []):
-        say(f"{target}: {note}")
+        say(f"{what}: {note}")
     paths = [Path(p) for p in expressions]
     frames = read_sequence(paths, src)
     t1 = time.perf_counter()
+    src_what = (src.name or "the source") if isinstance(source, Mesh) else str(source)
     xfer, lt, found = prepare_transfer(src, tgt, frames, options, source_landmarks, target_landmarks,
-                                   what=(str(source), str(target)))
+                                       what=(src_what, str(what)))
     t2 = time.perf_counter()
     results = xfer.apply(frames)            # through the sequence's basis where it holds (apply's rule)
     t3 = time.perf_counter()
