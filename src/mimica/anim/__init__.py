@@ -45,10 +45,21 @@ PRESETS = {
 
 @dataclass
 class Channel:
+    """One curve of a timeline: keyframes (time, value), interpolated between them.
+
+    Attributes
+    ----------
+    keys : (k, 2) float array
+        Time in seconds and value, times increasing; before the first key the first value holds,
+        after the last the last.
+    interp : str
+        "step", "linear" or "cubic" (monotone: PCHIP, no overshoot between keys).
+    """
     keys: np.ndarray            # (k, 2): time, value; times increasing
     interp: str = "linear"
 
     def __call__(self, t):
+        """The curve at time(s) `t` (float or array of seconds), as an array of t's shape."""
         t = np.asarray(t, float)
         k = self.keys
         if len(k) == 1:
@@ -64,10 +75,22 @@ class Channel:
 
 @dataclass
 class Timeline:
+    """Named curves over time: one channel per muscle (activation, about -1 to 1) or force
+    ("age" in years, "gravity" and "pull" as scales), what `simulate` plays.  Saved as JSON
+    ({"format": "mimica-timeline/1", "duration", "channels": {name: {"interp", "keys"}}}).
+
+    Attributes
+    ----------
+    channels : dict of str to Channel
+        The curves by name; a name without a channel is 0 throughout.
+    duration : float
+        Seconds.
+    """
     channels: dict = field(default_factory=dict)
     duration: float = 1.0
 
     def values(self, t: float, names) -> np.ndarray:
+        """(len(names),) float: each named channel at time `t` (0 where it has none)."""
         return np.array([float(self.channels[n](t)) if n in self.channels else 0.0 for n in names])
 
     @classmethod
@@ -98,6 +121,7 @@ class Timeline:
                    duration)
 
     def save(self, path) -> Path:
+        """Write the timeline as JSON, whole or not at all; returns the path."""
         doc = {"format": FORMAT, "duration": self.duration,
                "channels": {n: {"interp": c.interp, "keys": c.keys.tolist()} for n, c in self.channels.items()}}
         path = Path(path)
@@ -107,6 +131,9 @@ class Timeline:
 
     @classmethod
     def load(cls, path) -> "Timeline":
+        """A timeline file read and checked: each channel's keys finite, times increasing, values
+        in the channel's range (RANGES, else ACTIVATION_RANGE); a MimicaError naming the file and
+        the channel otherwise."""
         path = Path(path)
         doc = read_json(path, "timeline")
         if not isinstance(doc, dict) or doc.get("format") != FORMAT:

@@ -29,7 +29,32 @@ FORMAT = "mimica-rig/2"          # 2: the strips' springs fan out over the skin 
 
 @dataclass
 class Muscle:
-    """One placed muscle: strip nodes, its stretch mode, springs to the skin, ROI system."""
+    """One placed muscle (Kim 2020 §IV): a thin strip of nodes from the skull to under the skin,
+    its stretch mode, a spring from each node to the skin, and its region of interest.
+
+    Attributes
+    ----------
+    name : str
+        As in the library (rig.muscles.MUSCLES, rig.drives.DRIVES), "_L"/"_R" for a side.
+    nodes : (k, 3) float array
+        The strip's nodes at rest.
+    stretch : (k, 3) float array
+        Their displacement at full contraction (activation 1).
+    omega : float
+        The stretch mode's frequency, rad/s (critically damped).
+    attach : (k,) int array
+        The skin node each node's spring ties to.
+    roi : (n_skin,) bool array
+        The skin its system covers (Kim eq. 19).
+    basis : ModalBasis or dict or None
+        Its skin system (physics.precompute); arrays when loaded from a file, None until made.
+    kind : str
+        "strip" (a muscle) or "drive" (the jaw, a lid, a cheek: rig.drives).
+    weight : (k,) float array or None
+        A drive's attachment strengths.
+    info : dict
+        What placed it (its origin and insertion, calibration).
+    """
 
     name: str
     nodes: np.ndarray            # (k, 3) rest positions
@@ -55,6 +80,22 @@ class Muscle:
 
 @dataclass
 class Rig:
+    """A face ready to simulate: its skin, its 68 landmarks, the placed muscles and their
+    systems, saved to and loaded from one file (`save`, `load`; pipeline.make_rig makes one).
+
+    Attributes
+    ----------
+    skin : Mesh
+        The face (n_skin vertices).
+    landmarks : (68, 3) float array
+        Its landmarks, iBUG order.
+    muscles : list of Muscle
+        The muscles and drives, in the order activations are given.
+    params : dict
+        How it was built (ROI range, modes, contraction, the spring layer's stiffness, ...).
+    gravity_basis : ModalBasis or dict or None
+        The gravity system (physics.precompute), as a muscle's `basis`.
+    """
     skin: Mesh
     landmarks: np.ndarray        # (68, 3)
     muscles: list[Muscle]
@@ -69,6 +110,7 @@ class Rig:
         return held
 
     def muscle(self, name: str) -> Muscle:
+        """The muscle of that name; a MimicaError listing the rig's muscles otherwise."""
         for m in self.muscles:
             if m.name == name:
                 return m
@@ -76,6 +118,8 @@ class Rig:
 
     # ------------------------------------------------------------------ IO
     def save(self, path) -> Path:
+        """Write the rig (skin, landmarks, muscles, their systems) as one .npz file, whole or not
+        at all; returns the path."""
         path = Path(path)
         arrays = {"skin_v": self.skin.vertices, "skin_fi": self.skin.face_indices,
                   "skin_fs": self.skin.face_starts, "landmarks": self.landmarks}
@@ -100,6 +144,8 @@ class Rig:
 
     @classmethod
     def load(cls, path) -> "Rig":
+        """A rig file read back (its systems as arrays, made ready on first use); a MimicaError
+        naming the file where it is not one."""
         path = Path(path)
         try:
             z = np.load(path, allow_pickle=False)

@@ -39,7 +39,71 @@ __all__ = ["ExpressionTransfer", "TransferSolver", "static_vertices", "relative_
 
 
 class ExpressionTransfer:
-    """Precompute for one (source neutral, target neutral) pair, then `apply` to many frames."""
+    """Song et al.'s expression transfer for one (source neutral, target neutral) pair: the
+    correspondence and the factorization made once, then `apply` moves any number of source
+    frames onto the target.
+
+    Parameters
+    ----------
+    source, target : Mesh
+        The source neutral (n_S vertices) and the target neutral (any topology).
+    source_landmarks, target_landmarks : Landmarks or None
+        Their 68 landmarks; needed across topologies (the target's may be found on renders:
+        landmarks.landmarks_for).  On one topology every vertex is its own partner.
+    method : str
+        "vtc" (Song et al.'s vertex-tent coordinates) or "dt" (Sumner and Popovic's deformation
+        transfer).
+    static : (n_S,) bool array or None
+        Source vertices no frame moves (transfer.static_vertices): held still on the target.
+    solver_kind : str or None
+        The sparse solver (solver.SPDSolver; None: the best installed).
+    parts : bool
+        Split both heads into their parts (correspond.parts): skin to skin, eyeballs, teeth and
+        tongue rigid, lashes and shells with the skin (transfer.parts); `parts` is then (the
+        source's, the target's).
+    cut_mouth : bool
+        Cut a target's sealed lips apart (correspond.mouth): the results have the cut's copies
+        appended (`output_mesh` is the mesh they belong to; `mouth` the cut).
+    inward : (n_T, 3) float array or None
+        Where each target vertex's correspondence is looked up, as offsets (the two sides of a
+        cut seam look inside their own lip).
+    weld : bool
+        Solve a target whose seams are copies of a vertex (uv splits) welded.
+    lids : bool
+        The target's open eyes close as far as the source's do (transfer.contacts).
+    match : str
+        How target vertices find their source partners (correspond.METHODS): "nicp", a
+        non-rigid registration of the source onto the target, or "cylinder", Song et al.'s
+        cylinder map.
+    fill : bool
+        Skin whose correspondence has low confidence takes its motion from the skin around it
+        (transfer.fill).
+    stabilize : bool
+        VTC's energy gets a small per-triangle (DT) term (core.DT_STABILIZER), which keeps
+        vertices in sliver one-rings from drifting; off gives Song's energy alone.
+    relayout : bool
+        A target that is the source's own mesh in another vertex layout (a DCC's export,
+        correspond.layout) is solved on the source's topology (`relaid`).
+    cut_eyes : bool
+        A target whose eyes are one surface with its lids has each eye cut loose along its lid
+        margin (correspond.eyes), the inside then its eye, rigid, which the lids close over
+        (`eye_cut`; the copies follow the mouth's).
+
+    Attributes
+    ----------
+    output_mesh : Mesh
+        The mesh the results belong to: the target in its own vertex order, any cut's copies
+        after its vertices.
+    correspondence : Correspondence or None
+        The dense map (across topologies).
+    similarity : Similarity
+        The target's alignment onto the source; `alignment_residual` its residual over the
+        face's size.
+    mouth, eye_cut : MouthCut or EyeCut or None
+        The cuts made; `mouth_uncut` and `eyes_uncut` say why sealed ones were left.
+    basis_report : dict
+        What the last `apply` did with a long sequence's basis.
+    """
 
     def __init__(self, source: Mesh, target: Mesh, source_landmarks: Landmarks | None = None,
                  target_landmarks: Landmarks | None = None, method: str = "vtc",
@@ -47,34 +111,6 @@ class ExpressionTransfer:
                  cut_mouth: bool = True, inward: np.ndarray | None = None, weld: bool = True,
                  lids: bool = True, match: str = "nicp", fill: bool = True, stabilize: bool = True,
                  relayout: bool = True, cut_eyes: bool = True):
-        """Across topologies (target landmarks given):
-
-        - a target whose seams are saved as copies of a vertex (uv splits) is solved welded;
-        - cut_mouth: a target with sealed lips has them cut apart (correspond.mouth); the
-          results then have the cut's copies appended (`output_mesh` is the mesh they belong
-          to; `mouth` the cut);
-        - parts: both heads are split into their parts (correspond.parts): the skin is
-          transferred skin to skin, eyeballs, teeth and tongue move rigidly, lashes and shells
-          follow the skin (transfer.parts); `self.parts` is then (source's, target's).
-
-        - lids: the target's open eyes close as far as the source's do (transfer.contacts).
-        - fill: skin whose correspondence has low confidence takes its motion from the skin
-          around it (transfer.fill).
-        - stabilize: VTC's energy gets a small per-triangle (DT) term (core.DT_STABILIZER),
-          which keeps vertices in sliver one-rings from drifting; off gives Song's energy alone.
-        - match: how target vertices find their source partners (correspond.METHODS): "nicp",
-          a non-rigid registration of the source onto the target, or "cylinder", Song et
-          al.'s cylinder map.
-
-        cut_eyes: a target whose eyes are one surface with its lids has each eye cut loose along
-          its lid margin (correspond.eyes), the inside then its eye, rigid, which the lids close
-          over; the copies follow the mouth's (`eye_cut`).
-        relayout: a target that is the source's own mesh in another vertex layout (a DCC's export,
-        correspond.layout) is solved on the source's topology (`relaid`); off, its correspondence
-        is found as for any other head.
-
-        inward: (n_target, 3) offsets of where each target vertex's correspondence is looked
-        up (the two sides of a cut seam look inside their own lip)."""
         self.source, self.method, self.match = source, method, match
         self.basis_report = {"used": False, "why": "not applied yet"}
         same = source.same_topology(target)
