@@ -100,10 +100,9 @@ class Timeline:
             raise MimicaError(f"unknown expression {expression!r}; presets: {', '.join(PRESETS)}")
         onset = min(onset, 0.4 * duration)
         hold = duration * 0.6 if hold is None else hold
+        from ..rig.muscles import weights_on
         ch = {}
-        for name in muscles:
-            base = name.rsplit("_", 1)[0]
-            a = PRESETS[expression].get(base, PRESETS[expression].get(name, 0.0))
+        for name, a in zip(muscles, weights_on(PRESETS[expression], list(muscles))):
             if a:
                 keys = [[0.0, 0.0], [onset, a]]
                 if onset + hold + 0.2 < duration:              # long enough to let go again

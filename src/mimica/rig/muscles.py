@@ -173,9 +173,16 @@ FACIAL_ACTIONS = {
 }
 
 
+def weights_on(weights: dict, muscle_names) -> np.ndarray:
+    """(len(muscle_names),) float: a {muscle: value} map of the library's names (a preset, a
+    facial action) on a rig's muscles -- a side's muscle ("zygomaticus_major_L") takes its
+    muscle's value ("zygomaticus_major"), else its own name's, else 0.  The one place presets
+    and actions reach a rig (anim.Timeline, the viewer)."""
+    return np.array([float(weights.get(n.rsplit("_", 1)[0], weights.get(n, 0.0))) for n in muscle_names])
+
+
 def action_activations(action: str, muscle_names) -> np.ndarray:
     """Activations (n_muscles,) of one facial action for the muscles a rig has."""
     if action not in FACIAL_ACTIONS:
         raise MimicaError(f"unknown facial action {action!r}; actions: {', '.join(FACIAL_ACTIONS)}")
-    w = FACIAL_ACTIONS[action]
-    return np.array([w.get(n.rsplit("_", 1)[0], w.get(n, 0.0)) for n in muscle_names])
+    return weights_on(FACIAL_ACTIONS[action], muscle_names)

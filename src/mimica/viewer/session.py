@@ -59,18 +59,18 @@ class ViewerSession:
     def preset(self, name: str) -> None:
         if name not in self.presets and name != "neutral":
             raise MimicaError(f"preset: unknown expression {name!r}")
-        p = self.presets.get(name, {})
-        for n, b in zip(self.muscles, self.base):
-            self.values[n] = float(p.get(b, p.get(n, 0.0)))
+        from ..rig.muscles import weights_on
+        for n, v in zip(self.muscles, weights_on(self.presets.get(name, {}), self.muscles)):
+            self.values[n] = float(v)
         for k in self.action_values:
             self.action_values[k] = 0.0
 
     def activations(self) -> np.ndarray:
         a = np.array([self.values[n] for n in self.muscles])
+        from ..rig.muscles import weights_on
         for k, w in self.action_values.items():
             if w:
-                for i, b in enumerate(self.base):
-                    a[i] += w * self.actions[k].get(b, 0.0)
+                a += w * weights_on(self.actions[k], self.muscles)
         return np.clip(a, -1.0, 1.0)
 
     # -- simulation -----------------------------------------------------------------------------
