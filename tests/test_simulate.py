@@ -562,3 +562,18 @@ def test_every_engine_is_one_interface(tmp_path):
         assert np.abs(frames - rig.skin.vertices).max() < 1e-9 * np.ptp(rig.skin.vertices)
     with pytest.raises(MimicaError, match="engine 'cloth'"):
         make_engine("cloth", rig)
+
+
+def test_presets_and_actions_reach_a_rigs_muscles_one_way():
+    """A side's muscle takes its muscle's value, else its own name's, else 0; the preset's
+    timeline and a facial action both go through it."""
+    from mimica.anim import PRESETS
+    from mimica.rig.muscles import FACIAL_ACTIONS, action_activations, weights_on
+    names = ["zygomaticus_major_L", "zygomaticus_major_R", "orbicularis_oris", "no_such_R"]
+    w = weights_on({"zygomaticus_major": 0.7, "orbicularis_oris": 0.3, "zygomaticus_major_R": 0.1}, names)
+    assert w.tolist() == [0.7, 0.7, 0.3, 0.0]
+    tl = Timeline.preset("happiness", names, duration=2.0)
+    peak = tl.values(0.5, names)
+    assert np.allclose(peak, weights_on(PRESETS["happiness"], names))
+    act = next(iter(FACIAL_ACTIONS))
+    assert np.array_equal(action_activations(act, names), weights_on(FACIAL_ACTIONS[act], names))
