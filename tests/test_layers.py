@@ -19,7 +19,7 @@ PACKAGE = Path(mimica.__file__).resolve().parent
 # facts) reads through it; image is io for pictures
 # (read, write, and the rasterizer every picture is drawn with); the users sit on top.
 LAYERS = [
-    {"errors", "_extras", "_memory", "outputs", "solver"},
+    {"errors", "_extras", "_memory", "outputs", "solver", "validate"},
     {"mesh"},
     {"store"},
     {"data"},

@@ -158,3 +158,19 @@ def test_the_demo_runs_on_the_pipeline_and_its_glb_plays(tmp_path):
     assert len(list((out / "identity_B").glob("*.obj"))) == 4          # neutral and three expressions
     basis = landmark_basis(out / "real_head" / "arkit_52.glb")
     assert basis.motion.shape[0] == 52 and np.abs(basis.motion).max() > 0
+
+
+def test_the_validators_say_what_was_given_and_what_is_expected():
+    from mimica.validate import floats, number_in, pull, strengths
+    assert floats("0,1.5,-0.1", 3, "pivot") == [0.0, 1.5, -0.1]
+    assert number_in(8, 1, 200, "modes", integer=True) == 8
+    c, r, f = pull("0,1,2:0.5:0,0,3", "pull")
+    assert c.tolist() == [0, 1, 2] and r == 0.5 and f.tolist() == [0, 0, 3]
+    assert strengths("0,mouth=1", "strength") == {"all": 0.0, "mouth": 1.0} and strengths("0.5", "s") == 0.5
+    for call, words in ((lambda: floats("1,nan,2", 3, "--pivot"), "--pivot '1,nan,2': expected 3 finite"),
+                        (lambda: number_in(float("inf"), 1, 2, "--fps"), "--fps inf: expected a number"),
+                        (lambda: number_in(2.5, 1, 9, "--modes", integer=True), "a whole number"),
+                        (lambda: pull("1,2:3", "--pull"), "x,y,z:radius:fx,fy,fz"),
+                        (lambda: strengths("brows=x", "--strength"), "regions as brows=0.5")):
+        with pytest.raises(MimicaError, match=words.replace("(", r"\(")):
+            call()

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 
-from ..errors import MimicaError
+from ..validate import number_in
 
 
 # options that name what a command writes; every other path-like argument is an input
@@ -55,12 +54,8 @@ def check_numbers(a) -> None:
     """Every numeric option finite and in its range, before any work."""
     for (cmd, opt), (lo, hi, integer) in LIMITS.items():
         v = getattr(a, opt, None) if a.cmd == cmd else None
-        if v is None:
-            continue
-        if not np.isfinite(v) or not lo <= v <= hi:
-            flag = "--" + opt.replace("_", "-")
-            raise MimicaError(f"{flag} {v:g}: expected {'a whole number' if integer else 'a number'} "
-                              f"from {lo:g} to {hi:g}")
+        if v is not None:
+            number_in(v, lo, hi, "--" + opt.replace("_", "-"), integer)
 
 
 def check_paths(a) -> None:

@@ -7,24 +7,14 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MimicaError
+from ..validate import floats
 from ._common import _say
 from ..pipeline import AnimateOptions as D
 
 
-def _floats(text: str, n: int, flag: str) -> list[float]:
-    """'0,1.5,-0.1' -> [0.0, 1.5, -0.1]: n finite numbers, or a MimicaError naming the flag."""
-    try:
-        vals = [float(x) for x in text.split(",")]
-    except ValueError:
-        vals = []
-    if len(vals) != n or not np.isfinite(vals).all():
-        raise MimicaError(f"{flag} {text!r}: expected {n} finite numbers separated by commas")
-    return vals
-
-
 def cmd_animate(a):
     from ..pipeline import AnimateOptions, animate
-    opts = AnimateOptions(head_rotation=a.head_rotation, pivot=tuple(_floats(a.pivot, 3, "--pivot")) if a.pivot else None,
+    opts = AnimateOptions(head_rotation=a.head_rotation, pivot=tuple(floats(a.pivot, 3, "--pivot")) if a.pivot else None,
                           fps=a.fps, rest_frame=a.rest_frame)
     if (a.arkit is None) == (a.video is None):
         raise MimicaError("animate: give the take as --arkit take.csv or as --video take.mp4 (one of them)")

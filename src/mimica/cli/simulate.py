@@ -7,6 +7,7 @@ import argparse
 import numpy as np
 
 from ..errors import MimicaError
+from ..validate import pull
 from ._common import _progress, _clip_how, _say
 from ..pipeline.simulate import SimulateOptions as D, ENGINES, MAPS_SETS, SOLVERS, SPRINGS
 
@@ -14,7 +15,7 @@ from ..pipeline.simulate import SimulateOptions as D, ENGINES, MAPS_SETS, SOLVER
 def cmd_simulate(a):
     from ..pipeline import SimulateOptions, simulate
     opts = SimulateOptions(expression=a.expression, timeline=a.timeline, action=a.action, duration=a.duration,
-                           fps=a.fps, gravity=a.gravity, pulls=tuple(_parse_pull(p) for p in a.pull or []),
+                           fps=a.fps, gravity=a.gravity, pulls=tuple(pull(p, "--pull") for p in a.pull or []),
                            engine=a.engine, solver=a.solver, warp=a.warp, springs=a.springs, wrinkles=a.wrinkles,
                            age=a.age, refine=not a.no_refine, maps=a.maps, maps_set=a.maps_set)
     if a.maps and not a.wrinkles:
@@ -43,24 +44,6 @@ def cmd_simulate(a):
     _say(f"{r.frames} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {r.steps} steps in {r.seconds:.2f}s"
          + note)
     return 0
-
-
-def _parse_pull(spec):
-    """'x,y,z:radius:fx,fy,fz' -> (center (3,), radius, force (3,))."""
-    try:
-        c, r, f = spec.split(":")
-        center = np.array([float(v) for v in c.split(",")])
-        force = np.array([float(v) for v in f.split(",")])
-        radius = float(r)
-    except ValueError:
-        center = force = np.zeros(0)
-        radius = float("nan")
-    if not (center.shape == (3,) and force.shape == (3,) and np.isfinite(center).all()
-            and np.isfinite(force).all() and np.isfinite(radius) and radius > 0
-            and np.abs(force).max() <= 1e6):
-        raise MimicaError(f"--pull {spec!r}: expected x,y,z:radius:fx,fy,fz (skin units; finite numbers, "
-                          "radius > 0)")
-    return center, radius, force
 
 
 def _wrinkle_args(s) -> None:

@@ -6,29 +6,20 @@ from pathlib import Path
 
 from ..errors import MimicaError
 from ..pipeline.photos import METHODS, PhotoOptions as D
+from ..validate import strengths
 from ._common import _progress, DETECTOR_HELP, _say
 
 
 def _strength(text: str):
-    """--strength: a number, or regions: '0.5', 'brows=0.5,mouth=1.2', '0,mouth=1'."""
-    out, parts = {}, [t.strip() for t in str(text).split(",") if t.strip()]
-    try:
-        for t in parts:
-            if "=" in t:
-                k, v = t.split("=", 1)
-                out[k.strip()] = float(v)
-            else:
-                out["all"] = float(t)
-    except ValueError:
-        raise MimicaError(f"--strength {text!r}: a number from 0 to 2, or regions as brows=0.5,mouth=1.2") from None
-    if not parts:
-        raise MimicaError(f"--strength {text!r}: a number from 0 to 2, or regions as brows=0.5,mouth=1.2")
+    """--strength: a number, or regions: '0.5', 'brows=0.5,mouth=1.2', '0,mouth=1'; its regions
+    and range checked before the work."""
     from ..image.analogy import point_strengths
+    out = strengths(text, "--strength")
     try:
-        point_strengths(out)                              # checked before the work
+        point_strengths(out)
     except MimicaError as e:
         raise MimicaError(f"--{e}") from None
-    return out["all"] if list(out) == ["all"] else out
+    return out
 
 
 def cmd_transfer_image(a):
