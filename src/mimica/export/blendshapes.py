@@ -40,8 +40,20 @@ def ict_sources(arkit: str) -> list[str]:
 
 
 class Blendshapes(dict):
-    """{ARKit name: (n, 3) positions}; `mesh` is the head they belong to: the user's, or with its
-    sealed lips cut apart (its vertices first, the cut's copies after them); `mouth` the cut."""
+    """The 52 ARKit shapes of a head: {ARKit name: (m, 3) positions}.
+
+    Attributes
+    ----------
+    mesh : Mesh
+        The head they belong to: the user's, or with its sealed lips or eyes cut (its vertices
+        first, the cuts' copies after them).
+    mouth : MouthCut or None
+        The mouth's cut.
+    landmarks : Landmarks
+        The head's landmarks (given, or found).
+    transfer : ExpressionTransfer
+        The transfer that made them (vertex_report, pictures).
+    """
     mesh = None
     mouth = None
     landmarks = None              # the head's landmarks (given, or found)
@@ -50,8 +62,28 @@ class Blendshapes(dict):
 
 def arkit_blendshapes(head, landmarks=None, progress=None, store=None, cut_mouth=True, match="nicp",
                       relayout=True, cut_eyes=True) -> Blendshapes:
-    """The 52 ARKit shapes on `head` (a Mesh of any topology; cut_mouth, cut_eyes, relayout: see
-    ExpressionTransfer)."""
+    """The 52 ARKit shapes on a head of any topology: ICT-FaceKit's sculpted shapes moved onto it
+    by the expression transfer, the head's parts moving as their kind does.
+
+    Parameters
+    ----------
+    head : Mesh
+        The head (n vertices).
+    landmarks : Landmarks or None
+        Its 68 landmarks; None: built in for ICT-FaceKit's topology, else found on renders.
+    progress : callable, optional
+        Called with one line of text at each step.
+    store : TemplateStore, optional
+        Where ICT-FaceKit's files come from (the data directory, else a pinned download).
+    cut_mouth, match, relayout, cut_eyes
+        As ExpressionTransfer's.
+
+    Returns
+    -------
+    Blendshapes
+        {ARKit name: (m, 3) positions} on `Blendshapes.mesh` (the head, any cut's m - n vertices
+        after its own); tongueOut at rest (ICT-FaceKit has no tongue shape).
+    """
     from ..data import ICT_N_VERTICES
     from ..landmarks import ict_landmarks, landmarks_for
     from ..mesh import read_mesh

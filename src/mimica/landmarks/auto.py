@@ -11,7 +11,23 @@ from .detect3d import detect_mesh
 
 
 def landmarks_for(mesh: Mesh, path=None, what="mesh") -> Landmarks:
-    """Landmarks from a file, else built in for ICT-FaceKit topology, else a clear error."""
+    """A face's 68 landmarks: from a file, else built in for ICT-FaceKit's topology, else found
+    on renders of the mesh (landmarks.detect3d: dlib's detector, cast back onto the surface).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The face.
+    path : str or Path or None
+        A landmark file (JSON: {"scheme": "ibug68", "points": [[x, y, z], ...]}).
+    what : str
+        How errors name the mesh.
+
+    Returns
+    -------
+    Landmarks
+        Raises NeedsLandmarks (a MimicaError) where none are given and no face is found.
+    """
     if path is not None:
         return read_landmarks(path, mesh)
     if is_ict_topology(mesh):

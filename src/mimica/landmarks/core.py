@@ -50,7 +50,18 @@ def index(name: str) -> int:
 
 @dataclass
 class Landmarks:
-    """68 landmarks on a mesh: triangle index and barycentric coordinates, -1 where missing."""
+    """The 68 iBUG landmarks on a mesh, as points of its triangles: they follow the mesh through
+    any deformation of its vertices.
+
+    Attributes
+    ----------
+    triangle : (68,) int array
+        Each point's triangle (an index into `mesh.triangles`), -1 where missing.
+    bary : (68, 3) float array
+        Its barycentric coordinates in that triangle.
+    scheme : str
+        "ibug68".
+    """
 
     triangle: np.ndarray      # (68,) int, -1 = missing
     bary: np.ndarray          # (68, 3)

@@ -31,15 +31,28 @@ def _flatten_faces(faces):
 
 @dataclass(eq=False)
 class Mesh:
-    """A polygon mesh.
+    """A polygon mesh (triangles, quads and larger polygons, mixed); triangulation, edges and
+    adjacency are derived and cached, never stored twice.
 
-    vertices: (n, 3) float64.  face_indices / face_starts: polygons, flat (see module).
-    uv: optional (t, 2) texture coordinates, with face_uv_indices parallel to
-    face_indices (the OBJ model: a corner has its own uv index).
-    groups: optional (n_faces,) index into group_names: each face's material or group (OBJ
-    `usemtl`, else `g`/`o`), kept through submesh, with_vertices and OBJ writing.
-    layout: where a file of another tool put these vertices (mesh.io.gltf.GltfLayout), so that a
-    result can be written back into that file; None for OBJ and PLY.  Kept by with_vertices.
+    Attributes
+    ----------
+    vertices : (n, 3) float64 array
+        Positions, in the user's units.
+    face_indices : (c,) int64 array
+        Every polygon's corners, one polygon after another.
+    face_starts : (n_faces + 1,) int64 array
+        Where each polygon's corners start in `face_indices` (the last entry is c).
+    uv : (t, 2) float array or None
+        Texture coordinates, with `face_uv_indices` (c,) parallel to `face_indices` (the OBJ
+        model: a corner has its own uv index).
+    name : str
+        The file's stem, or "".
+    groups : (n_faces,) int array or None
+        Each face's material or group, an index into `group_names` (OBJ `usemtl`, else `g`/`o`),
+        kept through submesh, with_vertices and OBJ writing.
+    layout : GltfLayout or FbxLayout or None
+        Where a file of another tool put these vertices, so that a result can be written back
+        into that file; None for OBJ and PLY.  Kept by with_vertices.
     """
 
     vertices: np.ndarray

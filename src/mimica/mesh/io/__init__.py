@@ -67,7 +67,24 @@ def _suffix(path: Path) -> str:
 
 
 def read_mesh(path, validate_mesh=True, allow_degenerate=False) -> Mesh:
-    """Read an OBJ/PLY/glTF/GLB mesh; polygons stay polygons (glTF holds triangles only)."""
+    """Read a mesh file whole: OBJ, PLY, glTF/GLB (every node's mesh and primitive, in world
+    space; the file's layout kept for writing back) or FBX (through Blender).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file; its suffix says the format.
+    validate_mesh : bool
+        Check it (finite positions, valid indices, no degenerate polygons: mesh.io.checks).
+    allow_degenerate : bool
+        Accept zero-area polygons.
+
+    Returns
+    -------
+    Mesh
+        Polygons stay polygons (glTF holds triangles only).  A file that cannot be read is a
+        one-line MimicaError naming it.
+    """
     path = Path(path)
     s = _suffix(path)
     if not path.is_file():
@@ -81,9 +98,24 @@ def read_mesh(path, validate_mesh=True, allow_degenerate=False) -> Mesh:
 
 
 def write_mesh(path, mesh: Mesh, units: str = "auto") -> Path:
-    """Write atomically; the format follows the extension (units: glTF only, see write_glb).
+    """Write a mesh, whole or not at all; the format follows the suffix.
+
     A mesh read from a glTF file (`mesh.layout`) written as glTF goes back into that file
-    (gltf.write_gltf_layout: the user's nodes, materials and vertex layout, in its units)."""
+    (gltf.write_gltf_layout: the user's nodes, materials and vertex layout, in its units); one
+    read from FBX written as FBX goes back through Blender.
+
+    Parameters
+    ----------
+    path : str or Path
+        .obj, .ply, .glb, .gltf or .fbx.
+    mesh : Mesh
+    units : str
+        glTF only: the mesh's unit ("auto", "m", "cm", "mm"; glTF is in metres).
+
+    Returns
+    -------
+    Path
+    """
     path = Path(path)
     s = _suffix(path)
     with atomic_path(path) as tmp:
@@ -104,10 +136,17 @@ def write_mesh(path, mesh: Mesh, units: str = "auto") -> Path:
 
 
 def read_vertices(path) -> np.ndarray:
-    """Only the vertex positions of a mesh file, (n, 3), checked finite.
+    """Only the vertex positions of a mesh file, checked finite: for frame sequences whose
+    topology is known already (for OBJ only the 'v' lines are parsed: obj.read_obj_vertices).
 
-    For OBJ only the 'v' lines are parsed (obj.read_obj_vertices), which suits frame sequences
-    whose topology is known already."""
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    (n, 3) float64 array
+    """
     path = Path(path)
     if _suffix(path) != ".obj":
         return read_mesh(path, allow_degenerate=True).vertices
