@@ -30,6 +30,20 @@ def _muscle_bar(desc):
         bar.close()
 
 
+@contextlib.contextmanager
+def _bar(desc):
+    """A progress bar for a progress(done, total) callback: yields the callback."""
+    bar = _progress(range(1), None, desc)
+
+    def progress(k, n):
+        bar.total = n
+        bar.update(1)
+    try:
+        yield progress
+    finally:
+        bar.close()
+
+
 def _landmarks(mesh, path, flag, what):
     """A face's landmarks (landmarks_for); where none are found, the flag that gives them."""
     from ..landmarks import landmarks_for
@@ -64,10 +78,10 @@ def _clip_how(info: dict) -> str:
     """'120 frames as 9 basis shapes and their weights (largest error ...)'."""
     n = info["frames"]
     if info["basis"]:
-        how = (f"{n} frames as {info['shapes']} basis {'blend ' if 'unit' in info else ''}shapes and their weights "
+        how = (f"{n} frames as {info['shapes']} basis {'blend ' if info['format'] == 'usd' else ''}shapes and their weights "
                f"(largest error {info['max_error_m'] * 1e3:.3f} mm, bound 0.1 mm)")
     else:
-        how = f"{n} frames as " + ("blend shapes" if "unit" in info else "morph targets" + (
+        how = f"{n} frames as " + ("blend shapes" if info["format"] == "usd" else "morph targets" + (
             " (no smaller basis within 0.1 mm)" if info.get("compact") else ""))
     return how
 

@@ -50,11 +50,8 @@ def _say_uncut_mouth(xfer, what, landmarks_flag: str) -> None:
 
 def _warn_sealed_eyes(xfer, mesh, lm, what, found_flag=None):
     """One line on eyes that are one surface with the lids: cut open, or why not (blinks then
-    move the lids over them); found_flag: the option that gives landmarks, where none were
-    given (on a head not of ICT-FaceKit's topology they were then found on renders)."""
-    from ..data import is_ict_topology
-    if found_flag and is_ict_topology(mesh):
-        found_flag = None
+    move the lids over them); found_flag: the option that gives landmarks, where they were found
+    on renders (the pipeline's result says so)."""
     if xfer.eye_cut is not None:
         ec = xfer.eye_cut
         _say(f"{what}: the {' and '.join(ec.eyes)} eye{'s were' if len(ec.eyes) > 1 else ' was'} one surface with "

@@ -12,7 +12,7 @@ from ..pipeline import ExportOptions as D
 def _clip_line(info: dict, fps: float, units: str) -> str:
     """What export.clip.write_clip / write_clip_usd wrote, in one line."""
     how = _clip_how(info)
-    if "unit" in info:                                 # USD
+    if info["format"] == "usd":
         return (f"{how}, a SkelAnimation at {fps:g} fps; units: {info['unit']} (metersPerUnit "
                 f"{info['metres_per_unit']:g}, y up); {info['bytes'] / 1e6:.1f} MB")
     return (f"{how}, one animation at {fps:g} fps; " + _units_line(info["height"], info["units"], units) + "; "

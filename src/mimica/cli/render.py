@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import _progress, _say, _expand_frames
+from ._common import _bar, _say, _expand_frames
 from ..pipeline.sequence import RenderOptions as D, VIEW_CHOICES
 
 
@@ -14,9 +14,8 @@ def cmd_render(a):
     paths = _expand_frames([src]) if src.is_dir() else [src]
     opts = RenderOptions(view=a.view, turntable=a.turntable, size=a.size, frames=a.frames, fps=a.fps,
                          heatmap=a.heatmap)
-    bar = _progress(range(1), None, "rendering")
-    r = render_sequence(paths, a.out, opts, progress=lambda k, n: (setattr(bar, "total", n), bar.update(1)))
-    bar.close()
+    with _bar("rendering") as progress:
+        r = render_sequence(paths, a.out, opts, progress=progress)
     if r["kind"] == "png":
         if r["shown"] < r["frames"] and not a.turntable:
             _say(f"{src}: {r['frames']} meshes; the sheet shows {r['shown']} of them, evenly spaced "

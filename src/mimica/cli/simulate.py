@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import MimicaError
 from ..validate import pull
-from ._common import _progress, _clip_how, _say
+from ._common import _bar, _clip_how, _say
 from ..pipeline.simulate import SimulateOptions as D, ENGINES, MAPS_SETS, SOLVERS, SPRINGS
 
 
@@ -20,9 +20,8 @@ def cmd_simulate(a):
                            age=a.age, refine=not a.no_refine, maps=a.maps, maps_set=a.maps_set)
     if a.maps and not a.wrinkles:
         raise MimicaError("--maps: the maps are the wrinkles'; give the wrinkle mask (--wrinkles MASK)")
-    bar = _progress(range(1), None, "simulating")
-    r = simulate(a.rig, a.out, opts, progress=lambda f, n: (setattr(bar, "total", n), bar.update(1)))
-    bar.close()
+    with _bar("simulating") as progress:
+        r = simulate(a.rig, a.out, opts, progress=progress)
     out = r.out
     note = ""
     if r.wrinkles is not None:

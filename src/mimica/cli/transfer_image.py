@@ -7,7 +7,7 @@ from pathlib import Path
 from ..errors import MimicaError
 from ..pipeline.photos import METHODS, PhotoOptions as D
 from ..validate import strengths
-from ._common import _progress, DETECTOR_HELP, _say
+from ._common import _bar, DETECTOR_HELP, _say
 
 
 def _strength(text: str):
@@ -32,10 +32,8 @@ def cmd_transfer_image(a):
         raise MimicaError(f"{a.out}: with --driving the output is a video; name it .mp4")
     opts = PhotoOptions(method=a.method, strength=_strength(a.strength), mouth=not a.no_mouth, head=a.head,
                         detector=a.detector, face=a.face, source_face=a.source_face)
-    bar = _progress(range(1), None, "frames")
-    r = transfer_photos(a.source_neutral, a.target, a.out, a.source_expr, a.driving, opts,
-                        progress=lambda k, n: (setattr(bar, "total", n), bar.update(1)))
-    bar.close()
+    with _bar("frames") as progress:
+        r = transfer_photos(a.source_neutral, a.target, a.out, a.source_expr, a.driving, opts, progress=progress)
     if r["kind"] == "video":
         _say(f"{r['count']} frames -> {a.out} ({r['count'] / max(r['transfer_s'], 1e-9):.1f} frames/s, landmarks tracked)")
     else:

@@ -37,7 +37,7 @@ def write_clip(path, rest, names, frames: np.ndarray, fps: float, units: str = "
     Returns
     -------
     dict
-        The writer's figures ("units", "quantized", ...) and "frames", "shapes" (morph targets
+        The writer's figures ("units", "quantized", ...) and "format" ("gltf"), "frames", "shapes" (morph targets
         written), "basis" (whether they are a basis with weights), "max_error_m" (a basis's largest
         error, metres), "bytes" and "height" (the rest mesh's, in its unit).
     """
@@ -56,7 +56,7 @@ def write_clip(path, rest, names, frames: np.ndarray, fps: float, units: str = "
         info = write_glb(path, rest, shapes, binary=binary, fps=fps, units=units, weights=c.weights,
                          extras={"frames": list(names), "maxErrorMetres": c.max_error * k}, quantize=quantize)
         info.update(shapes=len(shapes), basis=True, max_error_m=c.max_error * k)
-    info.update(frames=len(frames), compact=compact, bytes=Path(path).stat().st_size,
+    info.update(format="gltf", frames=len(frames), compact=compact, bytes=Path(path).stat().st_size,
                 height=float(np.ptp(rest.vertices[:, 1])))
     return info
 
@@ -69,7 +69,7 @@ def write_clip_usd(path, rest, names, frames: np.ndarray, fps: float, units: str
     Returns
     -------
     dict
-        {"unit", "metres_per_unit", "frames", "shapes", "basis", "max_error_m", "bytes"}.
+        {"format": "usd", "unit", "metres_per_unit", "frames", "shapes", "basis", "max_error_m", "bytes"}.
     """
     from ..mesh.io import glb_units
     from .compact import compact_clip
@@ -84,4 +84,5 @@ def write_clip_usd(path, rest, names, frames: np.ndarray, fps: float, units: str
         info = write_usd(path, rest, {f"basis_{j:02d}": rest.vertices + b for j, b in enumerate(c.basis)},
                          c.weights, fps, units)
         out = {"shapes": info["shapes"], "basis": True, "max_error_m": c.max_error * k}
-    return {**out, "unit": unit, "metres_per_unit": k, "frames": len(frames), "bytes": Path(path).stat().st_size}
+    return {**out, "format": "usd", "unit": unit, "metres_per_unit": k, "frames": len(frames),
+            "bytes": Path(path).stat().st_size}

@@ -19,7 +19,9 @@ class ViewerSession:
         self.muscles = list(self.sim.names)
         self.base = np.array([n.rsplit("_", 1)[0] if n.endswith(("_L", "_R")) else n for n in self.muscles])
         # facial actions that reach at least one muscle of this rig
-        self.actions = {k: v for k, v in FACIAL_ACTIONS.items() if any(b in v for b in self.base)}
+        from ..rig.muscles import weights_on
+        self.actions = {k: weights_on(v, self.muscles) for k, v in FACIAL_ACTIONS.items()
+                        if any(b in v for b in self.base)}      # each on this rig's muscles, made once
         self.presets = {k: v for k, v in PRESETS.items()}
         self.values = {n: 0.0 for n in self.muscles}
         self.action_values = {k: 0.0 for k in self.actions}
@@ -67,10 +69,9 @@ class ViewerSession:
 
     def activations(self) -> np.ndarray:
         a = np.array([self.values[n] for n in self.muscles])
-        from ..rig.muscles import weights_on
         for k, w in self.action_values.items():
             if w:
-                a += w * weights_on(self.actions[k], self.muscles)
+                a += w * self.actions[k]
         return np.clip(a, -1.0, 1.0)
 
     # -- simulation -----------------------------------------------------------------------------
