@@ -158,7 +158,7 @@ def basis_path(repeat=3):
     S = model.mesh
     frames, _ = sequence(model, 300)
     T = S.with_vertices(held_out_identity(model, 0))
-    x = ExpressionTransfer(S, T, ict_landmarks(S), ict_landmarks(T), "vtc", static_vertices(S.vertices, frames))
+    x = ExpressionTransfer(S, T, ict_landmarks(S), ict_landmarks(T), method="vtc", static=static_vertices(S.vertices, frames))
     best, outs = {}, {}
     for mode in ("frames", "basis"):
         # one untimed call first: what a head computes once for all its performances (R's

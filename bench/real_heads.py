@@ -116,7 +116,7 @@ def rel_err_remeshed(model):
     face, _ = S.with_vertices(tv).submesh(np.arange(ICT_FACE_AREA_FACES))
     rs = resample_face(face, tv[ICT_LANDMARKS_68], n_vertices=12000, seed=7)
     lt = Landmarks.snap(rs.mesh, tv[ICT_LANDMARKS_68])
-    xr = ExpressionTransfer(S, rs.mesh, ls, lt, "vtc", static_vertices(S.vertices, basic))
+    xr = ExpressionTransfer(S, rs.mesh, ls, lt, method="vtc", static=static_vertices(S.vertices, basic))
     face_v = slice(0, ICT_FACE_AREA_VERTICES)
     return float(np.mean([relative_error(o, rs.carry(tv[face_v] + b[face_v] - S.vertices[face_v]), rs.mesh.vertices)
                           for o, b in zip(xr.apply(basic), basic)]))

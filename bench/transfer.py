@@ -117,15 +117,15 @@ def remeshed_mixes(model, peer_cases: int):
         rs = resample_face(face, tv[ICT_LANDMARKS_68], n_vertices=(6000, 9000, 12000, 15000)[k % 4], seed=seed)
         lt = Landmarks.snap(rs.mesh, tv[ICT_LANDMARKS_68])
         truth = [rs.carry(tv[FACE] + m[FACE] - S.vertices[FACE]) for m in mx]
-        out = ExpressionTransfer(S, rs.mesh, ls, lt, "vtc", static).apply(mx)
+        out = ExpressionTransfer(S, rs.mesh, ls, lt, method="vtc", static=static).apply(mx)
         ours.append(relative_error(out, np.stack(truth), rs.mesh.vertices))            # the case's mixes pooled
         T = S.with_vertices(tv)
-        o2 = ExpressionTransfer(S, T, ls, ict_landmarks(T), "vtc", static).apply(mx)
+        o2 = ExpressionTransfer(S, T, ls, ict_landmarks(T), method="vtc", static=static).apply(mx)
         same.append(relative_error(o2, tv + mx - S.vertices, tv, FACE))
         if k < peer_cases:
             saved, corr._registered = corr._registered, trimesh_registered
             try:
-                o3 = ExpressionTransfer(S, rs.mesh, ls, lt, "vtc", static).apply(mx)
+                o3 = ExpressionTransfer(S, rs.mesh, ls, lt, method="vtc", static=static).apply(mx)
             finally:
                 corr._registered = saved
             peer.append(relative_error(o3, np.stack(truth), rs.mesh.vertices))
@@ -166,7 +166,7 @@ def main():
         for k in range(a.targets):
             tv = held_out_identity(model, k)
             T = S.with_vertices(tv)
-            tp, xf = best_of(lambda: ExpressionTransfer(S, T, ls, ict_landmarks(T), method, static), a.repeat)
+            tp, xf = best_of(lambda: ExpressionTransfer(S, T, ls, ict_landmarks(T), method=method, static=static), a.repeat)
             ta, out = best_of(lambda: xf.apply(frames, basis=False), a.repeat)   # frame by frame
             pre.append(tp)
             fps.append(len(frames) / ta)
@@ -184,8 +184,8 @@ def main():
     full = ICTModel()
     ff, _ = sequence(full, a.frames)
     Tf = full.mesh.with_vertices(held_out_identity(full, 0))
-    xf = ExpressionTransfer(full.mesh, Tf, ict_landmarks(full.mesh), ict_landmarks(Tf), "vtc",
-                            static_vertices(full.neutral, ff))
+    xf = ExpressionTransfer(full.mesh, Tf, ict_landmarks(full.mesh), ict_landmarks(Tf), method="vtc",
+                            static=static_vertices(full.neutral, ff))
     tfull, _ = best_of(lambda: xf.apply(ff, basis=False), a.repeat)
     print(f"[vtc] full 26,719-vertex model: {a.frames / tfull:.0f} frames/s")
     # what `transfer` does by default on a sequence this long: through its basis (bench/batch.py)
@@ -205,7 +205,7 @@ def main():
     Ta = T.with_vertices(sim.apply(T.vertices))
     tc, _ = best_of(lambda: correspond(S, ls.positions(S), Ta, sim.apply(lt.positions(T))), a.repeat)
     for method in ("vtc", "dt"):
-        xr = ExpressionTransfer(S, T, ls, lt, method, static)
+        xr = ExpressionTransfer(S, T, ls, lt, method=method, static=static)
         ob = xr.apply(basic)
         rem[method] = [relative_error(o, rs.carry(tv[FACE] + b[FACE] - S.vertices[FACE]), T.vertices)
                        for o, b in zip(ob, basic)]
@@ -216,7 +216,7 @@ def main():
     # across topologies VTC carries a small per-triangle term (transfer.core.DT_STABILIZER):
     # Song's energy alone, and the sequence's speed with and without the term
     for stabilize in (True, False):
-        tp, xr = best_of(lambda: ExpressionTransfer(S, T, ls, lt, "vtc", static, stabilize=stabilize), a.repeat)
+        tp, xr = best_of(lambda: ExpressionTransfer(S, T, ls, lt, method="vtc", static=static, stabilize=stabilize), a.repeat)
         ta, _ = best_of(lambda: xr.apply(frames, basis=False), a.repeat)
         err = np.mean([relative_error(o, rs.carry(tv[FACE] + b[FACE] - S.vertices[FACE]), T.vertices)
                        for o, b in zip(xr.apply(basic), basic)])
@@ -226,7 +226,8 @@ def main():
     # every installed sparse solver on the same system (scikit-sparse's CHOLMOD, cholespy's, SuperLU)
     T = S.with_vertices(held_out_identity(model, 0))
     for kind in available():
-        tp, xk = best_of(lambda: ExpressionTransfer(S, T, ls, ict_landmarks(T), "vtc", static, solver_kind=kind), a.repeat)
+        tp, xk = best_of(lambda: ExpressionTransfer(S, T, ls, ict_landmarks(T), method="vtc", static=static,
+                                                    solver_kind=kind), a.repeat)
         ta, _ = best_of(lambda: xk.apply(frames, basis=False), a.repeat)
         print(f"solver {kind}: precompute {tp:.3f}s, {a.frames / ta:.0f} frames/s")
 

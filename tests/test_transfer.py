@@ -27,7 +27,7 @@ def basic(head_model):
 def _transfer(model, target_vertices, frames, method="vtc"):
     S = model.mesh
     T = S.with_vertices(target_vertices)
-    x = ExpressionTransfer(S, T, ict_landmarks(S), ict_landmarks(T), method,
+    x = ExpressionTransfer(S, T, ict_landmarks(S), ict_landmarks(T), method=method,
                            static=static_vertices(S.vertices, frames))
     return x, x.apply(frames, basis=False)
 
@@ -270,3 +270,29 @@ print(json.dumps({"fresh": fresh, "mapped": faults(a), "pages": a.nbytes // 4096
     assert got["shape"] == [300, 11248, 3]
     assert got["fresh"] >= 0.5 * got["pages"], got                           # the count sees faults
     assert got["mapped"] <= 0.01 * got["pages"], got
+
+
+def test_settings_object_and_keywords_solve_alike(head_model, basic):
+    """TransferSettings holds ExpressionTransfer's choices: a settings object and the same
+    choice given as a keyword make the same transfer; a keyword changes one field of the
+    object; a wrong name or value is refused, naming it."""
+    from dataclasses import replace
+
+    from mimica.errors import MimicaError
+    from mimica.transfer import TransferSettings
+    S = head_model.mesh
+    T = S.with_vertices(held_out_identity(head_model, 101))
+    dt = TransferSettings(method="dt", stabilize=False)
+    a = ExpressionTransfer(S, T, settings=dt)
+    b = ExpressionTransfer(S, T, method="dt", stabilize=False)
+    c = ExpressionTransfer(S, T, settings=replace(dt, method="vtc"), method="dt")
+    assert a.settings == b.settings == c.settings == dt and a.method == "dt"
+    np.testing.assert_array_equal(a.apply(basic[:2]), b.apply(basic[:2]))
+    with pytest.raises(TypeError, match="no setting metod"):
+        ExpressionTransfer(S, T, metod="dt")
+    with pytest.raises(TypeError, match="TransferSettings"):
+        ExpressionTransfer(S, T, None, None, "dt")
+    with pytest.raises(MimicaError, match="'vt'"):
+        TransferSettings(method="vt")
+    with pytest.raises(MimicaError, match="'closest'"):
+        ExpressionTransfer(S, T, match="closest")

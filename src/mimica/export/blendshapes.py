@@ -87,7 +87,7 @@ def arkit_blendshapes(head, landmarks=None, progress=None, store=None, cut_mouth
     from ..data import ICT_N_VERTICES
     from ..landmarks import ict_landmarks, landmarks_for
     from ..mesh import read_mesh
-    from ..transfer import ExpressionTransfer, static_vertices
+    from ..transfer import ExpressionTransfer, TransferSettings, static_vertices
     from ..store import default_store
 
     store = store or default_store()
@@ -104,9 +104,8 @@ def arkit_blendshapes(head, landmarks=None, progress=None, store=None, cut_mouth
     frames = np.stack([src.vertices + sum((shapes[n] - src.vertices for n in ict_sources(a)),
                                           np.zeros_like(src.vertices)) for a in ARKIT_52])
     say("transferring 52 shapes")
-    xfer = ExpressionTransfer(src, head, ict_landmarks(src), lt, method="vtc",
-                              static=static_vertices(src.vertices, frames), cut_mouth=cut_mouth, match=match,
-                              relayout=relayout, cut_eyes=cut_eyes)
+    how = TransferSettings(method="vtc", match=match, cut_mouth=cut_mouth, cut_eyes=cut_eyes, relayout=relayout)
+    xfer = ExpressionTransfer(src, head, ict_landmarks(src), lt, how, static=static_vertices(src.vertices, frames))
     if xfer.mouth is not None:
         say(f"the lips were sealed: cut apart along {len(xfer.mouth.seam)} vertices "
             f"({len(xfer.mouth.copies_of)} added after the head's own)")

@@ -36,6 +36,12 @@ class TransferOptions:
     cut_mouth: bool = True
     cut_eyes: bool = True
 
+    def settings(self):
+        """The transfer.TransferSettings these options ask for (the others at their defaults)."""
+        from ..transfer import TransferSettings
+        return TransferSettings(method=self.method, match=self.match, cut_mouth=self.cut_mouth,
+                                cut_eyes=self.cut_eyes)
+
 
 @dataclass
 class TransferResult:
@@ -140,8 +146,7 @@ def prepare_transfer(source: Mesh, target: Mesh, frames: np.ndarray, options: Tr
         ls = marks(source, source_landmarks, what[0], "source")
         lt = marks(target, target_landmarks, what[1], "target")
         found = target_landmarks is None and not is_ict_topology(target)
-    xfer = ExpressionTransfer(source, target, ls, lt, method=o.method, static=static_vertices(source.vertices, frames),
-                              cut_mouth=o.cut_mouth, cut_eyes=o.cut_eyes, match=o.match)
+    xfer = ExpressionTransfer(source, target, ls, lt, o.settings(), static=static_vertices(source.vertices, frames))
     return xfer, lt, found
 
 

@@ -1,6 +1,6 @@
 """Expression transfer between face meshes (Song et al. §IV-V), with Sumner-Popović DT as baseline.
 
-    xfer = ExpressionTransfer(S, T, source_landmarks, target_landmarks, method="vtc",
+    xfer = ExpressionTransfer(S, T, source_landmarks, target_landmarks, TransferSettings(method="vtc"),
                               static=static_vertices(S.vertices, frames))   # precompute
     T_frames = xfer.apply(frames)                                             # (F, n_T, 3)
 
@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -34,8 +35,71 @@ BASIS_CHECK = 4           # frames solved one by one to check it (where its tips
 # frames spread evenly read a quarter of it: 7.6e-5 against 2.8e-4; the threshold was 2.5e-4.)
 BASIS_DEVIATION = 6e-4
 
-__all__ = ["ExpressionTransfer", "TransferSolver", "static_vertices", "relative_error", "BASIS_FRAMES",
+__all__ = ["ExpressionTransfer", "TransferSettings", "TransferSolver", "static_vertices", "relative_error", "BASIS_FRAMES",
            "song_vertex_error", "METHODS"]
+
+
+@dataclass(frozen=True)
+class TransferSettings:
+    """How `ExpressionTransfer` solves a (source, target) pair; each default is the one every
+    caller gets.  `dataclasses.replace(settings, method="dt")` makes a variant.
+
+    Attributes
+    ----------
+    method : str
+        "vtc" (Song et al.'s vertex-tent coordinates) or "dt" (Sumner and Popovic's deformation
+        transfer).
+    match : str
+        How target vertices find their source partners across topologies (correspond.METHODS):
+        "nicp", a non-rigid registration of the source onto the target, or "cylinder", Song et
+        al.'s cylinder map.
+    solver_kind : str or None
+        The sparse solver (solver.SPDSolver; None: the best installed).
+    parts : bool
+        Split both heads into their parts (correspond.parts): skin to skin, eyeballs, teeth and
+        tongue rigid, lashes and shells with the skin (transfer.parts).
+    cut_mouth : bool
+        Cut a target's sealed lips apart (correspond.mouth): the results have the cut's copies
+        appended.
+    cut_eyes : bool
+        A target whose eyes are one surface with its lids has each eye cut loose along its lid
+        margin (correspond.eyes), the inside then its eye, rigid, which the lids close over
+        (the copies follow the mouth's).
+    weld : bool
+        Solve a target whose seams are copies of a vertex (uv splits) welded.
+    relayout : bool
+        A target that is the source's own mesh in another vertex layout (a DCC's export,
+        correspond.layout) is solved on the source's topology.
+    lids : bool
+        The target's open eyes close as far as the source's do (transfer.contacts).
+    fill : bool
+        Skin whose correspondence has low confidence takes its motion from the skin around it
+        (transfer.fill).
+    stabilize : bool
+        VTC's energy gets a small per-triangle (DT) term (core.DT_STABILIZER), which keeps
+        vertices in sliver one-rings from drifting; off gives Song's energy alone.
+    """
+    method: str = "vtc"
+    match: str = "nicp"
+    solver_kind: str | None = None
+    parts: bool = True
+    cut_mouth: bool = True
+    cut_eyes: bool = True
+    weld: bool = True
+    relayout: bool = True
+    lids: bool = True
+    fill: bool = True
+    stabilize: bool = True
+
+    def __post_init__(self):
+        from ..correspond import METHODS as MATCHES
+        if self.method not in METHODS:
+            raise MimicaError(f"transfer method {self.method!r}: use one of {', '.join(METHODS)}")
+        if self.match not in MATCHES:
+            raise MimicaError(f"correspondence {self.match!r}: use one of {', '.join(MATCHES)}")
+
+
+SETTINGS = frozenset(f.name for f in fields(TransferSettings))
 
 
 class ExpressionTransfer:
@@ -50,47 +114,20 @@ class ExpressionTransfer:
     source_landmarks, target_landmarks : Landmarks or None
         Their 68 landmarks; needed across topologies (the target's may be found on renders:
         landmarks.landmarks_for).  On one topology every vertex is its own partner.
-    method : str
-        "vtc" (Song et al.'s vertex-tent coordinates) or "dt" (Sumner and Popovic's deformation
-        transfer).
+    settings : TransferSettings or None
+        How the pair is solved (None: the defaults).
     static : (n_S,) bool array or None
         Source vertices no frame moves (transfer.static_vertices): held still on the target.
-    solver_kind : str or None
-        The sparse solver (solver.SPDSolver; None: the best installed).
-    parts : bool
-        Split both heads into their parts (correspond.parts): skin to skin, eyeballs, teeth and
-        tongue rigid, lashes and shells with the skin (transfer.parts); `parts` is then (the
-        source's, the target's).
-    cut_mouth : bool
-        Cut a target's sealed lips apart (correspond.mouth): the results have the cut's copies
-        appended (`output_mesh` is the mesh they belong to; `mouth` the cut).
     inward : (n_T, 3) float array or None
         Where each target vertex's correspondence is looked up, as offsets (the two sides of a
         cut seam look inside their own lip).
-    weld : bool
-        Solve a target whose seams are copies of a vertex (uv splits) welded.
-    lids : bool
-        The target's open eyes close as far as the source's do (transfer.contacts).
-    match : str
-        How target vertices find their source partners (correspond.METHODS): "nicp", a
-        non-rigid registration of the source onto the target, or "cylinder", Song et al.'s
-        cylinder map.
-    fill : bool
-        Skin whose correspondence has low confidence takes its motion from the skin around it
-        (transfer.fill).
-    stabilize : bool
-        VTC's energy gets a small per-triangle (DT) term (core.DT_STABILIZER), which keeps
-        vertices in sliver one-rings from drifting; off gives Song's energy alone.
-    relayout : bool
-        A target that is the source's own mesh in another vertex layout (a DCC's export,
-        correspond.layout) is solved on the source's topology (`relaid`).
-    cut_eyes : bool
-        A target whose eyes are one surface with its lids has each eye cut loose along its lid
-        margin (correspond.eyes), the inside then its eye, rigid, which the lids close over
-        (`eye_cut`; the copies follow the mouth's).
+    **changes
+        Any field of TransferSettings, changed from `settings` (`method="dt"`).
 
     Attributes
     ----------
+    settings : TransferSettings
+        The settings used.
     output_mesh : Mesh
         The mesh the results belong to: the target in its own vertex order, any cut's copies
         after its vertices.
@@ -99,19 +136,28 @@ class ExpressionTransfer:
     similarity : Similarity
         The target's alignment onto the source; `alignment_residual` its residual over the
         face's size.
+    parts : tuple of Parts or None
+        The source's and the target's parts, where either has more than skin.
     mouth, eye_cut : MouthCut or EyeCut or None
         The cuts made; `mouth_uncut` and `eyes_uncut` say why sealed ones were left.
+    relaid : bool
+        The target was the source's mesh in another layout, solved on the source's topology.
     basis_report : dict
         What the last `apply` did with a long sequence's basis.
     """
 
     def __init__(self, source: Mesh, target: Mesh, source_landmarks: Landmarks | None = None,
-                 target_landmarks: Landmarks | None = None, method: str = "vtc",
-                 static: np.ndarray | None = None, solver_kind: str | None = None, parts: bool = True,
-                 cut_mouth: bool = True, inward: np.ndarray | None = None, weld: bool = True,
-                 lids: bool = True, match: str = "nicp", fill: bool = True, stabilize: bool = True,
-                 relayout: bool = True, cut_eyes: bool = True):
-        self.source, self.method, self.match = source, method, match
+                 target_landmarks: Landmarks | None = None, settings: TransferSettings | None = None, *,
+                 static: np.ndarray | None = None, inward: np.ndarray | None = None, **changes):
+        if settings is not None and not isinstance(settings, TransferSettings):
+            raise TypeError("ExpressionTransfer: settings must be a TransferSettings (a method is given "
+                            "as method=...)")
+        unknown = set(changes) - SETTINGS
+        if unknown:
+            raise TypeError(f"ExpressionTransfer: no setting {', '.join(sorted(unknown))} "
+                            f"(TransferSettings has {', '.join(sorted(SETTINGS))})")
+        s = self.settings = replace(settings or TransferSettings(), **changes)
+        self.source = source
         self.basis_report = {"used": False, "why": "not applied yet"}
         same = source.same_topology(target)
         self.parts = self._parts = self.mouth = self._lids = self._fill = None
@@ -121,31 +167,60 @@ class ExpressionTransfer:
         # user vertex -> solved vertex, and the solved vertices appended after the user's
         self._copies, self._appended = None, 0
         self.relaid = False
-        if not same and relayout:
-            # the source's own mesh in another vertex layout (a DCC's export): solved on the
-            # source's topology, each user vertex taking its source vertex's result
-            from ..correspond.layout import same_mesh
-            of = same_mesh(source, target)
-            if of is not None:
-                at = np.full(source.n_vertices, -1)
-                at[of[::-1]] = np.arange(len(of))[::-1]
-                twins = np.nonzero(at < 0)[0]            # a source vertex the file welded to its twin
-                if len(twins):
-                    from scipy.spatial import cKDTree
-                    reached = np.nonzero(at >= 0)[0]
-                    at[twins] = at[reached[cKDTree(source.vertices[reached]).query(source.vertices[twins])[1]]]
-                target = source.with_vertices(target.vertices[at])
-                self._copies, same, self.relaid = of, True, True
-                if target_landmarks is not None:          # the source's, now on the same topology
-                    target_landmarks = source_landmarks
-        if not same and weld:
+        if not same and s.relayout:
+            target, target_landmarks, same = self._relayout(source, target, source_landmarks, target_landmarks)
+        if not same and s.weld:
             # an unwelded seam (copies of a vertex, e.g. a uv split) would open under the solve
             welded, index = target.welded()
             if welded is not target:
                 if target_landmarks is not None:
                     target_landmarks = Landmarks.snap(welded, target_landmarks.positions(target))
                 target, self._copies = welded, index
-        if not same and cut_mouth and target_landmarks is not None:
+        if not same and target_landmarks is not None:
+            target, target_landmarks, inward = self._cut(target, target_landmarks, inward)
+        self._mouth_appended = self._appended - (0 if self.eye_cut is None else len(self.eye_cut.copies_of))
+        self.target = target
+        if s.parts and not same and source_landmarks is not None and target_landmarks is not None:
+            from ..correspond.parts import split_parts
+            ls_pos, lt_pos = source_landmarks.positions(source), target_landmarks.positions(target)
+            eyes = self.eye_cut.eyes if self.eye_cut is not None else None
+            ps, pt = split_parts(source, ls_pos), split_parts(target, lt_pos, eyes=eyes)
+            if not (ps.only_skin and pt.only_skin):
+                self._init_parts(ps, pt, ls_pos, lt_pos, static, inward)
+                return
+        self._init_solve(source, target, source_landmarks, target_landmarks, same, static, inward)
+
+    @property
+    def method(self) -> str:
+        """"vtc" or "dt" (settings.method)."""
+        return self.settings.method
+
+    @property
+    def match(self) -> str:
+        """How the correspondence was found (settings.match)."""
+        return self.settings.match
+
+    def _relayout(self, source, target, source_landmarks, target_landmarks):
+        """The source's own mesh in another vertex layout (a DCC's export): solved on the
+        source's topology, each user vertex taking its source vertex's result."""
+        from ..correspond.layout import same_mesh
+        of = same_mesh(source, target)
+        if of is None:
+            return target, target_landmarks, False
+        at = np.full(source.n_vertices, -1)
+        at[of[::-1]] = np.arange(len(of))[::-1]
+        twins = np.nonzero(at < 0)[0]            # a source vertex the file welded to its twin
+        if len(twins):
+            from scipy.spatial import cKDTree
+            reached = np.nonzero(at >= 0)[0]
+            at[twins] = at[reached[cKDTree(source.vertices[reached]).query(source.vertices[twins])[1]]]
+        self._copies, self.relaid = of, True
+        # the source's landmarks, now on the same topology
+        return source.with_vertices(target.vertices[at]), (None if target_landmarks is None else source_landmarks), True
+
+    def _cut(self, target, target_landmarks, inward):
+        """A target's sealed lips cut apart and its one-surface eyes cut loose, as settings say."""
+        if self.settings.cut_mouth:
             from ..correspond.mouth import cut_mouth as cut
             mc = cut(target, target_landmarks.positions(target))
             self.mouth_uncut = mc if mc.why else None
@@ -155,8 +230,7 @@ class ExpressionTransfer:
                 self.output_mesh = _user_cut(self.output_mesh, target, mc)
                 inward = mc.inward             # the landmarks stay: the cut keeps every triangle
                 target = mc.mesh
-        self._mouth_appended = self._appended
-        if not same and cut_eyes and target_landmarks is not None:
+        if self.settings.cut_eyes:
             from ..correspond.eyes import cut_eyes as cut_e
             ec = cut_e(target, target_landmarks.positions(target))
             self.eyes_uncut = ec.why
@@ -168,16 +242,11 @@ class ExpressionTransfer:
                     inward = np.vstack([inward, np.zeros((len(ec.copies_of), 3))])
                 target_landmarks = _off_the_eyes(ec, target_landmarks.positions(target))
                 target = ec.mesh
-        self.target = target
-        if parts and not same and source_landmarks is not None and target_landmarks is not None:
-            from ..correspond.parts import split_parts
-            ls_pos, lt_pos = source_landmarks.positions(source), target_landmarks.positions(target)
-            eyes = self.eye_cut.eyes if self.eye_cut is not None else None
-            ps, pt = split_parts(source, ls_pos), split_parts(target, lt_pos, eyes=eyes)
-            if not (ps.only_skin and pt.only_skin):
-                self._init_parts(ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward, lids, match, fill,
-                                 stabilize)
-                return
+        return target, target_landmarks, inward
+
+    def _init_solve(self, source, target, source_landmarks, target_landmarks, same, static, inward):
+        """The alignment, the correspondence (across topologies) and the factored system."""
+        s = self.settings
         if source_landmarks is not None and target_landmarks is not None:
             ls = source_landmarks.positions(source)
             lt = target_landmarks.positions(target)
@@ -199,29 +268,28 @@ class ExpressionTransfer:
         else:
             lookup = None if inward is None else (aligned.vertices + self.similarity.scale
                                                   * np.asarray(inward) @ self.similarity.rotation.T)
-            self.correspondence = correspond(source, ls, aligned, self.similarity.apply(lt), method=match,
+            self.correspondence = correspond(source, ls, aligned, self.similarity.apply(lt), method=s.match,
                                              lookup=lookup)
             vmap = self.correspondence.matrix(source.triangles)
             matched = self.correspondence.matched
             moving = vmap @ (~static).astype(float)
             fixed = matched & (np.asarray(moving).ravel() == 0)
         # across topologies VTC is steadied by a small per-triangle term (core.DT_STABILIZER)
-        self.solver = TransferSolver(source, aligned, method, vertex_map=vmap, matched=matched,
-                                     fixed=fixed, solver_kind=solver_kind,
-                                     dt_weight=DT_STABILIZER if stabilize and not same else 0.0)
+        self.solver = TransferSolver(source, aligned, s.method, vertex_map=vmap, matched=matched,
+                                     fixed=fixed, solver_kind=s.solver_kind,
+                                     dt_weight=DT_STABILIZER if s.stabilize and not same else 0.0)
         self._back = self.similarity.inverse()
-        if fill and self.correspondence is not None and self.correspondence.confidence is not None:
+        if s.fill and self.correspondence is not None and self.correspondence.confidence is not None:
             from .fill import LowConfidenceFill
             lf = LowConfidenceFill(target, self.correspondence.confidence, self.correspondence.LOW)
             self._fill = lf if lf.ok else None
-        if lids and not same and lt is not None:
+        if s.lids and not same and lt is not None:
             from .contacts import LidContacts
             lc = LidContacts(target, lt, ls)
             if lc.eyes:
                 self._lids, self._source_landmarks = lc, source_landmarks
 
-    def _init_parts(self, ps, pt, ls_pos, lt_pos, method, static, solver_kind, inward=None, lids=True,
-                    match="nicp", fill=True, stabilize=True):
+    def _init_parts(self, ps, pt, ls_pos, lt_pos, static, inward=None):
         """The skin-to-skin transfer and the motion of the other parts (transfer.parts)."""
         from .parts import PartMotion
         s_skin, s_idx = self.source.submesh(ps.skin_faces)
@@ -229,9 +297,9 @@ class ExpressionTransfer:
         self.parts = (ps, self._user_parts(pt))
         self._parts_role = pt.role
         st = None if static is None else np.asarray(static, bool)[s_idx]
+        skin_only = replace(self.settings, parts=False, cut_mouth=False, weld=False, relayout=False, cut_eyes=False)
         self._skin = ExpressionTransfer(s_skin, t_skin, Landmarks.snap(s_skin, ls_pos), Landmarks.snap(t_skin, lt_pos),
-                                        method, st, solver_kind, parts=False, cut_mouth=False, weld=False, lids=lids,
-                                        match=match, fill=fill, stabilize=stabilize, relayout=False, cut_eyes=False,
+                                        skin_only, static=st,
                                         inward=None if inward is None else np.asarray(inward)[t_idx])
         self._source_skin, self._target_skin = s_idx, t_idx
         self.similarity = self._skin.similarity

@@ -92,11 +92,11 @@ class ViewerSession:
     # -- a second face ----------------------------------------------------------------------------
     def load_second(self, mesh):
         from ..landmarks import landmarks_for
-        from ..transfer import ExpressionTransfer
+        from ..transfer import ExpressionTransfer, TransferSettings
         src = self.rig.skin
         ls = self.rig_landmarks()
         lt = landmarks_for(mesh, None, "the second face")
-        self.second = (mesh, ExpressionTransfer(src, mesh, ls, lt, method="vtc"))
+        self.second = (mesh, ExpressionTransfer(src, mesh, ls, lt, TransferSettings(method="vtc")))
         return mesh
 
     def rig_landmarks(self):
