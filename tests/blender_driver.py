@@ -1,13 +1,12 @@
 """Run inside Blender's Python (bpy), by tests/test_blender.py: the add-on's four operators on
 real meshes, headless; what they made is written as JSON for the test to check.
 
-    python-with-bpy blender_driver.py ADDON.py HEAD.obj TAKE.csv OUT.json [GLB ...]
+    python-with-bpy blender_driver.py mimica_blender.zip HEAD.obj TAKE.csv OUT.json [GLB ...]
 
 and each GLB given after them imported as a user would (File > Import > glTF): its vertices,
 smooth shading, uv layers, materials, shape keys, armature; the first also through FBX and back.
 """
 
-import importlib.util
 import json
 import os
 import sys
@@ -16,13 +15,11 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-addon_path, head_obj, take_csv, out_json, *glbs = sys.argv[1:]
+addon_zip, head_obj, take_csv, out_json, *glbs = sys.argv[1:]
 bpy.ops.wm.read_factory_settings(use_empty=True)
-spec = importlib.util.spec_from_file_location("mimica_blender_addon", addon_path)
-addon = importlib.util.module_from_spec(spec)
-sys.modules["mimica_blender_addon"] = addon
-spec.loader.exec_module(addon)
-addon.register()
+# installed as a user installs it (Edit > Preferences > Add-ons > Install from disk, then enabled)
+assert bpy.ops.preferences.addon_install(filepath=addon_zip, overwrite=True) == {"FINISHED"}
+assert bpy.ops.preferences.addon_enable(module="mimica_blender") == {"FINISHED"}
 report = {}
 
 

@@ -26,9 +26,9 @@ HEAD = Path(os.environ["MIMICA_DATA"]) / "real-heads" / "mediapipe-canonical" / 
 
 
 def test_the_addon_reads_takes_as_mimica_does(tmp_path):
-    assert addon.ARKIT == ARKIT_52                     # its own copy: Blender's Python cannot import mimica
+    assert addon.ARKIT == ARKIT_52                     # the facts shared with mimica (mimica.facts)
     from mimica.anim import PRESETS
-    assert list(addon.EXPRESSIONS) == [e for e in PRESETS if e != "neutral"]    # and of simulate's presets
+    assert list(addon.EXPRESSIONS) == [e for e in PRESETS if e != "neutral"]    # and simulate's presets
     w = np.random.default_rng(1).uniform(0, 1, (30, 52))
     live_link_csv(tmp_path / "take.csv", w)
     t0, w0, _ = read_take(tmp_path / "take.csv")
@@ -119,8 +119,11 @@ def test_the_addon_inside_blender(tmp_path, full_model, head_glb, version):
               quantize=True)
     assert main(["animate", str(head_glb), "--arkit", str(tmp_path / "take.csv"), "--head-rotation",
                  "--out", str(tmp_path / "take.glb")]) == 0
-    env = {**os.environ, "MIMICA_COMMAND": str(cmd)}
-    run = subprocess.run([exe, str(ROOT / "tests" / "blender_driver.py"), str(Path(addon.__file__)), str(HEAD),
+    from mimica.pipeline import write_blender_addon
+    addon_zip = write_blender_addon(tmp_path / "addon")            # what `mimica blender-addon` writes
+    # Blender installs it under HOME (its user scripts): a home of the test's own
+    env = {**os.environ, "MIMICA_COMMAND": str(cmd), "HOME": str(tmp_path / "home")}
+    run = subprocess.run([exe, str(ROOT / "tests" / "blender_driver.py"), str(addon_zip), str(HEAD),
                           str(tmp_path / "take.csv"), str(out), str(tmp_path / "full.glb"),
                           str(tmp_path / "quantized.glb"), str(tmp_path / "take.glb")], env=env,
                          stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=900)

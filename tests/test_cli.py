@@ -142,11 +142,24 @@ def test_error_map_png(files, tmp_path, capsys):
 
 
 def test_blender_addon_writes_the_addon_to_install(tmp_path, capsys):
+    """The zip Blender installs: the package mimica_blender, the add-on and the facts it shares
+    with mimica, byte for byte mimica's own files; it imports outside mimica (as in Blender)."""
+    import subprocess
+    import sys
+    import zipfile
     from pathlib import Path
     import mimica.blender_addon as addon
+    import mimica.facts as facts
     from mimica.cli import main
     assert main(["blender-addon", "--out", str(tmp_path / "addons")]) == 0
-    copy = tmp_path / "addons" / "mimica_blender.py"
-    assert copy.read_bytes() == Path(addon.__file__).read_bytes()
+    copy = tmp_path / "addons" / "mimica_blender.zip"
+    with zipfile.ZipFile(copy) as z:
+        assert sorted(z.namelist()) == ["mimica_blender/__init__.py", "mimica_blender/facts.py"]
+        assert z.read("mimica_blender/__init__.py") == Path(addon.__file__).read_bytes()
+        assert z.read("mimica_blender/facts.py") == Path(facts.__file__).read_bytes()
+        z.extractall(tmp_path / "unzipped")
+    probe = "import sys; sys.path.insert(0, '.'); import mimica_blender as a; print(len(a.ARKIT), 'mimica' in sys.modules)"
+    got = subprocess.run([sys.executable, "-I", "-c", probe], cwd=tmp_path / "unzipped", capture_output=True, text=True)
+    assert got.stdout.split() == ["52", "False"], got.stderr
     assert main(["blender-addon", "--out", str(copy)]) == 2
     assert "name a folder" in capsys.readouterr().err

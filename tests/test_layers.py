@@ -19,7 +19,7 @@ PACKAGE = Path(mimica.__file__).resolve().parent
 # facts) reads through it; image is io for pictures
 # (read, write, and the rasterizer every picture is drawn with); the users sit on top.
 LAYERS = [
-    {"errors", "_extras", "_memory", "outputs", "solver", "validate"},
+    {"errors", "_extras", "_memory", "outputs", "solver", "validate", "facts"},
     {"mesh"},
     {"store"},
     {"data"},
@@ -85,6 +85,15 @@ def graph() -> dict[str, set[str]]:
 def test_every_module_has_a_layer():
     unplaced = sorted({stage(n) for n in modules()} - set(LAYER))
     assert not unplaced, f"place these in DESIGN.md's layers (and in LAYERS here): {unplaced}"
+
+
+def test_the_facts_the_blender_addon_ships_import_only_the_standard_library():
+    """mimica.facts goes into the add-on's zip and runs in Blender's Python, where mimica (and
+    numpy >= 2) cannot be imported: it imports the standard library only."""
+    tree = ast.parse((PACKAGE / "facts.py").read_text(encoding="utf-8"))
+    names = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    names |= {(n.module or "").split(".")[0] or "." for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    assert names <= set(sys.stdlib_module_names) | {"__future__"}, names
 
 
 def test_the_graph_sees_the_imports():

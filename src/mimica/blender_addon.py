@@ -12,10 +12,11 @@ mesh's shape keys moved onto the other selected meshes (any topology); Kim's mus
 the active mesh and preset expressions simulated into shape keys.  Progress shows in the status
 bar; mimica's one-line errors become Blender reports.
 
-Install: Edit > Preferences > Add-ons > Install from disk..., this file (or `mimica
-blender-addon --out DIR` to get a copy).  The panel is in the 3D view's sidebar, "mimica".
-This module imports without Blender (mimica's own tests read it); its classes exist only
-inside Blender.
+Install: `mimica blender-addon --out DIR` writes mimica_blender.zip -- this file as the package's
+__init__, and mimica/facts.py beside it (the ARKit names, the take reader and the axes, shared
+with mimica); in Blender: Edit > Preferences > Add-ons > Install from disk..., the zip.  The panel
+is in the 3D view's sidebar, "mimica".  This module imports without Blender (mimica's own tests
+read it); its classes exist only inside Blender.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ import shutil
 import subprocess
 import tempfile
 from pathlib import Path
+
+from . import facts      # shipped beside this file (mimica blender-addon); mimica's own when imported from mimica
 
 bl_info = {
     "name": "mimica: ARKit shape keys, Live Link takes, transfer, muscles",
@@ -43,15 +46,8 @@ try:  # inside Blender
 except ImportError:  # mimica's own tests read this module without Blender
     bpy = None
 
-ARKIT = ["eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft", "eyeSquintLeft",
-         "eyeWideLeft", "eyeBlinkRight", "eyeLookDownRight", "eyeLookInRight", "eyeLookOutRight", "eyeLookUpRight",
-         "eyeSquintRight", "eyeWideRight", "jawForward", "jawLeft", "jawRight", "jawOpen", "mouthClose",
-         "mouthFunnel", "mouthPucker", "mouthLeft", "mouthRight", "mouthSmileLeft", "mouthSmileRight",
-         "mouthFrownLeft", "mouthFrownRight", "mouthDimpleLeft", "mouthDimpleRight", "mouthStretchLeft",
-         "mouthStretchRight", "mouthRollLower", "mouthRollUpper", "mouthShrugLower", "mouthShrugUpper",
-         "mouthPressLeft", "mouthPressRight", "mouthLowerDownLeft", "mouthLowerDownRight", "mouthUpperUpLeft",
-         "mouthUpperUpRight", "browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft", "browOuterUpRight",
-         "cheekPuff", "cheekSquintLeft", "cheekSquintRight", "noseSneerLeft", "noseSneerRight", "tongueOut"]
+ARKIT = list(facts.ARKIT_52)
+EXPRESSIONS = facts.EXPRESSIONS
 
 
 class AddonError(Exception):
@@ -70,16 +66,17 @@ def mimica_command(configured: str = "") -> str:
 def write_obj(path, vertices, polygons) -> None:
     """An OBJ of the mesh in Blender's vertex order (1-based faces), turned from Blender's z up
     to mimica's y up (x, z, -y), as Blender's own OBJ export does."""
+    import numpy as np
+    turned = np.asarray(vertices, dtype=float).reshape(-1, 3) @ np.asarray(facts.Z_UP_TO_Y_UP).T
     with open(path, "w") as f:
-        f.writelines(f"v {x:.9g} {z:.9g} {-y:.9g}\n" for x, y, z in vertices)
+        f.writelines(f"v {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in turned)
         f.writelines("f " + " ".join(str(i + 1) for i in p) + "\n" for p in polygons)
 
 
 def to_blender(v):
     """(n, 3) positions from mimica's y up back to Blender's z up: (x, -z, y)."""
     import numpy as np
-    v = np.asarray(v, dtype=float)
-    return np.stack([v[:, 0], -v[:, 2], v[:, 1]], 1)
+    return np.asarray(v, dtype=float) @ np.asarray(facts.Z_UP_TO_Y_UP)      # the turn's inverse: its transpose
 
 
 def run_mimica(args, progress=None) -> list[str]:
@@ -154,7 +151,6 @@ def transfer_shapes(source_vertices, polygons, shapes: dict, target_vertices, ta
         return out
 
 
-EXPRESSIONS = ("happiness", "sadness", "surprise", "anger", "disgust", "fear")
 
 
 def simulated_shapes(vertices, polygons, expressions, exe: str, progress=None, seconds: float = 1.0) -> dict:
@@ -178,34 +174,17 @@ def simulated_shapes(vertices, polygons, expressions, exe: str, progress=None, s
 
 def read_take(path, fps: float | None = None):
     """(times in seconds from the start, {ARKit name: weights}) of a Live Link Face CSV (Timecode
-    HH:MM:SS:FF.fff, PascalCase names) or of a CSV with a `time` column; AddonError otherwise."""
-    with open(path, newline="", encoding="utf-8-sig") as f:
-        rows = [r for r in csv.reader(f) if any(c.strip() for c in r)]
-    if len(rows) < 2:
-        raise AddonError(f"{path}: no frames")
-    col = {h.strip()[:1].lower() + h.strip()[1:]: i for i, h in enumerate(rows[0])}
-    missing = [n for n in ARKIT if n not in col]
-    if missing:
-        raise AddonError(f"{path}: no column for {', '.join(missing[:4])}")
-    tcol = col.get("timecode", col.get("time"))
-    if tcol is None:
-        raise AddonError(f"{path}: no Timecode or time column")
+    HH:MM:SS:FF.fff, PascalCase names) or of a CSV with a `time` column (facts.take_from_rows,
+    as mimica reads takes); AddonError otherwise."""
     try:
-        if "timecode" in col:
-            parts = [r[tcol].strip().split(":") for r in rows[1:]]
-            rate = fps or float(int(max(float(p[3]) for p in parts)) + 1)
-            times = [3600 * int(p[0]) + 60 * int(p[1]) + int(p[2]) + float(p[3]) / rate for p in parts]
-        else:
-            times = [float(r[tcol]) for r in rows[1:]]
-        weights = {n: [float(r[col[n]]) for r in rows[1:]] for n in ARKIT}
-    except (ValueError, IndexError) as e:
-        raise AddonError(f"{path}: a value that is not a number or a timecode ({e})") from None
-    if any(b <= a for a, b in zip(times, times[1:])):
-        raise AddonError(f"{path}: the time does not increase")
-    bad = [n for n, w in weights.items() if any(x != x or abs(x) == float("inf") for x in w)]
-    if bad:
-        raise AddonError(f"{path}: {bad[0]} is not a finite number")
-    return [t - times[0] for t in times], weights
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            rows = list(csv.reader(f))
+        times, weights, _ = facts.take_from_rows(rows, path, fps)
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        raise AddonError(f"{path}: cannot read the take ({e})") from None
+    except facts.TakeError as e:
+        raise AddonError(str(e)) from None
+    return times, {n: weights[n] for n in ARKIT}
 
 
 if bpy is not None:  # pragma: no cover - runs inside Blender (tests/test_blender.py drives it headless)

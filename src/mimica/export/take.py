@@ -15,22 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import facts
 from ..errors import MimicaError
 from ..mesh.io.gltf import read_accessor
-from .blendshapes import ARKIT_52
 from .extras import HEAD_KEY, stored_head  # noqa: F401  (the key, for readers of this module)
 
 
-HEAD_ROTATION = ["headYaw", "headPitch", "headRoll"]     # Live Link Face: radians (ARKit's Euler angles)
-
-
-def _timecode(text: str) -> tuple[float, float]:
-    """'13:32:48:12.345' -> (seconds to the frame, frame number with its fraction)."""
-    parts = text.strip().split(":")
-    if len(parts) != 4:
-        raise ValueError(text)
-    h, m, s = (int(p) for p in parts[:3])
-    return 3600.0 * h + 60.0 * m + s, float(parts[3])
+HEAD_ROTATION = list(facts.HEAD_ROTATION)     # Live Link Face: radians (ARKit's Euler angles)
 
 
 def _json_rows(path: Path) -> list[list[str]]:
@@ -72,45 +63,15 @@ def read_take(path, fps: float | None = None) -> tuple[np.ndarray, dict, float]:
             raise MimicaError(f"{path}: cannot read the take ({e.strerror})") from None
         except (UnicodeDecodeError, csv.Error) as e:
             raise MimicaError(f"{path}: not a CSV file ({e})") from None
-    if len(rows) < 2:
-        raise MimicaError(f"{path}: no frames (a header line and one line per frame are needed)")
-    header = [h.strip() for h in rows[0]]
-    by_name = {h[:1].lower() + h[1:]: i for i, h in enumerate(header)}
-    missing = [n for n in ARKIT_52 if n not in by_name]
-    if missing:
-        raise MimicaError(f"{path}: no column for {', '.join(missing[:4])}"
-                          + (f" and {len(missing) - 4} more" if len(missing) > 4 else "")
-                          + " (a take needs the 52 ARKit weights, as Live Link Face writes them)")
-    body = [r for r in rows[1:] if any(c.strip() for c in r)]
-    if any(len(r) < len(header) for r in body):
-        short = next(i for i, r in enumerate(rows[1:], start=2) if any(c.strip() for c in r) and len(r) < len(header))
-        raise MimicaError(f"{path}: line {short} has fewer values than the header")
-    tcol = by_name.get("timecode", by_name.get("time"))
-    if tcol is None:
-        raise MimicaError(f"{path}: no Timecode or time column")
     try:
-        if header[tcol].lower() == "timecode":
-            tc = [_timecode(r[tcol]) for r in body]
-            rate = fps or float(int(max(f for _, f in tc)) + 1)
-            times = np.array([s + f / rate for s, f in tc])
-        else:
-            times = np.array([float(r[tcol]) for r in body])
-            rate = None
-        weights = {n: np.array([float(r[by_name[n]]) for r in body]) for n in ARKIT_52 + HEAD_ROTATION
-                   if n in by_name}
-    except ValueError as e:
-        raise MimicaError(f"{path}: a value that is not a number or a timecode ({e})") from None
-    bad = [n for n, w in weights.items() if not np.isfinite(w).all()]
-    if bad or not np.isfinite(times).all():
-        what = bad[0] if bad else header[tcol]
-        line = 2 + int(np.nonzero(~np.isfinite(weights[what] if bad else times))[0][0])
-        raise MimicaError(f"{path}: line {line}: {what} is not a finite number")
-    if len(times) > 1 and not (np.diff(times) > 0).all():
-        line = 3 + int(np.nonzero(np.diff(times) <= 0)[0][0])
-        raise MimicaError(f"{path}: line {line}: the time does not increase (frames must come in order)")
+        times, weights, rate = facts.take_from_rows(rows, path, fps)
+    except facts.TakeError as e:
+        raise MimicaError(str(e)) from None
+    times = np.asarray(times, float)
+    weights = {n: np.asarray(w, float) for n, w in weights.items()}
     if rate is None:
         rate = float(1.0 / np.median(np.diff(times))) if len(times) > 1 else 0.0
-    return times - times[0], weights, rate
+    return times, weights, rate
 
 
 def head_quaternions(yaw, pitch, roll) -> np.ndarray:

@@ -2,6 +2,7 @@
 viewer, the batch runner and the Blender add-on call.  Each job's options are a frozen
 dataclass that holds its defaults once; progress is a callback; nothing here prints."""
 
+from .addon import write_blender_addon
 from .age import AgeOptions, age_sheet
 from .animate import AnimateOptions, AnimateResult, animate
 from .blendshapes import BlendshapesOptions, BlendshapesResult, make_blendshapes
@@ -15,6 +16,7 @@ from .transfer import (TransferOptions, TransferResult, prepare_transfer, read_s
                        transfer_sequence, write_results)
 
 __all__ = [
+    "write_blender_addon",
     "AgeOptions", "age_sheet",
     "AnimateOptions", "AnimateResult", "animate",
     "BlendshapesOptions", "BlendshapesResult", "make_blendshapes",

@@ -27,13 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
+from ... import facts
 from ...errors import MimicaError
 from ..core import Mesh
 from .weld import weld_seams
 
 SCRIPT = Path(__file__).with_name("fbx_blender.py")
-# Blender's z up -> mimica's y up: (x, y, z) -> (x, z, -y)
-Z_UP_TO_Y_UP = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]])
+# Blender's z up -> mimica's y up (facts.Z_UP_TO_Y_UP), as a 4 x 4 transform
+Z_UP_TO_Y_UP = np.eye(4)
+Z_UP_TO_Y_UP[:3, :3] = facts.Z_UP_TO_Y_UP
 
 
 @dataclass
