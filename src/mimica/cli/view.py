@@ -24,10 +24,13 @@ def cmd_view(a):
     from ..wrinkles import mask_for
     import asyncio
     import webbrowser
-    from ..viewer import ViewerServer, ViewerSession, ensure_three
+    from ..viewer import ViewerServer, ViewerSession, ensure_three, port_in_use
 
     if not 0 <= a.port <= 65535:
         raise MimicaError(f"--port {a.port}: a port is 0-65535 (0: a free one)")
+    busy = port_in_use(a.port)
+    if busy is not None:
+        _busy(a.port, busy)
     vendor = ensure_three(progress=_say)
     rig, name = _rig_of(a)
     mask = None
@@ -48,9 +51,13 @@ def cmd_view(a):
         try:
             asyncio.run(server.run(ready))
         except OSError as e:
-            raise MimicaError(f"--port {a.port}: cannot listen on 127.0.0.1 ({e.strerror or e}); "
-                              "choose another port, or 0 for a free one") from None
+            _busy(a.port, e)
     return 0
+
+
+def _busy(port: int, e: OSError):
+    raise MimicaError(f"--port {port}: cannot listen on 127.0.0.1 ({e.strerror or e}); "
+                      "choose another port, or 0 for a free one") from None
 
 
 def add_args(sub) -> None:

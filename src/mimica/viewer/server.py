@@ -43,6 +43,19 @@ MAX_SECOND_VERTICES = 300_000    # a second face larger than this is refused bef
 IN_FLIGHT = 2
 
 
+def port_in_use(port: int) -> OSError | None:
+    """Why 127.0.0.1:`port` cannot be listened on now (the error), or None (0: any free port).
+    Asked before minutes of work, so that a busy port is said at once; the server still says
+    it should the port be taken in between."""
+    import socket
+    with socket.socket() as s:
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError as e:
+            return e
+    return None
+
+
 def _frame(kind: int, arr) -> bytes:
     return struct.pack("<I", kind) + np.ascontiguousarray(arr).tobytes()
 
