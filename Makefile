@@ -90,8 +90,9 @@ $(DOCS_STAMP): constraints/ci.txt
 	.venv-docs/bin/pip install -q -c constraints/ci.txt mkdocs mkdocs-material "mkdocstrings[python]"
 	touch $(DOCS_STAMP)
 
-docs: $(DOCS_STAMP)
-	NO_MKDOCS_2_WARNING=1 .venv-docs/bin/mkdocs build --strict --quiet
+# the gallery's pictures are made by the build (docs/hooks/gallery.py) with mimica's own venv
+docs: $(DOCS_STAMP) $(WHEEL_STAMP)
+	MIMICA_PYTHON=$(abspath $(BIN)/python) NO_MKDOCS_2_WARNING=1 .venv-docs/bin/mkdocs build --strict --quiet
 	@echo "the site: out/site/index.html"
 
 # every benchmark, one after the other (never while tests run: the timings would mean nothing);
