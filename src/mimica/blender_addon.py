@@ -51,11 +51,27 @@ EXPRESSIONS = facts.EXPRESSIONS
 
 
 class AddonError(Exception):
-    """What the user is told, in one line."""
+    """What the user is told, in one line (a Blender report).
+
+    Parameters
+    ----------
+    message : str
+    """
 
 
 def mimica_command(configured: str = "") -> str:
-    """The mimica executable: the preference, else MIMICA_COMMAND, else `mimica` on PATH."""
+    """The mimica executable the add-on runs.
+
+    Parameters
+    ----------
+    configured : str
+        The add-on's preference ("" for none).
+
+    Returns
+    -------
+    str
+        The preference, else $MIMICA_COMMAND, else `mimica` on PATH; AddonError where none is found.
+    """
     exe = configured or os.environ.get("MIMICA_COMMAND", "") or shutil.which("mimica") or ""
     if not exe or not (Path(exe).is_file() or shutil.which(exe)):
         raise AddonError("the mimica command was not found: install mimica (pip install mimica) and set its "
@@ -64,8 +80,17 @@ def mimica_command(configured: str = "") -> str:
 
 
 def write_obj(path, vertices, polygons) -> None:
-    """An OBJ of the mesh in Blender's vertex order (1-based faces), turned from Blender's z up
-    to mimica's y up (x, z, -y), as Blender's own OBJ export does."""
+    """An OBJ of a Blender mesh in its vertex order (1-based faces), turned from Blender's z up to
+    mimica's y up (facts.Z_UP_TO_Y_UP), as Blender's own OBJ export does.
+
+    Parameters
+    ----------
+    path : str or Path
+    vertices : (n, 3) float array
+        Blender's positions.
+    polygons : list of tuple of int
+        Each polygon's vertices.
+    """
     import numpy as np
     turned = np.asarray(vertices, dtype=float).reshape(-1, 3) @ np.asarray(facts.Z_UP_TO_Y_UP).T
     with open(path, "w") as f:
@@ -74,13 +99,35 @@ def write_obj(path, vertices, polygons) -> None:
 
 
 def to_blender(v):
-    """(n, 3) positions from mimica's y up back to Blender's z up: (x, -z, y)."""
+    """Positions from mimica's y up back to Blender's z up: (x, -z, y).
+
+    Parameters
+    ----------
+    v : (n, 3) float array
+
+    Returns
+    -------
+    (n, 3) float array
+    """
     import numpy as np
     return np.asarray(v, dtype=float) @ np.asarray(facts.Z_UP_TO_Y_UP)      # the turn's inverse: its transpose
 
 
 def run_mimica(args, progress=None) -> list[str]:
-    """Run mimica; its stderr lines go to progress(line); a failure raises its last line."""
+    """Run mimica, its progress passed on.
+
+    Parameters
+    ----------
+    args : list of str
+        The command line.
+    progress : callable, optional
+        Called with each line mimica writes on stderr.
+
+    Returns
+    -------
+    list of str
+        Those lines; a failure raises AddonError with its last line.
+    """
     proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     lines = []
     for line in proc.stderr:
@@ -95,15 +142,36 @@ def run_mimica(args, progress=None) -> list[str]:
 
 
 class Shapes(dict):
-    """{name: (n, 3) positions}; `cut`: where mimica cut the head (sealed lips, one-surface eyes)
-    -- {"copies": (k,) the vertex each added one copies, "corners": (m, 3) rows (polygon, corner,
-    added vertex)} -- to apply to the mesh before the shape keys, or None."""
+    """{name: (n, 3) positions} with where mimica cut the head.
+
+    Attributes
+    ----------
+    cut : dict or None
+        Where mimica cut the head (sealed lips, one-surface eyes), to apply to the mesh before the
+        shape keys: {"copies": (k,) the vertex each added one copies, "corners": (m, 3) rows
+        (polygon, corner, added vertex)}; None where nothing was cut.
+    """
     cut = None
 
 
 def arkit_shapes(vertices, polygons, exe: str, progress=None) -> dict:
-    """{ARKit name: (n, 3) positions} for a head given as Blender's vertices and polygons (a
-    Shapes: with the cut of sealed lips or eyes mimica made, whose vertices come after the head's)."""
+    """The 52 ARKit shapes of a head given as Blender's vertices and polygons (`mimica blendshapes`).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float array
+    polygons : list of tuple of int
+    exe : str
+        The mimica command.
+    progress : callable, optional
+        Called with each of mimica's progress lines.
+
+    Returns
+    -------
+    Shapes
+        {ARKit name: (n + k, 3) positions in Blender's frame}, k the vertices of any cut (after the
+        head's).
+    """
     import numpy as np
     with tempfile.TemporaryDirectory(prefix="mimica-blender-") as d:
         obj, out = Path(d) / "head.obj", Path(d) / "shapes.npz"
@@ -120,7 +188,17 @@ def arkit_shapes(vertices, polygons, exe: str, progress=None) -> dict:
 
 
 def read_obj_vertices(path):
-    """(n, 3) vertex positions of an OBJ mimica wrote (its `v` lines, in order)."""
+    """The vertex positions of an OBJ mimica wrote.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    (n, 3) float array
+        Its `v` lines, in order.
+    """
     import numpy as np
     with open(path) as f:
         rows = [ln.split()[1:4] for ln in f if ln.startswith("v ")]
@@ -129,8 +207,27 @@ def read_obj_vertices(path):
 
 def transfer_shapes(source_vertices, polygons, shapes: dict, target_vertices, target_polygons, exe: str,
                     progress=None) -> dict:
-    """{shape name: (m, 3) target positions}: the source's shapes (its rest `source_vertices`,
-    {name: (n, 3) positions}) moved onto the target by `mimica transfer` (any topology)."""
+    """The source's shapes moved onto the target by `mimica transfer` (any topology).
+
+    Parameters
+    ----------
+    source_vertices : (n, 3) float array
+        The source at rest.
+    polygons : list of tuple of int
+        The source's polygons.
+    shapes : dict
+        {name: (n, 3) positions} of the source.
+    target_vertices : (m, 3) float array
+    target_polygons : list of tuple of int
+    exe : str
+        The mimica command.
+    progress : callable, optional
+
+    Returns
+    -------
+    dict
+        {name: (m, 3) target positions}.
+    """
     with tempfile.TemporaryDirectory(prefix="mimica-blender-") as d:
         d = Path(d)
         (d / "shapes").mkdir()
@@ -154,8 +251,26 @@ def transfer_shapes(source_vertices, polygons, shapes: dict, target_vertices, ta
 
 
 def simulated_shapes(vertices, polygons, expressions, exe: str, progress=None, seconds: float = 1.0) -> dict:
-    """{"muscles_<expression>": (n, 3) positions}: Kim's muscles rigged on the head (`mimica
-    rig`) and each preset expression simulated for `seconds` (`mimica simulate`), its last frame."""
+    """Kim's muscles rigged on the head (`mimica rig`) and each preset expression simulated
+    (`mimica simulate`), its last frame.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float array
+    polygons : list of tuple of int
+    expressions : list of str
+        Presets (facts.EXPRESSIONS).
+    exe : str
+        The mimica command.
+    progress : callable, optional
+    seconds : float
+        How long each is simulated.
+
+    Returns
+    -------
+    dict
+        {"muscles_<expression>": (n, 3) positions}.
+    """
     with tempfile.TemporaryDirectory(prefix="mimica-blender-") as d:
         d = Path(d)
         write_obj(d / "head.obj", vertices, polygons)
@@ -173,9 +288,23 @@ def simulated_shapes(vertices, polygons, expressions, exe: str, progress=None, s
 
 
 def read_take(path, fps: float | None = None):
-    """(times in seconds from the start, {ARKit name: weights}) of a Live Link Face CSV (Timecode
-    HH:MM:SS:FF.fff, PascalCase names) or of a CSV with a `time` column (facts.take_from_rows,
-    as mimica reads takes); AddonError otherwise."""
+    """A take's times and ARKit weights (facts.take_from_rows, as mimica reads takes).
+
+    Parameters
+    ----------
+    path : str or Path
+        A Live Link Face CSV (Timecode HH:MM:SS:FF.fff, PascalCase names) or a CSV with a `time`
+        column.
+    fps : float or None
+        The Timecode's frame rate (None: one more than its largest frame number).
+
+    Returns
+    -------
+    times : list of float
+        Seconds from the start.
+    weights : dict
+        {ARKit name: list of float}; AddonError for a take that cannot be read.
+    """
     try:
         with open(path, newline="", encoding="utf-8-sig") as f:
             rows = list(csv.reader(f))

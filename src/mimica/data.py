@@ -35,16 +35,48 @@ ICT_FACE_AREA_SHA256 = "9be0b1b432fef37dd62416d07dd400bab4c925047a6c1f14b5b7a582
 
 
 def ict_path(name: str) -> Path:
-    """Path of an ICT-FaceKit OBJ by stem ('generic_neutral_mesh', 'identity003', 'jawOpen'...),
-    through the one template store."""
+    """Path of an ICT-FaceKit OBJ, through the one template store (store.TemplateStore).
+
+    Parameters
+    ----------
+    name : str
+        Its stem: 'generic_neutral_mesh', 'identity003', 'jawOpen', ...
+
+    Returns
+    -------
+    Path
+        The file (fetched into the cache where the store fetches).
+    """
     return default_store().path(name)
 
 
 def ict_expression_names() -> list[str]:
+    """The names of ICT-FaceKit's expression shapes (its OBJs but the neutral and the identities).
+
+    Returns
+    -------
+    list of str
+        As the store lists them ('jawOpen', 'eyeBlink_L', ...).
+    """
     return [n for n in shape_names() if n != "generic_neutral_mesh" and not n.startswith("identity")]
 
 
 def face_area_hash(face_indices: np.ndarray, face_starts: np.ndarray) -> str | None:
+    """A fingerprint of a mesh's first ICT_FACE_AREA_FACES polygons (is_ict_topology compares it
+    with ICT-FaceKit's).
+
+    Parameters
+    ----------
+    face_indices : (k,) int array
+        The polygons' corners, concatenated (Mesh.face_indices).
+    face_starts : (n_faces + 1,) int array
+        Where each polygon starts in face_indices (Mesh.face_starts).
+
+    Returns
+    -------
+    str or None
+        The sha256 hex digest; None for a mesh with fewer polygons.
+    """
     if len(face_starts) <= ICT_FACE_AREA_FACES:
         return None
     end = face_starts[ICT_FACE_AREA_FACES]
@@ -54,7 +86,17 @@ def face_area_hash(face_indices: np.ndarray, face_starts: np.ndarray) -> str | N
 
 
 def is_ict_topology(mesh) -> bool:
-    """True when the mesh's first 9230 polygons are ICT-FaceKit's face area (any identity)."""
+    """Whether a mesh is ICT-FaceKit's topology (any identity, any expression).
+
+    Parameters
+    ----------
+    mesh : Mesh
+
+    Returns
+    -------
+    bool
+        Its first 9,230 polygons are ICT-FaceKit's face area, vertex for vertex.
+    """
     return (mesh.n_vertices >= ICT_FACE_AREA_VERTICES
             and face_area_hash(mesh.face_indices, mesh.face_starts) == ICT_FACE_AREA_SHA256)
 
@@ -81,8 +123,19 @@ EXPRESSIONS = {
 class ICTModel:
     """ICT-FaceKit's linear model: face = N + sum w_i (identity_i - N) + sum e_j (E_j - N).
 
-    Shapes are read on first use and kept.  `n` restricts every shape to its first n
-    vertices (e.g. ICT_HEAD_VERTICES for face + head and neck).
+    Shapes are read on first use and kept.
+
+    Parameters
+    ----------
+    n : int or None
+        Restricts every shape to its first n vertices (ICT_HEAD_VERTICES: face, head and neck;
+        ICT_FACE_AREA_VERTICES: the face alone); None: the whole mesh (26,719 vertices, eyes,
+        teeth and the rest).
+
+    Attributes
+    ----------
+    mesh : Mesh
+        The neutral, restricted to n vertices.
     """
 
     def __init__(self, n: int | None = None):

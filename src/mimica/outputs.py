@@ -32,7 +32,20 @@ _STAGE = ".mimica-stage-"
 
 
 def os_error(path, e: OSError, doing="write") -> MimicaError:
-    """One line for an OS error on the user's path, with what to do."""
+    """One line for an OS error on the user's path, with what to do.
+
+    Parameters
+    ----------
+    path : str or Path
+    e : OSError
+    doing : str
+        "write", "read", ...
+
+    Returns
+    -------
+    MimicaError
+        To raise.
+    """
     hint = {errno.ENOSPC: "free some disk space", errno.EDQUOT: "free some disk space",
             errno.EROFS: "the file system is read-only; choose another place",
             errno.EACCES: "check the folder's permissions", errno.EPERM: "check the folder's permissions",
@@ -43,6 +56,13 @@ def os_error(path, e: OSError, doing="write") -> MimicaError:
 
 
 def make_parent(path: Path) -> None:
+    """Make a file's folder (and its parents); a part of the path that is a file, or an OS error, is
+    one MimicaError naming the path.
+
+    Parameters
+    ----------
+    path : Path
+    """
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except FileExistsError:
@@ -53,7 +73,18 @@ def make_parent(path: Path) -> None:
 
 @contextmanager
 def atomic_path(path):
-    """Yield a temporary path beside `path`; move it into place only on success."""
+    """A context manager: a temporary path beside `path`, moved into place only on success.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write (not a folder); its folder is made.
+
+    Yields
+    ------
+    Path
+        Where to write.
+    """
     path = Path(path)
     if path.is_dir():
         raise MimicaError(f"{path}: is a folder; name a file to write")
@@ -122,7 +153,17 @@ def _exchange(a: Path, b: Path) -> bool:
 
 
 def check_output_dir(path) -> Path:
-    """An output folder mimica may replace: absent, empty, or a complete earlier run's."""
+    """An output folder mimica may replace: absent, empty, or a complete earlier run's.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    Path
+        A MimicaError for a file, or for a folder of the user's (files without `.mimica-run.json`).
+    """
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise MimicaError(f"{path}: exists and is not a folder; name a folder for the output")
@@ -139,7 +180,21 @@ def check_output_dir(path) -> Path:
 
 @contextmanager
 def staged_dir(path, about: dict | None = None):
-    """Yield an empty temporary folder beside `path`; on success it replaces `path` whole."""
+    """A context manager: an empty temporary folder beside `path`, which replaces `path` whole on
+    success (an atomic exchange on Linux).
+
+    Parameters
+    ----------
+    path : str or Path
+        Checked by check_output_dir.
+    about : dict or None
+        Recorded in the completed folder's `.mimica-run.json`.
+
+    Yields
+    ------
+    Path
+        The folder to write into.
+    """
     path = check_output_dir(path)
     make_parent(path)
     _sweep(path.parent, path.name)
@@ -182,8 +237,15 @@ def _inside(p: Path, folder: Path) -> bool:
 
 
 def guard_outputs(inputs, outputs) -> None:
-    """Refuse outputs that would destroy an input: the same file, or a folder to be replaced
-    that holds an input.  `outputs`: (path, is_folder) pairs.  Before any work is done."""
+    """Refuse, before any work, outputs that would destroy an input: the same file, or a folder to be
+    replaced that holds an input.
+
+    Parameters
+    ----------
+    inputs : list of str or Path or None
+    outputs : list of tuple
+        (path, is_folder) pairs.
+    """
     ins = [Path(p) for p in inputs if p is not None]
     for out, is_folder in outputs:
         if out is None:

@@ -21,7 +21,13 @@ MANIFEST = json.loads(Path(__file__).with_name("ict_manifest.json").read_text())
 
 
 def cache_dir() -> Path:
-    """$MIMICA_CACHE, else $XDG_CACHE_HOME/mimica, else ~/.cache/mimica."""
+    """The folder mimica caches downloads and derived files in.
+
+    Returns
+    -------
+    Path
+        $MIMICA_CACHE, else $XDG_CACHE_HOME/mimica, else ~/.cache/mimica.
+    """
     env = os.environ.get("MIMICA_CACHE")
     if env:
         return Path(env).expanduser()
@@ -29,8 +35,13 @@ def cache_dir() -> Path:
 
 
 def data_dir() -> Path | None:
-    """The configured data directory: `MIMICA_DATA`, else `<checkout>/../shared/data` when
-    running from this repository, else None."""
+    """The configured data directory (ICT-FaceKit, the real heads, the Yale faces).
+
+    Returns
+    -------
+    Path or None
+        $MIMICA_DATA, else `<checkout>/../shared/data` when running from this repository, else None.
+    """
     env = os.environ.get("MIMICA_DATA")
     if env:
         return Path(env).expanduser().resolve()
@@ -40,7 +51,21 @@ def data_dir() -> Path | None:
 
 
 class TemplateStore:
-    """Where the ICT-FaceKit template files come from (data directory, cache, or download)."""
+    """Where the ICT-FaceKit template files come from: the data directory, else the cache, else a
+    download of the pinned commit (checked against the manifest's sha256).
+
+    Parameters
+    ----------
+    data : str or Path or None
+        The folder holding ICT-FaceKit's OBJs (None: data_dir()/ict-facekit/FaceXModel).
+    cache : str or Path or None
+        Where downloads go (None: cache_dir()/ict-facekit/<commit>).
+    url : str or None
+        A mirror of the pinned files ({commit} and {name} in it; None: $MIMICA_ICT_URL, else
+        GitHub's).
+    timeout : float
+        Seconds a download may stall.
+    """
 
     def __init__(self, data=None, cache=None, url=None, timeout=30.0):
         base = data_dir()
@@ -110,7 +135,13 @@ _default = None
 
 
 def default_store() -> TemplateStore:
-    """The store for the current MIMICA_DATA / MIMICA_CACHE (rebuilt when they change)."""
+    """The store for the current MIMICA_DATA, MIMICA_CACHE, XDG_CACHE_HOME and MIMICA_ICT_URL
+    (made again when they change).
+
+    Returns
+    -------
+    TemplateStore
+    """
     global _default
     key = tuple(os.environ.get(k) for k in ("MIMICA_DATA", "MIMICA_CACHE", "XDG_CACHE_HOME", "MIMICA_ICT_URL"))
     if _default is None or _default[0] != key:
@@ -119,6 +150,12 @@ def default_store() -> TemplateStore:
 
 
 def shape_names() -> list[str]:
-    """Every ICT-FaceKit file the store knows, by stem."""
+    """Every ICT-FaceKit file the store knows.
+
+    Returns
+    -------
+    list of str
+        Their stems, sorted.
+    """
     return sorted(MANIFEST["files"])
 

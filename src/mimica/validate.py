@@ -10,7 +10,24 @@ from .errors import MimicaError
 
 
 def number_in(value, lo: float, hi: float, what: str, integer: bool = False) -> float:
-    """`value` as a finite number from `lo` to `hi` (a whole number where `integer`)."""
+    """`value` as a finite number from `lo` to `hi`.
+
+    Parameters
+    ----------
+    value : object
+        What the user gave (a number or its text).
+    lo, hi : float
+        The range, both ends allowed.
+    what : str
+        How the message names it (the option or field).
+    integer : bool
+        A whole number is expected (returned as int).
+
+    Returns
+    -------
+    float or int
+        Raises MimicaError naming `what`, the value and the range otherwise.
+    """
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -22,7 +39,22 @@ def number_in(value, lo: float, hi: float, what: str, integer: bool = False) -> 
 
 
 def floats(text: str, n: int, what: str) -> list[float]:
-    """'0,1.5,-0.1' -> [0.0, 1.5, -0.1]: exactly n finite numbers separated by commas."""
+    """'0,1.5,-0.1' -> [0.0, 1.5, -0.1].
+
+    Parameters
+    ----------
+    text : str
+        Exactly `n` finite numbers separated by commas.
+    n : int
+        How many.
+    what : str
+        How the message names it.
+
+    Returns
+    -------
+    list of float
+        (n,) the numbers; MimicaError otherwise.
+    """
     try:
         vals = [float(x) for x in str(text).split(",")]
     except ValueError:
@@ -33,8 +65,21 @@ def floats(text: str, n: int, what: str) -> list[float]:
 
 
 def pull(spec: str, what: str) -> tuple[np.ndarray, float, np.ndarray]:
-    """'x,y,z:radius:fx,fy,fz' -> (centre (3,), radius, force (3,)): a force on the skin within a
-    radius of a point, in the skin's units (finite numbers, radius > 0, |force| <= 1e6)."""
+    """A force on the skin within a radius of a point, from its text.
+
+    Parameters
+    ----------
+    spec : str
+        'x,y,z:radius:fx,fy,fz' in the skin's units (finite numbers, radius > 0, |force| <= 1e6).
+    what : str
+        How the message names it.
+
+    Returns
+    -------
+    centre : (3,) float array
+    radius : float
+    force : (3,) float array
+    """
     try:
         c, r, f = str(spec).split(":")
         center = np.array([float(v) for v in c.split(",")])
@@ -52,9 +97,21 @@ def pull(spec: str, what: str) -> tuple[np.ndarray, float, np.ndarray]:
 
 
 def strengths(text: str, what: str):
-    """'0.5' -> 0.5; 'brows=0.5,mouth=1.2' -> {"brows": 0.5, "mouth": 1.2}; '0,mouth=1' ->
-    {"all": 0.0, "mouth": 1.0}: how much of an expression, overall or per region (the regions
-    and the range are checked where they are used: image.analogy.point_strengths)."""
+    """How much of an expression, overall or per region.
+
+    Parameters
+    ----------
+    text : str
+        '0.5', or regions 'brows=0.5,mouth=1.2', or both '0,mouth=1'.
+    what : str
+        How the message names it.
+
+    Returns
+    -------
+    float or dict
+        0.5; {"brows": 0.5, "mouth": 1.2}; {"all": 0.0, "mouth": 1.0}.  The regions and the
+        range are checked where they are used (image.analogy.point_strengths).
+    """
     out, parts = {}, [t.strip() for t in str(text).split(",") if t.strip()]
     try:
         for t in parts:

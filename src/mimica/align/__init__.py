@@ -12,7 +12,19 @@ from ..errors import MimicaError
 
 @dataclass
 class Similarity:
-    """x -> scale * R @ x + t; `residual` is the RMS landmark distance after the fit."""
+    """A similarity transform x -> scale * R @ x + t.
+
+    Attributes
+    ----------
+    scale : float
+    rotation : (3, 3) float array
+        R, a proper rotation.
+    translation : (3,) float array
+        t.
+    residual : float
+        The RMS distance of the fitted points after the fit (fit_similarity), in the
+        destination's units.
+    """
 
     scale: float
     rotation: np.ndarray
@@ -32,11 +44,25 @@ class Similarity:
 
 
 def fit_similarity(src, dst, what="landmarks", scale=True) -> Similarity:
-    """Least-squares similarity mapping src points onto dst points, (m, 3) each; NaN rows skipped.
+    """The least-squares similarity mapping src points onto dst points.
 
     Centroids, cross-covariance SVD for the rotation (reflection excluded), scale from the
     singular values (1 with scale=False: the best rigid motion), translation from the
     centroids (Challis 1995).
+
+    Parameters
+    ----------
+    src, dst : (m, 3) float arrays
+        Corresponding points; rows with a NaN in either are skipped (at least 3 must remain).
+    what : str
+        How messages name the points.
+    scale : bool
+        Fit the scale too (False: the best rigid motion).
+
+    Returns
+    -------
+    Similarity
+        Its `residual` the RMS distance after the fit.
     """
     src, dst = np.asarray(src, float), np.asarray(dst, float)
     ok = np.isfinite(src).all(1) & np.isfinite(dst).all(1)
@@ -65,7 +91,17 @@ _BROWS = slice(17, 27)
 
 @dataclass
 class Cylinder:
-    """A vertical cylinder in a face frame: origin on the axis, axes (right, up, forward)."""
+    """A vertical cylinder in a face frame (Song et al.'s cylinder map).
+
+    Attributes
+    ----------
+    origin : (3,) float array
+        A point on the axis.
+    axes : (3, 3) float array
+        Rows: right, up (the axis), forward.
+    radius : float
+        The reference radius: u is arc length at this radius.
+    """
 
     origin: np.ndarray
     axes: np.ndarray          # (3, 3) rows: right, up, forward
@@ -80,7 +116,18 @@ class Cylinder:
 
 
 def face_cylinder(landmarks: np.ndarray) -> Cylinder:
-    """Cylinder from 68 landmark positions: axis vertical through the middle of the head."""
+    """The face's cylinder: its axis vertical (brows over chin) through the middle of the head.
+
+    Parameters
+    ----------
+    landmarks : (68, 3) float array
+        iBUG 68 positions; the chin (8), the outer eye corners (36, 45) and a brow point
+        (17-26) are needed, others may be NaN.
+
+    Returns
+    -------
+    Cylinder
+    """
     lm = np.asarray(landmarks, float)
     ok = np.isfinite(lm).all(1)
     need = [_JAW_CHIN, _EYE_R_OUT, _EYE_L_OUT]

@@ -71,6 +71,17 @@ JOB_KEYS = {"run", "heads", "performances", "from"}
 
 @dataclass
 class Head:
+    """A head of the manifest.
+
+    Attributes
+    ----------
+    name : str
+        Its name in the manifest (a folder of the results).
+    mesh : Path
+        Its mesh file.
+    landmarks : Path or None
+        Its landmark file, where given.
+    """
     name: str
     mesh: Path
     landmarks: Path | None = None
@@ -78,6 +89,16 @@ class Head:
 
 @dataclass
 class Performance:
+    """A performance of the manifest: what drives the heads.
+
+    Attributes
+    ----------
+    name : str
+    kind : str
+        "frames", "arkit" or "timeline".
+    files : dict
+        role -> Path: neutral, frames (a folder or a list), arkit, timeline.
+    """
     name: str
     kind: str                      # frames | arkit | timeline
     files: dict                    # role -> Path (neutral, frames (a folder or a list), arkit, timeline)
@@ -85,6 +106,25 @@ class Performance:
 
 @dataclass
 class Job:
+    """One job of a batch: a kind of work on one head (and one performance).
+
+    Attributes
+    ----------
+    id : str
+        "<job>/<head>[/<performance>]".
+    name : str
+        The manifest's job name.
+    kind : str
+        blendshapes, transfer, rig, simulate, age, animate or render.
+    head : Head
+    performance : Performance or None
+    options : dict
+        The job's options, the pipeline's defaults filled in.
+    after : list of str
+        The ids of the jobs whose outputs it reads.
+    key : str
+        A hash of what it depends on (key_jobs); equal keys: nothing to redo.
+    """
     id: str                        # <job>/<head>[/<performance>]
     name: str                      # the manifest's job name
     kind: str
@@ -136,6 +176,16 @@ def _plain(x):
 
 
 def read_manifest(path) -> dict:
+    """A batch manifest's TOML, parsed; a missing or malformed file is one MimicaError.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    dict
+    """
     path = Path(path)
     try:
         return tomllib.loads(path.read_text(encoding="utf-8"))
@@ -148,8 +198,18 @@ def read_manifest(path) -> dict:
 
 
 def plan(path) -> list[Job]:
-    """The manifest at `path` made into jobs, in an order where every job comes after those it
-    reads from; keys not yet computed (see `key_jobs`)."""
+    """The manifest made into jobs, in an order where every job comes after those it reads from;
+    keys not yet computed (key_jobs).
+
+    Parameters
+    ----------
+    path : str or Path
+        The manifest (TOML); its relative paths are taken from its folder.
+
+    Returns
+    -------
+    list of Job
+    """
     path = Path(path)
     m = read_manifest(path)
     base = path.resolve().parent
@@ -359,8 +419,14 @@ def _job_order(jobs: dict, where: str) -> list[str]:
 
 
 class FileHashes:
-    """sha256 of files, remembered by (path, size, mtime) in a JSON file, so that a rerun with
-    nothing changed reads no input again."""
+    """sha256 of files, remembered by (path, size, mtime) in a JSON file, so that a rerun with nothing
+    changed reads no input again.
+
+    Parameters
+    ----------
+    path : Path or None
+        The JSON file (None: remember nothing).
+    """
 
     def __init__(self, path: Path | None):
         self.path = path
@@ -394,8 +460,15 @@ class FileHashes:
 
 
 def key_jobs(jobs: list[Job], hashes: FileHashes) -> None:
-    """Each job's key: a hash of its kind, options, mimica's version, its inputs' contents and
-    the keys of the jobs it reads from."""
+    """Set each job's key: a hash of its kind, options, mimica's version, its inputs' contents and
+    the keys of the jobs it reads from.
+
+    Parameters
+    ----------
+    jobs : list of Job
+        In plan's order; changed in place.
+    hashes : FileHashes
+    """
     from .. import __version__
     keys = {}
     for j in jobs:
@@ -406,8 +479,18 @@ def key_jobs(jobs: list[Job], hashes: FileHashes) -> None:
 
 
 def frame_files(perf: Performance) -> list[Path]:
-    """The expression meshes of a frames performance: its list, or its folder's frames (as the
-    `transfer` command takes a folder: natural order, one format)."""
+    """The expression meshes of a frames performance (as the `transfer` command takes a folder:
+    natural order, one format).
+
+    Parameters
+    ----------
+    perf : Performance
+
+    Returns
+    -------
+    list of Path
+        Its list, or its folder's frames.
+    """
     from ..mesh.io import sequence_files
     if getattr(perf, "_listed", None) is None:          # listed once per plan
         f = perf.files["frames"]
@@ -416,6 +499,12 @@ def frame_files(perf: Performance) -> list[Path]:
 
 
 def environment() -> dict:
-    """What a job's result records of where it ran."""
+    """What a job's result records of where it ran.
+
+    Returns
+    -------
+    dict
+        {"machine": the host's name, "pid": the process}.
+    """
     import platform
     return {"machine": platform.node(), "pid": os.getpid()}

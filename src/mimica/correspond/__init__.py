@@ -46,7 +46,22 @@ from .register import on_boundary, register, rows_of
 
 @dataclass
 class Correspondence:
-    """For each target vertex: a source triangle (-1 = unmatched) and barycentric coordinates."""
+    """A dense map from the target's vertices onto the source's surface.
+
+    Attributes
+    ----------
+    triangle : (n_target,) int array
+        The source triangle each target vertex lies on (-1: unmatched).
+    bary : (n_target, 3) float array
+        Its barycentric coordinates there.
+    n_source : int
+        The source's vertex count.
+    confidence : (n_target,) float array or None
+        0 to 1: how close and parallel the two surfaces came (None for the cylinder map);
+        below LOW a vertex counts as low-confidence.
+    contours : list or None
+        The lid and lip contours matched (correspond.contours), where asked for.
+    """
 
     triangle: np.ndarray
     bary: np.ndarray
@@ -103,16 +118,34 @@ CONTOUR_WEIGHT = 1.0          # of a contour sample, against a landmark's (regis
 def correspond(source: Mesh, source_lm: np.ndarray, target: Mesh, target_lm: np.ndarray,
                k: int = 24, method: str = "nicp", lookup: np.ndarray | None = None,
                contours: bool = False) -> Correspondence:
-    """Correspondence from target vertices to the source surface; both faces already aligned.
+    """Correspondence from the target's vertices to the source's surface; both faces already
+    aligned (align.fit_similarity on their landmarks).
 
-    source_lm / target_lm: (68, 3) landmark positions (NaN = missing) on each face.
-    lookup: (n_target, 3) where each target vertex looks its partner up (default: where it
-    is; the two sides of a cut seam look a little inside their own lip).
-    contours: with "nicp", the lid and lip contours are also held, matched by arc length
-    (correspond.contours).  Off by default: on four held-out remeshes the transfer's mean
-    relative error was 0.1033 without them, 0.1035 with the eyes' rims, 0.1043 with the outer
-    lips, 0.1073 with the inner lips, 0.1068 with all four (the landmarks and closest points
-    already place the rims; a scan's ragged holes pull the source's rims off their place).
+    Parameters
+    ----------
+    source, target : Mesh
+        The faces.
+    source_lm, target_lm : (68, 3) float arrays
+        Landmark positions on each (NaN: missing; at least 6 present on both).
+    k : int
+        Neighbours of the cylinder map's interpolation ("cylinder" only).
+    method : str
+        "nicp": the source registered onto the target by a non-rigid ICP held at the landmarks
+        (correspond.register), each target vertex taking its closest point; "cylinder": Song
+        et al.'s cylinder map.
+    lookup : (n_target, 3) float array or None
+        Where each target vertex looks its partner up (None: where it is; the two sides of a
+        cut seam look a little inside their own lip).
+    contours : bool
+        With "nicp", the lid and lip contours are also held, matched by arc length
+        (correspond.contours).  Off by default: on four held-out remeshes the transfer's mean
+        relative error was 0.1033 without them, 0.1035 with the eyes' rims, 0.1043 with the
+        outer lips, 0.1073 with the inner lips, 0.1068 with all four (the landmarks and closest
+        points already place the rims; a scan's ragged holes pull the source's rims off).
+
+    Returns
+    -------
+    Correspondence
     """
     if method not in METHODS:
         raise MimicaError(f"unknown correspondence method {method!r}; use one of {', '.join(METHODS)}")

@@ -41,26 +41,70 @@ EXACT = 1.0                                    # without libigl: exact within th
 
 @dataclass
 class Registration:
+    """The source deformed onto the target (register).
+
+    Attributes
+    ----------
+    vertices : (n_source, 3) float array
+    edge : float
+        The target's median edge length.
+    """
     vertices: np.ndarray      # (n_source, 3) the source deformed onto the target
     edge: float               # the target's median edge length
 
 
 def rows_of(mesh: Mesh, triangle: np.ndarray, bary: np.ndarray) -> sp.csr_matrix:
-    """(k, n) barycentric rows: points on `mesh` as combinations of its vertices."""
+    """Points on a mesh's surface as combinations of its vertices.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    triangle : (k,) int array
+    bary : (k, 3) float array
+
+    Returns
+    -------
+    (k, n) sparse matrix
+        Barycentric rows.
+    """
     t = mesh.triangles[np.asarray(triangle)]
     r = np.repeat(np.arange(len(t)), 3)
     return sp.csr_matrix((np.asarray(bary, float).ravel(), (r, t.ravel())), shape=(len(t), mesh.n_vertices))
 
 
 def median_edge(mesh: Mesh) -> float:
+    """The median length of a mesh's edges.
+
+    Parameters
+    ----------
+    mesh : Mesh
+
+    Returns
+    -------
+    float
+    """
     e = mesh.edges
     return float(np.median(np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1)))
 
 
 def on_boundary(mesh: Mesh, triangle: np.ndarray, bary: np.ndarray, boundary=None, eps: float = 1e-9) -> np.ndarray:
-    """Surface points that lie on the mesh's boundary: every vertex they depend on is a
-    boundary vertex (a point on a boundary edge, or a boundary vertex itself).
-    boundary: the mesh's boundary_vertices(), when the caller has them."""
+    """Which surface points lie on the mesh's boundary: every vertex they depend on is a boundary
+    vertex (a point on a boundary edge, or a boundary vertex itself).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    triangle : (k,) int array
+    bary : (k, 3) float array
+    boundary : (n,) bool array or None
+        The mesh's boundary_vertices(), when the caller has them.
+    eps : float
+        Barycentrics at most this count as zero.
+
+    Returns
+    -------
+    (k,) bool array
+    """
     b = mesh.boundary_vertices() if boundary is None else boundary
     nz = np.asarray(bary) > eps
     return (nz & b[mesh.triangles[triangle]]).sum(1) == nz.sum(1)
@@ -69,8 +113,29 @@ def on_boundary(mesh: Mesh, triangle: np.ndarray, bary: np.ndarray, boundary=Non
 def register(source: Mesh, points: sp.spmatrix, target: Mesh, targets: np.ndarray,
              stiffness=STIFFNESS, iterations: int = ITERATIONS, point_weight: float = POINT_WEIGHT,
              max_angle: float = MAX_ANGLE) -> Registration:
-    """Deform `source` onto `target`, both aligned; points: (k, n_source) rows of source
-    surface points held at targets (k, 3) (landmarks, contour samples)."""
+    """Deform the source onto the target, both aligned: a non-rigid ICP after Amberg et al. 2007
+    (closest points, none taken on the target's holes and edges or where the surfaces face apart;
+    decreasing stiffness), with some source surface points held at given targets.
+
+    Parameters
+    ----------
+    source, target : Mesh
+    points : (k, n_source) sparse matrix
+        Rows of source surface points (rows_of) held at `targets`: landmarks, contour samples.
+    targets : (k, 3) float array
+    stiffness : tuple of float
+        Amberg's alpha per step, for unit-weight edges.
+    iterations : int
+        Closest-point updates per stiffness.
+    point_weight : float
+        Beta: the held points' weight.
+    max_angle : float
+        Degrees between normals beyond which a closest point is no data.
+
+    Returns
+    -------
+    Registration
+    """
     v0 = source.vertices
     adj = source.adjacency
     lap = (sp.diags(np.asarray(adj.sum(1)).ravel()) - adj).tocsr()    # sum over edges |d_i - d_j|^2

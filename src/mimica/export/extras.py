@@ -14,10 +14,23 @@ LANDMARKS_KEY = "mimica_landmarks"  # {"vertices": (68, 3) int, "bary": (68, 3)}
 
 
 def head_joint(mesh, landmarks) -> dict | None:
-    """Where a head turns, from its 68 landmarks: {"pivot": the top of the neck (near the
-    atlanto-occipital joint): level with the jaw outline under the ears (points 1, 2, 14, 15),
-    a third of the face's width (0 to 16) behind them; "chin": point 8} -- a mimica estimate,
-    not measured on anatomy.  None where those landmarks are missing."""
+    """Where a head turns, from its 68 landmarks -- a mimica estimate, not measured on anatomy.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The head.
+    landmarks : Landmarks
+        Its 68 landmarks (0, 1, 2, 8, 14, 15, 16 and 30 are used).
+
+    Returns
+    -------
+    dict or None
+        {"pivot": (3,) the top of the neck (near the atlanto-occipital joint): level with the jaw
+        outline under the ears (points 1, 2, 14, 15), a third of the face's width (0 to 16)
+        behind them; "chin": (3,) point 8}, in the mesh's units.  None where those landmarks
+        are missing.
+    """
     p = landmarks.positions(mesh)
     if np.isnan(p[[0, 1, 2, 8, 14, 15, 16, 30]]).any():
         return None
@@ -59,14 +72,38 @@ def head_extras(mesh, landmarks, metres_per_unit: float) -> dict:
 
 
 def stored_head(extras: dict | None) -> dict:
-    """{"pivot": [x, y, z], "chin": [x, y, z]} in metres as `head_extras` stored them, or {}."""
+    """The head's joint as `head_extras` stored it.
+
+    Parameters
+    ----------
+    extras : dict or None
+        A glTF mesh's extras.
+
+    Returns
+    -------
+    dict
+        {"pivot": [x, y, z], "chin": [x, y, z]} in metres, or {} where none is stored.
+    """
     return dict((extras or {}).get(HEAD_KEY) or {})
 
 
 def stored_landmarks(extras: dict | None, n_vertices: int, what: str) -> tuple[np.ndarray, np.ndarray] | None:
-    """The 68 landmarks `head_extras` stored: (vertices (68, 3) int64, bary (68, 3) float64), or
-    None where none are stored.  Raises MimicaError where they do not fit the mesh's
-    `n_vertices`; `what` names the file."""
+    """The 68 landmarks `head_extras` stored.
+
+    Parameters
+    ----------
+    extras : dict or None
+        A glTF mesh's extras.
+    n_vertices : int
+        The mesh's vertex count, which the stored triangles must fit (MimicaError otherwise).
+    what : str
+        How the message names the file.
+
+    Returns
+    -------
+    tuple or None
+        (vertices (68, 3) int64 array, bary (68, 3) float64 array), or None where none are stored.
+    """
     stored = (extras or {}).get(LANDMARKS_KEY)
     if not stored:
         return None

@@ -45,13 +45,27 @@ def _json_rows(path: Path) -> list[list[str]]:
 
 
 def read_take(path, fps: float | None = None) -> tuple[np.ndarray, dict, float]:
-    """(times in seconds from the take's start (F,), {ARKit name: weights (F,)}, frame rate)
-    of a take CSV or JSON (_json_rows; the rate: the Timecode's, or the median of a time
-    column's steps).  The
-    head's rotation, where the take has it, comes as headYaw, headPitch, headRoll (radians).
+    """A take: the 52 ARKit weights over time, from a CSV (Live Link Face's, or with a `time`
+    column) or a JSON file.
 
-    fps: the frame rate of a Timecode column (default: one more than the largest frame number
-    in the take, e.g. 60 for frames 0-59)."""
+    Parameters
+    ----------
+    path : str or Path
+        The take (facts.take_from_rows reads its rows).
+    fps : float or None
+        The frame rate of a Timecode column (None: one more than the largest frame number in
+        the take, e.g. 60 for frames 0-59).
+
+    Returns
+    -------
+    times : (F,) float array
+        Seconds from the take's first frame.
+    weights : dict
+        {ARKit name: (F,) float array}; the head's rotation, where the take has it, as
+        headYaw, headPitch, headRoll (radians).
+    rate : float
+        The Timecode's frame rate, or the median of the time column's steps.
+    """
     path = Path(path)
     if path.suffix.lower() == ".json":
         rows = _json_rows(path)
@@ -75,9 +89,21 @@ def read_take(path, fps: float | None = None) -> tuple[np.ndarray, dict, float]:
 
 
 def head_quaternions(yaw, pitch, roll) -> np.ndarray:
-    """(F, 4) glTF quaternions (x, y, z, w) of the head's rotation: yaw about the head's up (y),
-    pitch about its left-right axis (x), roll about its forward axis (z), turned in that order
-    (R = Ry Rx Rz, right-handed, the face looking along +z as mimica's heads do)."""
+    """glTF quaternions of the head's rotation, each next to the last (glTF's slerp between
+    keyframes then takes the short way).
+
+    Parameters
+    ----------
+    yaw, pitch, roll : (F,) float arrays
+        Radians: yaw about the head's up (y), pitch about its left-right axis (x), roll about its
+        forward axis (z), turned in that order (R = Ry Rx Rz, right-handed, the face looking
+        along +z as mimica's heads do).
+
+    Returns
+    -------
+    (F, 4) float32 array
+        (x, y, z, w).
+    """
     from scipy.spatial.transform import Rotation
     q = Rotation.from_euler("YXZ", np.stack([yaw, pitch, roll], 1)).as_quat()
     # q and -q are one rotation: keep each next to the last, so that glTF's slerp between
@@ -87,9 +113,23 @@ def head_quaternions(yaw, pitch, roll) -> np.ndarray:
 
 
 def neck_weights(y: np.ndarray, pivot_y: float, chin_y: float | None) -> np.ndarray:
-    """How much each vertex turns with the head (0..1) from its height y: 1 from the chin up,
-    easing (smoothstep) to 0 at the mesh's lowest point, so that a neck bends and the shoulders
-    stay; a face that ends at its chin (no neck below it) turns whole."""
+    """How much each vertex turns with the head: 1 from the chin up, easing (smoothstep) to 0 at
+    the mesh's lowest point, so that a neck bends and the shoulders stay.
+
+    Parameters
+    ----------
+    y : (n,) float array
+        Each vertex's height.
+    pivot_y : float
+        The head's pivot's height.
+    chin_y : float or None
+        The chin's height; None, or a face that ends at its chin: it turns whole.
+
+    Returns
+    -------
+    (n,) float array
+        0 to 1.
+    """
     top = pivot_y - 1.2 * (pivot_y - chin_y) if chin_y is not None else pivot_y
     bottom = float(y.min())
     if chin_y is None or top - bottom < 0.25 * (pivot_y - chin_y):
@@ -103,12 +143,30 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: 
     """Write `out`: the head's GLB with an animation of its morph targets' weights (one
     keyframe per time; targets the take does not name stay at 0).
 
-    head_rotation: also turn the head by the take's headYaw/headPitch/headRoll, as a skin of two
-    joints (neck, head) at the pivot: the head turns whole, the neck below the chin bends
-    (neck_weights), the shoulders stay.  The pivot is `pivot` (metres, in the file's frame), else
-    the one `blendshapes` stored (HEAD_KEY); a GLB without one needs `pivot` (it then turns whole).
-    Returns {"driven": how many of the head's targets the take drives, "pivot": the pivot used or
-    None, "bending": how many vertices bend with the neck}."""
+    Parameters
+    ----------
+    head_glb : str or Path
+        A GLB whose morph targets are named as ARKit shapes (`blendshapes` makes one).
+    out : str or Path
+        The GLB to write.
+    times : (F,) float array
+        Seconds.
+    weights : dict
+        {name: (F,) float array}, as read_take gives them.
+    head_rotation : bool
+        Also turn the head by the take's headYaw/headPitch/headRoll, as a skin of two joints
+        (neck, head) at the pivot: the head turns whole, the neck below the chin bends
+        (neck_weights), the shoulders stay.
+    pivot : (3,) float array or None
+        The pivot (metres, in the file's frame); None: the one `blendshapes` stored (HEAD_KEY).
+        A GLB without one needs it (it then turns whole).
+
+    Returns
+    -------
+    dict
+        {"driven": how many of the head's targets the take drives, "pivot": the pivot used or
+        None, "bending": how many vertices bend with the neck}.
+    """
     from ..mesh.io.gltf import ARRAY_BUFFER, FLOAT, UNSIGNED_BYTE, _placed_meshes, open_for_edit, save_edited
     head_glb = Path(head_glb)
     g, doc, buf, _ = open_for_edit(head_glb)

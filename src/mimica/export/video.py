@@ -49,8 +49,17 @@ POINT_WEIGHTS = np.r_[np.full(17, 0.3), np.ones(51)]   # the face's outline, whe
 
 @dataclass
 class LandmarkBasis:
-    """The head's 68 landmarks at rest (68, 3) and their motion in each ARKit shape (52, 68, 3),
-    metres in the GLB's frame."""
+    """The head's 68 landmarks at rest and their motion in each ARKit shape, metres in the GLB's
+    frame (landmark_basis).
+
+    Attributes
+    ----------
+    rest : (68, 3) float array
+    motion : (52, 68, 3) float array
+        In names' order.
+    names : list of str
+        ARKIT_52.
+    """
     rest: np.ndarray
     motion: np.ndarray
     names: list
@@ -58,7 +67,17 @@ class LandmarkBasis:
 
 def landmark_basis(head_glb) -> LandmarkBasis:
     """Read the head's landmarks and their motion in its morph targets from a GLB written by
-    `blendshapes` (which stores the landmarks, LANDMARKS_KEY)."""
+    `blendshapes` (which stores the landmarks, LANDMARKS_KEY).
+
+    Parameters
+    ----------
+    head_glb : str or Path
+
+    Returns
+    -------
+    LandmarkBasis
+        MimicaError for a GLB without the 52 ARKit targets or without stored landmarks.
+    """
     from ..mesh.io import UNITS, read_morph_targets
     head_glb = Path(head_glb)
     mesh, targets, unit = read_morph_targets(head_glb)
@@ -94,6 +113,17 @@ def _cross_matrices(v: np.ndarray) -> np.ndarray:
 
 @dataclass
 class VideoFit:
+    """The ARKit weights fitted to a take's tracked points (fit_weights).
+
+    Attributes
+    ----------
+    weights : (F, 52) float array
+        In ARKIT_52's order.
+    rotations : (F, 3, 3) float array
+        The head's rotation relative to the rest frame.
+    residual : (F,) float array
+        RMS misfit of the 68 points, in face widths.
+    """
     weights: np.ndarray          # (F, 52) in ARKIT_52's order
     rotations: np.ndarray        # (F, 3, 3): the head's rotation relative to the rest frame
     residual: np.ndarray         # (F,) RMS misfit of the 68 points, in face widths
@@ -102,8 +132,32 @@ class VideoFit:
 def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, rest_pull: float = REST_PULL,
                 smooth_pull: float = SMOOTH_PULL, smooth_points: float = SMOOTH_POINTS,
                 sparse_pull: float = SPARSE_PULL) -> VideoFit:
-    """The ARKit weights of each frame of tracked 2D points (F, 68, 2), pixels (y down).
-    smooth_points: a Gaussian over time (frames) on the points first, against the detector's jitter."""
+    """The ARKit weights of each frame of tracked 2D points: the head's pose (scaled orthographic)
+    and weights in [0, 1] through its landmark basis, frame by frame (Gauss-Newton on the pose
+    joined to a bounded least squares on the weights), pulled toward rest, toward few shapes (a
+    reweighted L1, then refitted without it) and toward the last frame's weights.
+
+    Parameters
+    ----------
+    points : (F, 68, 2) float array
+        Pixels (y down).
+    basis : LandmarkBasis
+    rest_frame : int
+        The frame showing the performer's rest: what it shows of their own face is added to the
+        head's landmarks (a per-performer neutral), and the rotations are relative to it.
+    rest_pull : float
+        Weight of sum w^2 against the points' misfit.
+    smooth_pull : float
+        Weight of the change from the last frame's weights.
+    smooth_points : float
+        Frames: a Gaussian over time on the points first, against the detector's jitter.
+    sparse_pull : float
+        Weight of sum w (an L1 pull toward few shapes).
+
+    Returns
+    -------
+    VideoFit
+    """
     from scipy.optimize import lsq_linear
     from scipy.spatial.transform import Rotation
     pts = np.asarray(points, np.float64)
@@ -180,7 +234,21 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
 
 
 def track_video(path, progress=None, max_frames: int | None = None):
-    """(frames per second, (F, 68, 2) points) of the face in a video or a folder of frames."""
+    """The face's 68 points through a video or a folder of frames (dlib's tracker).
+
+    Parameters
+    ----------
+    path : str or Path
+    progress : callable, optional
+        Called with a line of text every 30 frames tracked.
+    max_frames : int or None
+        Stop after this many.
+
+    Returns
+    -------
+    fps : float
+    points : (F, 68, 2) float array
+    """
     from ..image.video import frame_source
     from ..landmarks.detect2d import Tracker
     n, fps, frames = frame_source(path)
@@ -199,17 +267,44 @@ def track_video(path, progress=None, max_frames: int | None = None):
 
 
 def head_angles(rotations: np.ndarray) -> np.ndarray:
-    """(F, 3) yaw, pitch, roll in radians (R = Ry Rx Rz, as animate's head rotation reads them)."""
+    """The head's rotations as Euler angles (R = Ry Rx Rz, as animate's head rotation reads them).
+
+    Parameters
+    ----------
+    rotations : (F, 3, 3) float array
+
+    Returns
+    -------
+    (F, 3) float array
+        Yaw, pitch, roll in radians.
+    """
     from scipy.spatial.transform import Rotation
     return Rotation.from_matrix(rotations).as_euler("YXZ")
 
 
 def write_live_link_csv(path, times: np.ndarray, weights: np.ndarray, fps: float,
                         angles: np.ndarray | None = None) -> Path:
-    """A Live Link Face-style CSV: Timecode (HH:MM:SS:FF.fff, FF counting frames at `fps` within
-    each second, so that a reader finds the rate from a take of a second or more),
-    BlendShapeCount, the 52 PascalCase weights, then HeadYaw, HeadPitch, HeadRoll (radians) and
-    the eyes' (zero)."""
+    """Write a Live Link Face-style CSV, whole or not at all.
+
+    Columns: Timecode (HH:MM:SS:FF.fff, FF counting frames at `fps` within each second, so that a
+    reader finds the rate from a take of a second or more), BlendShapeCount, the 52 PascalCase
+    weights, then HeadYaw, HeadPitch, HeadRoll (radians) and the eyes' (zero).
+
+    Parameters
+    ----------
+    path : str or Path
+    times : (F,) float array
+        Seconds.
+    weights : (F, 52) float array
+        In ARKIT_52's order.
+    fps : float
+    angles : (F, 3) float array or None
+        Yaw, pitch, roll (head_angles); None: zeros.
+
+    Returns
+    -------
+    Path
+    """
     from ..mesh import atomic_path
     rot = ["HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
            "RightEyeYaw", "RightEyePitch", "RightEyeRoll"]

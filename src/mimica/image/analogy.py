@@ -37,7 +37,19 @@ from .warp import (FOREHEAD_BROW, Bilinear, FOREHEAD_FOLLOW, PiecewiseAffine, Si
 
 
 def psnr(a, b, mask=None) -> float:
-    """PSNR in dB of images in [0, 1] over the pixels where mask is set."""
+    """Peak signal-to-noise ratio of images in [0, 1].
+
+    Parameters
+    ----------
+    a, b : (h, w) or (h, w, c) float arrays
+    mask : (h, w) bool array or None
+        The pixels counted (None: all).
+
+    Returns
+    -------
+    float
+        dB.
+    """
     d = (np.asarray(a, float) - np.asarray(b, float)) ** 2
     if d.ndim == 3:
         d = d.mean(-1)
@@ -46,9 +58,19 @@ def psnr(a, b, mask=None) -> float:
 
 
 class Result:
-    """image: (H, W, 3) the target with the expression; points: (68, 2) the target's feature
-    points after the warp; warped: the target warped only (shape, no appearance); mask: (H, W)
-    face weight in [0, 1] where the appearance was solved for (the last two on first use)."""
+    """What ImageAnalogy.transfer made.
+
+    Attributes
+    ----------
+    image : (H, W, 3) float array
+        The target with the expression.
+    points : (68, 2) float array
+        The target's feature points after the warp.
+    warped : (H, W, 3) float array
+        The target warped only (shape, no appearance); made on first use.
+    mask : (H, W) float array
+        The face's weight in [0, 1] where the appearance was solved for; made on first use.
+    """
 
     def __init__(self, image, points, analogy, lookup):
         self.image, self.points, self._an, self._lookup = image, points, analogy, lookup
@@ -98,8 +120,25 @@ def _face_laplacian(inside):
 
 
 class ImageAnalogy:
-    """Expression transfer onto one target photo; per-size tables built once, reused for every
-    source pair (and every video frame)."""
+    """Expression transfer onto one target photo (Song et al. §VI); per-size tables built once,
+    reused for every source pair (and every video frame).
+
+    Parameters
+    ----------
+    target : (H, W, 3) float array
+        The target photo, RGB in [0, 1].
+    target_points : (68, 2) float array
+        Its feature points (x, y).
+    height : float
+        The height field's scale (i, j, height * Y), Song's §VI.A.
+    margin : float
+        The face box grown by this share of its size.
+    feather : float or None
+        Pixels over which the face mask fades in from its outline (None: 4 % of the face's size,
+        at least 2).
+    mouth : bool
+        Fill an opening mouth from the source's (fill_mouth) when the target's is closed.
+    """
 
     def __init__(self, target, target_points, height=1.0, margin=0.25, feather=None, mouth=True):
         t = np.asarray(target, np.float32)
@@ -386,8 +425,18 @@ REGIONS = {"brows": np.arange(17, 27), "eyes": np.arange(36, 48), "nose": np.ara
 
 
 def point_strengths(strength) -> np.ndarray:
-    """(68,) strength per feature point from a number (every region alike) or {region: a}
-    (regions not named: 1; "all" sets the default), each from 0 to 2."""
+    """The strength of the expression at each feature point.
+
+    Parameters
+    ----------
+    strength : float or dict
+        A number (every region alike), or {region: a} (REGIONS; regions not named: 1; "all" sets
+        the default), each from 0 to 2.
+
+    Returns
+    -------
+    (68,) float array
+    """
     if not isinstance(strength, dict):
         return np.full(68, check_strength(strength))
     bad = sorted(set(strength) - set(REGIONS) - {"all"})
@@ -406,7 +455,16 @@ def _compose(f: Similarity2D, g: Similarity2D) -> Similarity2D:
 
 
 def check_strength(strength) -> float:
-    """An expression strength from 0 to 2, else a clear error (NaN included)."""
+    """An expression strength from 0 to 2, else a clear error (NaN included).
+
+    Parameters
+    ----------
+    strength : float
+
+    Returns
+    -------
+    float
+    """
     a = float(strength)
     if not 0 <= a <= 2:
         raise MimicaError(f"strength {a:g}: expected a number from 0 (no expression) to 2")
@@ -417,7 +475,17 @@ MOUTH = np.arange(60, 68)                  # the inner lip outline
 
 
 def mouth_open(pts) -> bool:
-    """The inner lip outline encloses more than 1 % of the squared eye distance."""
+    """Whether a face's mouth is open: its inner lip outline encloses more than 1 % of the squared
+    eye distance.
+
+    Parameters
+    ----------
+    pts : (68, 2) float array
+
+    Returns
+    -------
+    bool
+    """
     pts = np.asarray(pts, float)
     x, y = pts[MOUTH, 0], pts[MOUTH, 1]
     area = 0.5 * abs(float(x @ np.roll(y, 1) - y @ np.roll(x, 1)))
@@ -432,12 +500,25 @@ def _lightness(img, pts) -> float:
 
 
 def fill_mouth(out, pts, expressive, x_pts, gain: float = 1.0) -> None:
-    """Song et al. §VII's remedy for an opening mouth, "a 2D teeth template": inside the
-    result's inner lip outline (pts), the expressive source's own mouth interior (teeth,
-    tongue, the dark of the mouth), mapped by the affine fit between the two inner lip
-    outlines and scaled by `gain` (the target's lightness over the source's); feathered over
-    1.5 pixels.  For open outlines (mouth_open); ImageAnalogy calls it only for a target
-    whose own mouth is closed."""
+    """Song et al. §VII's remedy for an opening mouth, "a 2D teeth template": inside the result's
+    inner lip outline, the expressive source's own mouth interior (teeth, tongue, the dark of the
+    mouth), mapped by the affine fit between the two inner lip outlines and scaled by `gain`;
+    feathered over 1.5 pixels.  For open outlines (mouth_open); ImageAnalogy calls it only for a
+    target whose own mouth is closed.
+
+    Parameters
+    ----------
+    out : (H, W, 3) float array
+        The result, changed in place.
+    pts : (68, 2) float array
+        The result's points.
+    expressive : (H', W', 3) float array
+        The expressive source photo.
+    x_pts : (68, 2) float array
+        Its points.
+    gain : float
+        The target's lightness over the source's.
+    """
     from scipy.ndimage import distance_transform_edt
     poly, src = np.asarray(pts, float)[MOUTH], np.asarray(x_pts, float)[MOUTH]
     inside, (x0, y0, x1, y1) = polygon_mask(poly, out.shape[:2], pad=2)

@@ -20,7 +20,18 @@ _YUV2RGB = np.linalg.inv(_RGB2YUV)
 
 
 def to_uint8(img) -> np.ndarray:
-    """uint8 pixels of an image in [0, 1] (float) or already uint8."""
+    """An image's pixels as uint8.
+
+    Parameters
+    ----------
+    img : array
+        Float in [0, 1] (clipped), or already uint8.
+
+    Returns
+    -------
+    uint8 array
+        The same shape.
+    """
     img = np.asarray(img)
     if img.dtype == np.uint8:
         return img
@@ -28,8 +39,19 @@ def to_uint8(img) -> np.ndarray:
 
 
 def write_image(path, img: np.ndarray) -> Path:
-    """Write an RGB or grey image (uint8, or float in [0, 1]) atomically, its folder made; the
-    format follows the suffix (PNG for .png and anything Pillow does not know)."""
+    """Write an RGB or grey image, whole or not at all, its folder made; the format follows the
+    suffix (PNG for .png and anything Pillow does not know).
+
+    Parameters
+    ----------
+    path : str or Path
+    img : (h, w) or (h, w, 3) array
+        uint8, or float in [0, 1].
+
+    Returns
+    -------
+    Path
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fmt = Image.registered_extensions().get(path.suffix.lower(), "PNG")
@@ -42,7 +64,17 @@ MAX_PIXELS = 40_000_000           # 40 megapixels: more than any camera frame mi
 
 
 def read_image(path) -> np.ndarray:
-    """An image file as float RGB in [0, 1], (h, w, 3); one-line error naming the file."""
+    """An image file as float RGB; a file that cannot be read is one MimicaError naming it.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    (h, w, 3) float array
+        In [0, 1].
+    """
     from PIL import UnidentifiedImageError
     path = Path(path)
     if not path.is_file():
@@ -62,15 +94,45 @@ def read_image(path) -> np.ndarray:
 
 
 def rgb_to_yuv(rgb) -> np.ndarray:
+    """RGB to YUV (BT.601), float32.
+
+    Parameters
+    ----------
+    rgb : (..., 3) array
+
+    Returns
+    -------
+    (..., 3) float32 array
+    """
     return np.asarray(rgb, np.float32) @ _RGB2YUV.T.astype(np.float32)
 
 
 def yuv_to_rgb(yuv) -> np.ndarray:
+    """YUV (BT.601) to RGB, float32.
+
+    Parameters
+    ----------
+    yuv : (..., 3) array
+
+    Returns
+    -------
+    (..., 3) float32 array
+    """
     return np.asarray(yuv, np.float32) @ _YUV2RGB.T.astype(np.float32)
 
 
 def luminance(img) -> np.ndarray:
-    """Y of an RGB image, float32; a single-channel image is already its own luminance."""
+    """The luminance Y of an image.
+
+    Parameters
+    ----------
+    img : (h, w, 3) or (h, w) array
+        A single-channel image is already its own luminance.
+
+    Returns
+    -------
+    (h, w) float32 array
+    """
     img = np.asarray(img, np.float32)
     if img.ndim == 2:
         return img

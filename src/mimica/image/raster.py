@@ -13,7 +13,19 @@ from ..mesh import Mesh, vertex_normals
 
 
 def view_matrix(yaw_deg=0.0, pitch_deg=0.0) -> np.ndarray:
-    """Rotation taking model coordinates (y up, z towards the viewer) to camera coordinates."""
+    """The rotation taking model coordinates (y up, z towards the viewer) to camera coordinates.
+
+    Parameters
+    ----------
+    yaw_deg : float
+        Turn about y, degrees.
+    pitch_deg : float
+        Then about x, degrees.
+
+    Returns
+    -------
+    (3, 3) float array
+    """
     y, p = np.radians(yaw_deg), np.radians(pitch_deg)
     ry = np.array([[np.cos(y), 0, np.sin(y)], [0, 1, 0], [-np.sin(y), 0, np.cos(y)]])
     rx = np.array([[1, 0, 0], [0, np.cos(p), -np.sin(p)], [0, np.sin(p), np.cos(p)]])
@@ -28,10 +40,25 @@ def _round_up(n):
 
 
 def rasterize_pixels(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, width: int, height: int):
-    """The visible fragments: flat pixel index (y * width + x), triangle (row of `tris`) and
-    barycentrics (l0, l1; l2 = 1 - l0 - l1, float32) of each covered pixel.
+    """The visible fragments of a triangle mesh in an image (z-buffered).
 
-    xy: (n, 2) pixel coordinates (x right, y down); z: (n,) depth, larger = closer.
+    Parameters
+    ----------
+    xy : (n, 2) float array
+        Pixel coordinates (x right, y down).
+    z : (n,) float array
+        Depth, larger = closer.
+    tris : (T, 3) int array
+    width, height : int
+
+    Returns
+    -------
+    pix : (k,) int array
+        Flat pixel index (y * width + x) of each covered pixel.
+    tri : (k,) int array
+        Its triangle (row of `tris`).
+    l0, l1 : (k,) float32 arrays
+        Its barycentrics (l2 = 1 - l0 - l1).
     """
     tris = np.asarray(tris)
     p = xy[tris]                                    # (T, 3, 2)
@@ -99,10 +126,22 @@ def rasterize_pixels(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, width: int
 
 
 def rasterize(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, width: int, height: int):
-    """Visible triangle and barycentrics per pixel.
+    """The visible triangle and barycentrics at every pixel.
 
-    xy: (n, 2) pixel coordinates (x right, y down); z: (n,) depth, larger = closer.
-    Returns tri_id (h, w) int (-1 = background) and bary (h, w, 3).
+    Parameters
+    ----------
+    xy : (n, 2) float array
+        Pixel coordinates (x right, y down).
+    z : (n,) float array
+        Depth, larger = closer.
+    tris : (T, 3) int array
+    width, height : int
+
+    Returns
+    -------
+    tri_id : (height, width) int array
+        -1 = background.
+    bary : (height, width, 3) float array
     """
     pix, tri, l0, l1 = rasterize_pixels(xy, z, tris, width, height)
     tri_id = np.full(width * height, -1, dtype=np.int64)
@@ -113,8 +152,18 @@ def rasterize(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, width: int, heigh
 
 
 def facing(xy: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """(T,) bool: the triangles of an outward mesh that face the viewer, from their projected
-    corners (pixel coordinates, y down: a counter-clockwise triangle on screen has negative area)."""
+    """The triangles of an outward mesh that face the viewer, from their projected corners (pixel
+    coordinates, y down: a counter-clockwise triangle on screen has negative area).
+
+    Parameters
+    ----------
+    xy : (n, 2) float array
+    tris : (T, 3) int array
+
+    Returns
+    -------
+    (T,) bool array
+    """
     q = xy[tris]
     return ((q[:, 1, 0] - q[:, 0, 0]) * (q[:, 2, 1] - q[:, 0, 1])
             - (q[:, 2, 0] - q[:, 0, 0]) * (q[:, 1, 1] - q[:, 0, 1])) < 0
@@ -123,14 +172,35 @@ def facing(xy: np.ndarray, tris: np.ndarray) -> np.ndarray:
 def render_mesh(mesh: Mesh, vertices=None, size=(512, 512), yaw=0.0, pitch=0.0, colors=None,
                 background=(255, 255, 255), frame=None, base_color=(0.82, 0.72, 0.64), light=None,
                 cull=None) -> np.ndarray:
-    """Shaded picture of a mesh, (h, w, 3) uint8.
+    """A shaded picture of a mesh.
 
-    colors: optional (n, 3) per-vertex RGB in [0, 1] (heat maps); shading still applied.
-    frame: optional (center (3,), half_extent) so several meshes share one framing.
-    light: optional camera-space direction (x right, y up, z to the viewer) of a single key
-    light with a little ambient, instead of the default key + fill.
-    cull: skip back faces; by default when the mesh is consistently oriented and outward
-    (`Mesh.outward_oriented`), where they are hidden anyway.
+    Parameters
+    ----------
+    mesh : Mesh
+    vertices : (n, 3) float array or None
+        Positions to draw (None: the mesh's).
+    size : tuple of int
+        (w, h) pixels.
+    yaw, pitch : float
+        The view, degrees (view_matrix).
+    colors : (n, 3) float array or None
+        Per-vertex RGB in [0, 1] (heat maps); shading still applied.
+    background : tuple of int
+        RGB 0-255.
+    frame : tuple or None
+        (center (3,), half extent), so several meshes share one framing (None: framing()).
+    base_color : tuple of float
+        The skin's RGB in [0, 1] where no colors are given.
+    light : (3,) float array or None
+        A camera-space direction (x right, y up, z to the viewer) of a single key light with a
+        little ambient, instead of the default key + fill.
+    cull : bool or None
+        Skip back faces; None: when the mesh is consistently oriented and outward
+        (`Mesh.outward_oriented`), where they are hidden anyway.
+
+    Returns
+    -------
+    (h, w, 3) uint8 array
     """
     v = mesh.vertices if vertices is None else np.asarray(vertices)
     w, h = size
@@ -166,14 +236,41 @@ def render_mesh(mesh: Mesh, vertices=None, size=(512, 512), yaw=0.0, pitch=0.0, 
 
 
 def framing(v, yaw=0.0, pitch=0.0, margin=1.05):
-    """The framing render_mesh uses for one mesh: its bounding box centre, half extent."""
+    """The framing render_mesh uses for one mesh.
+
+    Parameters
+    ----------
+    v : (n, 3) float array
+    yaw, pitch : float
+        The view, degrees.
+    margin : float
+        Room around it, a factor of its half extent.
+
+    Returns
+    -------
+    center : (3,) float array
+        Its bounding box's centre.
+    half_extent : float
+        In the view's plane.
+    """
     c = 0.5 * (v.min(0) + v.max(0))
     cam = (v - c) @ view_matrix(yaw, pitch).T
     return c, 0.5 * max(np.ptp(cam[:, 0]), np.ptp(cam[:, 1])) * margin
 
 
 def face_framing(landmarks, margin=0.95):
-    """A framing of the face alone, forehead included, from its 68 landmarks (front view)."""
+    """A framing of the face alone, forehead included, from its 68 landmarks (front view).
+
+    Parameters
+    ----------
+    landmarks : (68, 3) float array
+    margin : float
+
+    Returns
+    -------
+    center : (3,) float array
+    half_extent : float
+    """
     lm = np.asarray(landmarks)
     c = np.nanmean(lm, 0)
     c = c + 0.45 * (np.nanmean(lm[17:27], 0) - c)                  # toward the brows
@@ -181,8 +278,25 @@ def face_framing(landmarks, margin=0.95):
 
 
 def project(points, frame, size, yaw=0.0, pitch=0.0):
-    """Pixel coordinates (m, 2) and camera-space points (m, 3) of 3D points, as render_mesh
-    draws them with this framing (center, half extent) and image size (w, h)."""
+    """Where render_mesh draws 3D points with this framing and image size.
+
+    Parameters
+    ----------
+    points : (m, 3) float array
+    frame : tuple
+        (center (3,), half extent).
+    size : tuple of int
+        (w, h).
+    yaw, pitch : float
+        The view, degrees.
+
+    Returns
+    -------
+    xy : (m, 2) float array
+        Pixel coordinates.
+    cam : (m, 3) float array
+        Camera-space points.
+    """
     w, h = size
     cam = (np.asarray(points) - frame[0]) @ view_matrix(yaw, pitch).T
     s = 0.5 * min(w, h) / frame[1]
@@ -190,5 +304,17 @@ def project(points, frame, size, yaw=0.0, pitch=0.0):
 
 
 def shared_frame(vertex_sets, yaw=0.0, pitch=0.0, margin=1.05):
-    """A framing (center, half extent) that fits every given (n, 3) array in the view."""
+    """A framing that fits every given set of points in the view.
+
+    Parameters
+    ----------
+    vertex_sets : list of (n_i, 3) float arrays
+    yaw, pitch : float
+    margin : float
+
+    Returns
+    -------
+    center : (3,) float array
+    half_extent : float
+    """
     return framing(np.concatenate([np.asarray(v) for v in vertex_sets]), yaw, pitch, margin)

@@ -14,7 +14,17 @@ JAW = np.arange(0, 17)
 
 
 class Similarity2D:
-    """x -> s R x + t in the image plane (Umeyama 1991 in 2D)."""
+    """x -> s R x + t in the image plane (Umeyama 1991 in 2D); `fit` makes one from point pairs.
+
+    Parameters
+    ----------
+    s : float
+        The scale.
+    r : (2, 2) float array
+        The rotation.
+    t : (2,) float array
+        The translation.
+    """
 
     def __init__(self, s, r, t):
         self.s, self.r, self.t = float(s), np.asarray(r, float), np.asarray(t, float)
@@ -41,9 +51,21 @@ class Similarity2D:
 
 
 def orthographic_pose(points3d, points2d):
-    """Scaled orthographic pose (s, R (3x3), t (2,)) with points2d ~ s R[:2] points3d + t: the affine
-    camera by least squares, its rows made orthonormal (Procrustes), R's third row their cross
-    product.  2D axes as given (flip y first for image rows that grow downward)."""
+    """The scaled orthographic pose with points2d ~ s R[:2] points3d + t: the affine camera by least
+    squares, its rows made orthonormal (Procrustes), R's third row their cross product.  2D axes as
+    given (flip y first for image rows that grow downward).
+
+    Parameters
+    ----------
+    points3d : (m, 3) float array
+    points2d : (m, 2) float array
+
+    Returns
+    -------
+    s : float
+    R : (3, 3) float array
+    t : (2,) float array
+    """
     X, x = np.asarray(points3d, float), np.asarray(points2d, float)
     mx, mi = X.mean(0), x.mean(0)
     M = np.linalg.lstsq(X - mx, x - mi, rcond=None)[0].T        # (2, 3)
@@ -55,13 +77,39 @@ def orthographic_pose(points3d, points2d):
 
 
 def head_motion(pts, ref_pts) -> Similarity2D:
-    """The similarity on the stable points (eye corners, nose) taking pts into ref_pts' frame:
-    how the analogy removes the head motion between a neutral and an expressive photo."""
+    """How the analogy removes the head's motion between a neutral and an expressive photo: the
+    similarity on the stable points (eye corners, nose) taking one photo's points into the other's
+    frame.
+
+    Parameters
+    ----------
+    pts, ref_pts : (68, 2) float arrays
+        The two photos' landmarks.
+
+    Returns
+    -------
+    Similarity2D
+        pts -> ref_pts's frame.
+    """
     return Similarity2D.fit(np.asarray(pts, float)[STABLE], np.asarray(ref_pts, float)[STABLE])
 
 
 def align_to(img, pts, ref_pts) -> np.ndarray:
-    """img resampled into the frame of ref_pts by head_motion (for truths)."""
+    """An image resampled into another photo's frame by head_motion (for truths).
+
+    Parameters
+    ----------
+    img : (h, w) or (h, w, c) array
+    pts : (68, 2) float array
+        Its landmarks.
+    ref_pts : (68, 2) float array
+        The other photo's.
+
+    Returns
+    -------
+    array
+        float32, img's shape.
+    """
     b = head_motion(pts, ref_pts).inverse()
     h, w = img.shape[:2]
     yy, xx = np.mgrid[0:h, 0:w]
@@ -70,8 +118,23 @@ def align_to(img, pts, ref_pts) -> np.ndarray:
 
 
 def polygon_mask(poly, shape, pad: int = 0) -> tuple[np.ndarray, tuple]:
-    """The pixels inside a polygon (x, y points) over its bounding box grown by `pad` and
-    clipped to an image of `shape` (h, w): (mask (y1 - y0, x1 - x0) bool, (x0, y0, x1, y1))."""
+    """The pixels inside a polygon over its bounding box grown by `pad` and clipped to an image.
+
+    Parameters
+    ----------
+    poly : (k, 2) float array
+        (x, y) points.
+    shape : tuple
+        The image's (h, w[, c]).
+    pad : int
+        Pixels added around the box.
+
+    Returns
+    -------
+    mask : (y1 - y0, x1 - x0) bool array
+    box : tuple of int
+        (x0, y0, x1, y1).
+    """
     from PIL import Image, ImageDraw
     poly = np.asarray(poly, float)
     h, w = shape[:2]
@@ -83,9 +146,18 @@ def polygon_mask(poly, shape, pad: int = 0) -> tuple[np.ndarray, tuple]:
 
 
 def forehead_points(lm) -> np.ndarray:
-    """Two rows of points above the brows (the 68-point markup stops at the brows), (12, 2):
-    brow points 17, 19, 21, 22, 24, 26 moved up along the face's vertical by 0.4 and 0.8 of
-    the brow-to-nose-base height."""
+    """Two rows of points above the brows (the 68-point markup stops at the brows): brow points 17,
+    19, 21, 22, 24, 26 moved up along the face's vertical by 0.4 and 0.8 of the brow-to-nose-base
+    height.
+
+    Parameters
+    ----------
+    lm : (68, 2) float array
+
+    Returns
+    -------
+    (12, 2) float array
+    """
     lm = np.asarray(lm, float)
     eye_r, eye_l = lm[36:42].mean(0), lm[42:48].mean(0)
     across = eye_l - eye_r
@@ -103,7 +175,19 @@ FOREHEAD_FOLLOW = np.array([0.6] * 6 + [0.3] * 6)
 
 
 def border_points(w, h, per_side=4) -> np.ndarray:
-    """Still points on a rectangle just outside the w x h pixel grid (corners included)."""
+    """Still points on a rectangle just outside an image's pixel grid (corners included).
+
+    Parameters
+    ----------
+    w, h : int
+        The image's size.
+    per_side : int
+        Intervals along each side.
+
+    Returns
+    -------
+    (4 per_side, 2) float array
+    """
     xs = np.linspace(-1.0, w, per_side + 1)
     ys = np.linspace(-1.0, h, per_side + 1)
     top = np.stack([xs, np.full_like(xs, -1.0)], 1)
@@ -114,14 +198,34 @@ def border_points(w, h, per_side=4) -> np.ndarray:
 
 
 def triangulate(points) -> np.ndarray:
+    """The Delaunay triangulation of 2D points (scipy.spatial.Delaunay).
+
+    Parameters
+    ----------
+    points : (m, 2) float array
+
+    Returns
+    -------
+    (k, 3) int32 array
+    """
     from scipy.spatial import Delaunay
     return Delaunay(np.asarray(points, float)).simplices.astype(np.int32)
 
 
 class PiecewiseAffine:
-    """Pixels of a w x h grid located in a triangulation of moved control points (one
-    triangle id per pixel, rasterized by Pillow); any corresponding point set then gives a
-    dense map (pixel -> point in another image) through one affine map per triangle."""
+    """Pixels of a w x h grid located in a triangulation of moved control points (one triangle id per
+    pixel, rasterized by Pillow); any corresponding point set then gives a dense map (pixel ->
+    point in another image) through one affine map per triangle.
+
+    Parameters
+    ----------
+    points : (m, 2) float array
+        The control points where they are in this grid.
+    tris : (k, 3) int array
+        Their triangles.
+    w, h : int
+        The grid's size.
+    """
 
     def __init__(self, points, tris, w, h):
         from PIL import Image, ImageDraw
@@ -154,8 +258,16 @@ class PiecewiseAffine:
 
 
 class Bilinear:
-    """Bilinear lookup at fixed float pixel positions (flat x, y) in h x w images: the indices
-    and weights are computed once, then each channel costs four gathers."""
+    """Bilinear lookup at fixed float pixel positions: the indices and weights are computed once,
+    then each channel costs four gathers.
+
+    Parameters
+    ----------
+    x, y : (m,) float arrays
+        Pixel coordinates, clamped to the image.
+    h, w : int
+        The images' size.
+    """
 
     def __init__(self, x, y, h, w):
         x = np.clip(np.asarray(x, np.float32), 0, np.float32(w - 1.001))
@@ -180,8 +292,19 @@ class Bilinear:
 
 
 def sample(img, x, y) -> np.ndarray:
-    """Bilinear samples of img (h, w[, c]) at float pixel coordinates x, y (any shape), clamped at
-    the edges; x.shape (+ (c,)) float32."""
+    """Bilinear samples of an image at float pixel coordinates, clamped at the edges.
+
+    Parameters
+    ----------
+    img : (h, w) or (h, w, c) array
+    x, y : float arrays
+        Pixel coordinates, any shape (the same).
+
+    Returns
+    -------
+    float32 array
+        x.shape, or x.shape + (c,).
+    """
     shape = np.shape(x)
     out = Bilinear(np.ravel(x), np.ravel(y), *np.shape(img)[:2])(img)
     return out.reshape(shape + out.shape[1:])

@@ -41,7 +41,18 @@ MIRROR = _mirror_pairs()
 
 
 def index(name: str) -> int:
-    """Index of a canonical landmark name, e.g. 'eye.left.0' -> 42."""
+    """The index of a canonical landmark name.
+
+    Parameters
+    ----------
+    name : str
+        'part.side.k' or 'part.k', e.g. 'eye.left.0' (-> 42) or 'jaw.8' (-> 8).
+
+    Returns
+    -------
+    int
+        0 to 67 in the iBUG 68 order; MimicaError for an unknown name.
+    """
     try:
         return NAMES.index(name)
     except ValueError:
@@ -120,13 +131,41 @@ class Landmarks:
 
 
 def ict_landmarks(mesh: Mesh) -> Landmarks:
-    """The built-in ICT-FaceKit landmark vertices (upstream README)."""
+    """The built-in ICT-FaceKit landmarks (its upstream README's vertices).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        A mesh of ICT-FaceKit's topology (any identity or expression).
+
+    Returns
+    -------
+    Landmarks
+    """
     return Landmarks.from_vertex_indices(mesh, ICT_LANDMARKS_68)
 
 
 def read_point_file(path, scheme: str, dim: int, allow_null: bool, example: str = "...") -> np.ndarray:
-    """The 68 points of a landmark JSON file of the given scheme, (68, dim); null entries
-    (when allowed) are NaN rows.  Every problem is one line naming the file."""
+    """The 68 points of a landmark JSON file of the given scheme; every problem is one line naming
+    the file.
+
+    Parameters
+    ----------
+    path : str or Path
+        {"scheme": scheme, "points": [...68 entries...]}.
+    scheme : str
+        The scheme expected ("ibug68" for meshes, "ibug68-image" for photos).
+    dim : int
+        3 for positions, 2 for pixels.
+    allow_null : bool
+        A null entry (a point not given) is allowed, as a NaN row.
+    example : str
+        How the message shows the points.
+
+    Returns
+    -------
+    (68, dim) float array
+    """
     path = Path(path)
     doc = read_json(path, "landmark file")
     if not isinstance(doc, dict) or doc.get("scheme") != scheme:
@@ -149,7 +188,20 @@ def read_point_file(path, scheme: str, dim: int, allow_null: bool, example: str 
 
 
 def read_landmarks(path, mesh: Mesh | None = None):
-    """Read a landmark JSON file; returns (68,3) positions (NaN = missing), or Landmarks if mesh."""
+    """Read a landmark JSON file ({"scheme": "ibug68", "points": [[x, y, z] or null, ...]}).
+
+    Parameters
+    ----------
+    path : str or Path
+        At least 4 points given, not all on one spot.
+    mesh : Mesh or None
+        The mesh they lie on: the points are then snapped onto its surface.
+
+    Returns
+    -------
+    (68, 3) float array or Landmarks
+        The positions (NaN rows: missing) without a mesh; Landmarks on the mesh with one.
+    """
     out = read_point_file(path, SCHEME, 3, allow_null=True)
     ok = np.isfinite(out).all(axis=1)
     if ok.sum() < 4:
@@ -169,7 +221,18 @@ def read_landmarks(path, mesh: Mesh | None = None):
 
 
 def write_landmarks(path, positions) -> Path:
-    """Write (68, 3) positions (NaN rows -> null) atomically."""
+    """Write 68 landmark positions as a landmark JSON file, whole or not at all.
+
+    Parameters
+    ----------
+    path : str or Path
+    positions : (68, 3) float array
+        NaN rows are written as null (a point not given).
+
+    Returns
+    -------
+    Path
+    """
     pts = [None if not np.isfinite(p).all() else [float(c) for c in p] for p in np.asarray(positions)]
     path = Path(path)
     with atomic_path(path) as tmp:

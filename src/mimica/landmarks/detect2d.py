@@ -76,7 +76,19 @@ def _grey8(img) -> np.ndarray:
 
 
 def detect_faces(img, upsample=None) -> list:
-    """Face boxes (left, top, right, bottom), largest first.  Small images are upsampled once."""
+    """The faces dlib's HOG detector finds in a photo.
+
+    Parameters
+    ----------
+    img : (h, w) or (h, w, 3) array
+    upsample : int or None
+        Times the image is doubled first (None: once for images under 400 pixels, else not).
+
+    Returns
+    -------
+    list of tuple
+        Boxes (left, top, right, bottom), largest first.
+    """
     det, _ = _models()
     g = _grey8(img)
     if upsample is None:
@@ -87,7 +99,19 @@ def detect_faces(img, upsample=None) -> list:
 
 
 def fit_points(img, box) -> np.ndarray:
-    """The 68 points inside a face box, (68, 2) float."""
+    """The 68 points dlib's shape predictor fits inside a face box.
+
+    Parameters
+    ----------
+    img : (h, w) or (h, w, 3) array
+    box : tuple
+        (left, top, right, bottom).
+
+    Returns
+    -------
+    (68, 2) float array
+        Pixels (x, y).
+    """
     import dlib
     _, pred = _models()
     g = _grey8(img)
@@ -123,12 +147,28 @@ def _face_mesh():
 
 @lru_cache(maxsize=1)
 def mediapipe_68() -> np.ndarray:
-    """The 68 of MediaPipe's 468 face-mesh points read as the iBUG points, in iBUG order."""
+    """The 68 of MediaPipe's 468 face-mesh points read as the iBUG points.
+
+    Returns
+    -------
+    (68,) int array
+        Indices into the 468, in iBUG order.
+    """
     return np.array(json.loads(Path(__file__).with_name("mediapipe68.json").read_text())["indices"], int)
 
 
 def mediapipe_faces(img) -> list:
-    """MediaPipe's 468 points (pixels, pixel centres at integers) of every face, largest first."""
+    """MediaPipe's face mesh on a photo (the photo extra).
+
+    Parameters
+    ----------
+    img : (h, w, 3) array
+
+    Returns
+    -------
+    list of (468, 2) float arrays
+        Every face's points in pixels (pixel centres at integers), largest first.
+    """
     from ..image.io import to_uint8
     a = np.asarray(img)
     if a.dtype != np.uint8:
@@ -145,15 +185,42 @@ def mediapipe_faces(img) -> list:
 
 
 def face_boxes(img, detector: str = DEFAULT_DETECTOR) -> list:
-    """The photo's faces as boxes (left, top, right, bottom), largest first, as `detect` numbers them."""
+    """The photo's faces as boxes, numbered as `detect` numbers them.
+
+    Parameters
+    ----------
+    img : (h, w) or (h, w, 3) array
+    detector : str
+        "dlib" or "mediapipe".
+
+    Returns
+    -------
+    list of tuple
+        (left, top, right, bottom), largest first.
+    """
     if detector == "mediapipe":
         return [tuple(int(round(c)) for c in (*f.min(0), *f.max(0))) for f in mediapipe_faces(img)]
     return detect_faces(img)
 
 
 def detect(img, what="image", face: int = 0, detector: str = DEFAULT_DETECTOR) -> np.ndarray:
-    """68 points of the photo's face number `face` (0: the largest, faces by size, as
-    detect_faces lists them); a clear error when there is no such face."""
+    """The 68 points of one of a photo's faces; a clear error when there is no such face.
+
+    Parameters
+    ----------
+    img : (h, w) or (h, w, 3) array
+    what : str
+        How messages name the photo.
+    face : int
+        Which face: 0 the largest, faces by size (as face_boxes lists them).
+    detector : str
+        "dlib" or "mediapipe".
+
+    Returns
+    -------
+    (68, 2) float array
+        Pixels (x, y).
+    """
     if detector not in DETECTORS:
         raise MimicaError(f"unknown landmark detector {detector!r}; use one of {', '.join(DETECTORS)}")
     if detector == "mediapipe":
@@ -169,7 +236,19 @@ def detect(img, what="image", face: int = 0, detector: str = DEFAULT_DETECTOR) -
 
 
 def box_of(points, grow=0.1) -> tuple:
-    """A detector-like box around 68 points (for tracking from the previous frame)."""
+    """A detector-like box around 68 points (for tracking from the previous frame).
+
+    Parameters
+    ----------
+    points : (68, 2) float array
+    grow : float
+        The square box's margin, a share of the points' extent.
+
+    Returns
+    -------
+    tuple
+        (left, top, right, bottom).
+    """
     p = np.asarray(points)
     lo, hi = p.min(0), p.max(0)
     c, half = 0.5 * (lo + hi), 0.5 * (hi - lo).max() * (1 + grow)
@@ -178,8 +257,19 @@ def box_of(points, grow=0.1) -> tuple:
 
 class Tracker:
     """Landmarks through a video: detect once, then refit inside the box of the last points,
-    re-detecting when the fit drifts; exponential smoothing damps jitter (alpha = weight of
-    the new frame)."""
+    re-detecting when the fit drifts; exponential smoothing damps jitter.
+
+    Parameters
+    ----------
+    alpha : float
+        The weight of the new frame in the smoothing.
+    what : str
+        How messages name the video.
+    face : int
+        Which face (0: the largest).
+    detector : str
+        "dlib" or "mediapipe".
+    """
 
     def __init__(self, alpha=0.6, what="video", face: int = 0, detector: str = DEFAULT_DETECTOR):
         self.alpha, self.what, self.prev, self.raw, self.face = alpha, what, None, None, face
@@ -206,7 +296,18 @@ class Tracker:
 
 
 def read_points(path, size=None) -> np.ndarray:
-    """Read a 2D landmark file, (68, 2); checked against the image size when given."""
+    """Read a 2D landmark file ({"scheme": "ibug68-image", "points": [[x, y], ...]}).
+
+    Parameters
+    ----------
+    path : str or Path
+    size : tuple or None
+        The image's (w, h): the points must lie on it.
+
+    Returns
+    -------
+    (68, 2) float array
+    """
     from .core import read_point_file
     out = read_point_file(path, SCHEME, 2, allow_null=False, example="[x, y], ...")
     if size is not None:
@@ -218,6 +319,21 @@ def read_points(path, size=None) -> np.ndarray:
 
 
 def write_points(path, points, image=None, size=None) -> Path:
+    """Write a 2D landmark file, whole or not at all.
+
+    Parameters
+    ----------
+    path : str or Path
+    points : (68, 2) float array
+    image : str or None
+        The photo they were found on, recorded.
+    size : tuple or None
+        Its (w, h), recorded.
+
+    Returns
+    -------
+    Path
+    """
     doc = {"scheme": SCHEME}
     if image is not None:
         doc["image"] = str(image)
@@ -231,7 +347,24 @@ def write_points(path, points, image=None, size=None) -> Path:
 
 
 def points_for(img, path=None, what="image", face: int = 0, detector: str = DEFAULT_DETECTOR) -> np.ndarray:
-    """Points from a file when given, else detected (the photo's face number `face`)."""
+    """A photo's 68 points: from a file when given, else detected.
+
+    Parameters
+    ----------
+    img : (h, w) or (h, w, 3) array
+    path : str or Path or None
+        A 2D landmark file.
+    what : str
+        How messages name the photo.
+    face : int
+        Which face (0: the largest).
+    detector : str
+        "dlib" or "mediapipe".
+
+    Returns
+    -------
+    (68, 2) float array
+    """
     if path is not None:
         return read_points(path, (img.shape[1], img.shape[0]))
     return detect(img, what, face, detector)

@@ -26,8 +26,30 @@ def _frame(v, view):
 
 
 def render_for_detection(mesh: Mesh, vertices=None, view=(0, 0), size=640, frame=None):
-    """A front picture for the detector (grey, lit from the front and a little above), the
-    framing used, and the vertices' pixel (xy) and camera-space positions."""
+    """A picture of a mesh for the face detector (grey, lit from the front and a little above).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    vertices : (n, 3) float array or None
+        Positions to draw (None: the mesh's).
+    view : tuple of float
+        (yaw, pitch) degrees.
+    size : int
+        The square picture's side, pixels.
+    frame : tuple or None
+        (center, half extent) (None: the mesh framed).
+
+    Returns
+    -------
+    img : (size, size, 3) uint8 array
+    frame : tuple
+        The framing used.
+    xy : (n, 2) float array
+        The vertices' pixels.
+    cam : (n, 3) float array
+        Their camera-space positions.
+    """
     from ..image.raster import project, render_mesh
     v = mesh.vertices if vertices is None else np.asarray(vertices)
     frame = frame or _frame(v, view)
@@ -38,9 +60,25 @@ def render_for_detection(mesh: Mesh, vertices=None, view=(0, 0), size=640, frame
 
 
 def front_ids(mesh: Mesh, xy, cam, size, sign=1.0):
-    """Triangle per pixel with back faces culled, so that a point in an eye or mouth opening
-    sees no surface (rather than the inside of the back of the head); ids index the mesh's
-    triangles, -1 = nothing."""
+    """The triangle seen at each pixel with back faces culled, so that a point in an eye or mouth
+    opening sees no surface (rather than the inside of the back of the head).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    xy : (n, 2) float array
+        The vertices' pixels.
+    cam : (n, 3) float array
+        Their camera-space positions.
+    size : int
+    sign : float
+        1 for outward normals, -1 for a mesh that is inside out.
+
+    Returns
+    -------
+    (size, size) int array
+        Indices of the mesh's triangles; -1 = nothing.
+    """
     from ..image.raster import rasterize
     tris = mesh.triangles
     p = xy[tris]
@@ -52,8 +90,25 @@ def front_ids(mesh: Mesh, xy, cam, size, sign=1.0):
 
 
 def cast_back(points2d, mesh: Mesh, xy, tri_id, vertices=None) -> np.ndarray:
-    """Surface points under 2D pixel positions: the visible triangle at the pixel, exact
-    barycentrics of the point in its projection, (m, 3); NaN where no surface is seen."""
+    """Surface points under 2D pixel positions: the visible triangle at the pixel, exact barycentrics
+    of the point in its projection.
+
+    Parameters
+    ----------
+    points2d : (m, 2) float array
+    mesh : Mesh
+    xy : (n, 2) float array
+        The vertices' pixels.
+    tri_id : (h, w) int array
+        front_ids'.
+    vertices : (n, 3) float array or None
+        The positions drawn (None: the mesh's).
+
+    Returns
+    -------
+    (m, 3) float array
+        NaN where no surface is seen.
+    """
     v = mesh.vertices if vertices is None else np.asarray(vertices)
     tris = mesh.triangles
     h, w = tri_id.shape
@@ -100,7 +155,17 @@ def _offsets():
 
 
 def eye_frame(p2):
-    """Eye-to-eye distance and the unit vectors across and down the face, from 2D points."""
+    """The eye-to-eye distance and the unit vectors across and down the face, from 2D points.
+
+    Parameters
+    ----------
+    p2 : (68, 2) float array
+
+    Returns
+    -------
+    iod : float
+    across, down : (2,) float arrays
+    """
     across = p2[42:48].mean(0) - p2[36:42].mean(0)
     iod = float(np.linalg.norm(across))
     ex = across / max(iod, 1e-9)
@@ -108,6 +173,19 @@ def eye_frame(p2):
 
 
 def calibrate(p2, offsets=None) -> np.ndarray:
+    """2D points moved by the per-landmark offsets from the detector's markup to ICT-FaceKit's
+    vertex markup (_offsets), in eye-frame units.
+
+    Parameters
+    ----------
+    p2 : (68, 2) float array
+    offsets : (68, 2) float array or None
+        None: the fitted ones (detect3d_offsets.json).
+
+    Returns
+    -------
+    (68, 2) float array
+    """
     off = _offsets() if offsets is None else offsets
     if off is None:
         return p2
@@ -116,7 +194,28 @@ def calibrate(p2, offsets=None) -> np.ndarray:
 
 
 def detect_mesh(mesh: Mesh, vertices=None, what="mesh", size=640, view=None, calibrated=True):
-    """68 landmarks on a mesh of any topology, (68, 3), and the view (yaw, pitch) that found them."""
+    """The 68 landmarks of a mesh of any topology, found by dlib on renders and cast back onto the
+    surface (the front first, then the back, the sides, top and bottom).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    vertices : (n, 3) float array or None
+    what : str
+        How messages name the mesh.
+    size : int
+        The renders' side, pixels.
+    view : tuple or None
+        Only this (yaw, pitch).
+    calibrated : bool
+        Apply calibrate's offsets.
+
+    Returns
+    -------
+    points : (68, 3) float array
+    view : tuple
+        The (yaw, pitch) that found them.
+    """
     views = [view] if view is not None else VIEWS
     for vw in views:
         img, frame, xy, cam = render_for_detection(mesh, vertices, vw, size)

@@ -298,7 +298,18 @@ class Mesh:
 
 
 def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Unit area-weighted vertex normals (n, 3); isolated vertices get (0, 0, 0)."""
+    """Unit area-weighted vertex normals.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float array
+    triangles : (m, 3) int array
+
+    Returns
+    -------
+    (n, 3) float array
+        Isolated vertices get (0, 0, 0).
+    """
     v = vertices
     fn = np.cross(v[triangles[:, 1]] - v[triangles[:, 0]], v[triangles[:, 2]] - v[triangles[:, 0]])
     vn = np.zeros_like(v)
@@ -310,8 +321,21 @@ def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 
 
 def plane_grid(nx: int, ny: int, length: float, width: float) -> Mesh:
-    """A flat length x width rectangle in the z = 0 plane, nx x ny cells, each cut into two
-    triangles along alternating diagonals (no preferred direction)."""
+    """A flat rectangle in the z = 0 plane, each cell cut into two triangles along alternating
+    diagonals (no preferred direction).
+
+    Parameters
+    ----------
+    nx, ny : int
+        Cells along x and y.
+    length, width : float
+        Its size along x and y.
+
+    Returns
+    -------
+    Mesh
+        (nx + 1) * (ny + 1) vertices.
+    """
     xs, ys = np.meshgrid(np.linspace(0, length, nx + 1), np.linspace(0, width, ny + 1), indexing="ij")
     v = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], 1)
     i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")

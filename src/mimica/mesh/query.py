@@ -12,9 +12,17 @@ except Exception:  # pragma: no cover - a platform without its wheel
 
 
 def closest_point_on_triangles(p, a, b, c):
-    """Closest points to p on triangles (a, b, c), all (m, 3); returns (points, bary (m, 3)).
+    """The closest points to p on triangles (a, b, c), pairwise: Ericson's region-based algorithm
+    (Real-Time Collision Detection, §5.1.5), vectorized.
 
-    Region-based algorithm (Ericson, Real-Time Collision Detection, §5.1.5), vectorized.
+    Parameters
+    ----------
+    p, a, b, c : (m, 3) float arrays
+
+    Returns
+    -------
+    points : (m, 3) float array
+    bary : (m, 3) float array
     """
     ab, ac, ap = b - a, c - a, p - a
     d1, d2 = np.einsum("ij,ij->i", ab, ap), np.einsum("ij,ij->i", ac, ap)
@@ -56,14 +64,19 @@ def closest_point_on_triangles(p, a, b, c):
 
 
 class TriangleLocator:
-    """Exact closest point on a triangle mesh, for many query points.
+    """Exact closest point on a triangle mesh, for many query points (`closest`).
 
     With libigl installed (a dependency), its AABB tree answers (point_mesh_squared_distance);
-    without it (or with use_igl=False), candidates come from k-d trees over triangle
-    centroids, one tree per band of triangle sizes (a few large triangles, e.g. at the back of
-    a head, would otherwise make every query unsure); a point whose k-th candidate could still
-    hide a closer triangle is queried again with twice the candidates, vectorized, until none
-    can.
+    without it (or with use_igl=False), candidates come from k-d trees over triangle centroids, one
+    tree per band of triangle sizes (a few large triangles, e.g. at the back of a head, would
+    otherwise make every query unsure); a point whose k-th candidate could still hide a closer
+    triangle is queried again with twice the candidates, vectorized, until none can.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float array
+    triangles : (m, 3) int array
+    use_igl : bool
     """
 
     def __init__(self, vertices, triangles, use_igl: bool = True):
@@ -132,8 +145,17 @@ class TriangleLocator:
 
 
 def barycentric_2d(p, a, b, c):
-    """Barycentric coordinates of 2D points p in triangles (a, b, c), all (m, 2); NaN rows for
-    triangles of zero area."""
+    """Barycentric coordinates of 2D points in triangles (a, b, c), pairwise.
+
+    Parameters
+    ----------
+    p, a, b, c : (m, 2) float arrays
+
+    Returns
+    -------
+    (m, 3) float array
+        NaN rows for triangles of zero area.
+    """
     v0, v1, v2 = b - a, c - a, p - a
     den = v0[:, 0] * v1[:, 1] - v1[:, 0] * v0[:, 1]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -145,12 +167,24 @@ def barycentric_2d(p, a, b, c):
 
 
 class SurfaceMap:
-    """A triangle mesh seen through a 2D map of its vertices (a front view, a flattened
-    cylinder); 2D points -> surface points.
+    """A triangle mesh seen through a 2D map of its vertices (a front view, a flattened cylinder):
+    2D points -> surface points (`points`, `locate`).
 
-    Where several layers of the surface lie under a point (nostrils, lips, ears), the one
-    with the largest `score` (depth toward the viewer, or distance from the cylinder axis)
-    wins: the outermost skin, as a ray from outside would hit it.
+    Where several layers of the surface lie under a point (nostrils, lips, ears), the one with the
+    largest `score` (depth toward the viewer, or distance from the cylinder axis) wins: the
+    outermost skin, as a ray from outside would hit it.
+
+    Parameters
+    ----------
+    triangles : (m, 3) int array
+    uv : (n, 2) float array
+        The vertices in the map.
+    score : (n,) float array
+        Larger wins where layers overlap.
+    vertices : (n, 3) float array
+        The surface.
+    max_span : float or None
+        Triangles wider than this in the map (cut by the map's seam) are left out.
     """
 
     def __init__(self, triangles: np.ndarray, uv: np.ndarray, score: np.ndarray, vertices: np.ndarray,
@@ -197,10 +231,22 @@ class SurfaceMap:
 
 
 def concave_angles(mesh, edges=None) -> np.ndarray:
-    """Per edge (default `mesh.edges`), the angle in radians by which the surface folds inward
-    across it: the angle between the normals of its two triangles where it is a valley (the
-    other triangle's far corner on the front of the first), 0 on ridges, flat ground, boundary
-    and non-manifold edges.  Sealed lips and closed lids meet in such a valley."""
+    """The angle by which the surface folds inward across each edge: the angle between the normals of
+    its two triangles where it is a valley (the other triangle's far corner on the front of the
+    first), 0 on ridges, flat ground, boundary and non-manifold edges.  Sealed lips and closed lids
+    meet in such a valley.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    edges : (k, 2) int array or None
+        None: mesh.edges.
+
+    Returns
+    -------
+    (k,) float array
+        Radians.
+    """
     edges = mesh.edges if edges is None else np.asarray(edges)
     n = mesh.n_vertices
     t = mesh.triangles

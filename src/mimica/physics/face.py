@@ -61,8 +61,7 @@ SPRING_LAWS = ("linear", "kim")
 
 def kim_spring(s_init: np.ndarray, u_m: np.ndarray, u_s: np.ndarray, k) -> tuple:
     """The subcutaneous springs of Kim 2020 §V.B, eqs. 14-16, on the skin's end, vectorized over
-    springs: s_init (m, 3) the initial spring vector (skin node -> muscle node), u_m and u_s (m, 3)
-    the muscle node's and the skin node's displacements, k (m,) or a number.
+    springs.
 
       S_d = s_init + u_m - u_s                                  (the deformed spring)
       |F| = k | |S_d| - |s_init| | / |s_init|                   (eqs. 14-15: relative elongation)
@@ -74,9 +73,23 @@ def kim_spring(s_init: np.ndarray, u_m: np.ndarray, u_s: np.ndarray, k) -> tuple
     0.07-0.22 on ICT's face), so nothing restores it -- measured, every calibrated muscle's skin
     diverged within a second at 60 fps.  Along the spring's own deformation u_m - u_s it restores.
 
-    Returns (F, dF/du_s, dF/du_m), (m, 3) and (m, 3, 3) twice (F depends on u_m - u_s only, so
-    dF/du_m = -dF/du_s); F = 0 where the spring is undeformed.  The magnitude's kink at
-    |S_d| = |s_init| takes the derivative of the side the spring is on."""
+    Parameters
+    ----------
+    s_init : (m, 3) float array
+        The initial spring vectors (skin node -> muscle node).
+    u_m, u_s : (m, 3) float arrays
+        The muscle nodes' and the skin nodes' displacements.
+    k : float or (m,) float array
+        The springs' stiffness.
+
+    Returns
+    -------
+    F : (m, 3) float array
+        The force on the skin's end; 0 where the spring is undeformed.
+    dF_du_s, dF_du_m : (m, 3, 3) float arrays
+        Its derivatives (F depends on u_m - u_s only, so dF/du_m = -dF/du_s); the magnitude's kink
+        at |S_d| = |s_init| takes the derivative of the side the spring is on.
+    """
     s_init, u_m, u_s = (np.asarray(x, float) for x in (s_init, u_m, u_s))
     k = np.broadcast_to(np.asarray(k, float), len(s_init))
     l0 = np.linalg.norm(s_init, axis=1)
@@ -342,8 +355,20 @@ DRIVE_SPRING = 4.0               # a drive's attachments, as stiff as this many 
 
 
 def drive_springs(rig, muscle) -> np.ndarray:
-    """(n,) a drive's attachment stiffness per skin node: DRIVE_SPRING default springs x its
-    weight (part of its system's stiffness, so fixed at precompute)."""
+    """A drive's attachment stiffness per skin node: DRIVE_SPRING default springs x its weight
+    (part of its system's stiffness, so fixed at precompute).
+
+    Parameters
+    ----------
+    rig : Rig
+    muscle : Muscle
+        A drive (kind "drive").
+
+    Returns
+    -------
+    (n,) float array
+        n: the skin's vertices.
+    """
     k = np.zeros(rig.skin.n_vertices)
     w = muscle.weight if muscle.weight is not None else np.ones(len(muscle.attach))
     np.add.at(k, muscle.attach, DRIVE_SPRING * spring_stiffness(rig, 4.0) * w)
@@ -351,8 +376,23 @@ def drive_springs(rig, muscle) -> np.ndarray:
 
 
 def strip_springs(rig, muscle, spring: float = 4.0) -> tuple:
-    """A strip muscle's springs on the skin: ((n,) stiffness per skin node, (n, 3) their pull at
-    full activation K_s u_m), each strip node's spring fanned out (rig.spring_fan)."""
+    """A strip muscle's springs on the skin, each strip node's spring fanned out (rig.spring_fan).
+
+    Parameters
+    ----------
+    rig : Rig
+    muscle : Muscle
+        A strip muscle.
+    spring : float
+        Each spring's stiffness in edges' stiffness (spring_stiffness).
+
+    Returns
+    -------
+    stiffness : (n,) float array
+        Per skin node.
+    pull : (n, 3) float array
+        Their pull at full activation, K_s u_m.
+    """
     at, wt, of = muscle.springs()
     k = spring_stiffness(rig, spring) * wt
     f = np.zeros((rig.skin.n_vertices, 3))
@@ -361,8 +401,20 @@ def strip_springs(rig, muscle, spring: float = 4.0) -> tuple:
 
 
 def strip_loads(rig, muscle) -> np.ndarray:
-    """(3n, 3u) a strip's load patterns: each spring pulling its fan along x, y and z, once for
-    the nodes that share a skin node (their fans are the same)."""
+    """A strip's load patterns: each spring pulling its fan along x, y and z, once for the nodes
+    that share a skin node (their fans are the same).
+
+    Parameters
+    ----------
+    rig : Rig
+    muscle : Muscle
+        A strip muscle.
+
+    Returns
+    -------
+    (3n, 3u) float array
+        n: the skin's vertices; u: the strip's distinct skin nodes.
+    """
     at, wt, of = muscle.springs()
     _, first = np.unique(muscle.attach, return_index=True)
     col = np.full(len(muscle.nodes), -1)
@@ -375,8 +427,20 @@ def strip_loads(rig, muscle) -> np.ndarray:
 
 
 def drive_load(rig, muscle, motion=None) -> np.ndarray:
-    """(n, 3) the force of a drive's anchors moved by `motion` (default: their motion at full
-    activation), K_s u_part."""
+    """The force of a drive's anchors moved by `motion`, K_s u_part.
+
+    Parameters
+    ----------
+    rig : Rig
+    muscle : Muscle
+        A drive.
+    motion : (k, 3) float array or None
+        Its anchors' motion (None: their motion at full activation, muscle.stretch).
+
+    Returns
+    -------
+    (n, 3) float array
+    """
     f = np.zeros((rig.skin.n_vertices, 3))
     k = drive_springs(rig, muscle)
     f[muscle.attach] = k[muscle.attach, None] * (muscle.stretch if motion is None else motion)
@@ -384,8 +448,19 @@ def drive_load(rig, muscle, motion=None) -> np.ndarray:
 
 
 def drive_motions(m) -> list:
-    """A drive's anchor motions whose loads its system must hold: the jaw's opening as its two
-    parts (exact rotation at any angle, rig.drives.jaw_open_parts), any other its one motion."""
+    """A drive's anchor motions whose loads its system must hold.
+
+    Parameters
+    ----------
+    m : Muscle
+        A drive.
+
+    Returns
+    -------
+    list of (k, 3) float arrays
+        The jaw's opening as its two parts (exact rotation at any angle, rig.drives.jaw_open_parts);
+        any other drive's one motion.
+    """
     if m.info.get("part") == "jaw" and m.info.get("motion") == "open" and "pivot" in m.info:
         ms, mc, _ = jaw_open_parts(m.nodes, m.info)
         return [ms, mc]
@@ -408,16 +483,35 @@ def _shares(xp, ucp, info, steps: int = 24) -> np.ndarray:
 
 
 def lid_contact(u, uc, rest, info, passes: int = 4):
-    """Lid contact, position by position: u (n, 3) the skin's displacement, uc (n, 3) the
-    closing drive's part of it.  Where the margins would cross, the closing field is taken away
-    there, along the eye, until they meet: at each pair of facing margin nodes the share of uc
-    that brings the opening to 0 (bisection, all pairs at once), interpolated across the eye
-    between the pairs (by the position of their upper nodes) for every node the closing drive
-    moves.  The rims then meet wherever the closing lid reaches the lower one and are held
-    apart nowhere else -- a share of the whole field, the same at every pair, held the ends of
-    a fitted blink 9 % of the opening apart where its middle met (docs/benchmarks.md).  Passes
-    repeat it for the lower nodes' own shares; what still crosses after them has the rest of
-    the field taken away evenly.  Returns u (changed in place)."""
+    """Lid contact, position by position.
+
+    Where the margins would cross, the closing field is taken away there, along the eye, until
+    they meet: at each pair of facing margin nodes the share of uc that brings the opening to 0
+    (bisection, all pairs at once), interpolated across the eye between the pairs (by the position
+    of their upper nodes) for every node the closing drive moves.  The rims then meet wherever the
+    closing lid reaches the lower one and are held apart nowhere else -- a share of the whole
+    field, the same at every pair, held the ends of a fitted blink 9 % of the opening apart where
+    its middle met (docs/benchmarks.md).  Passes repeat it for the lower nodes' own shares; what
+    still crosses after them has the rest of the field taken away evenly.
+
+    Parameters
+    ----------
+    u : (n, 3) float array
+        The skin's displacement; changed in place.
+    uc : (n, 3) float array
+        The closing drive's part of it.
+    rest : (n, 3) float array
+        The skin at rest.
+    info : dict
+        The closing drive's (Muscle.info): the eye's centre, up and fwd, and its margins' facing
+        pairs (lid_pairs).
+    passes : int
+
+    Returns
+    -------
+    (n, 3) float array
+        u.
+    """
     p = lid_pairs(info)
     if len(p) == 0:
         return u
@@ -452,14 +546,23 @@ def lid_contact(u, uc, rest, info, passes: int = 4):
 
 
 class ActivationMap:
-    """The muscles' activations -> each force system's input.  A muscle's input is its
-    activation, except for the drives (rig.drives): the jaw opens by the digastric's activation
-    less its strongest closer's (masseter, temporalis: the teeth stop it at rest, so never below
-    0).  With `lid_room` (the full-space solver, which has no contact), a lid closes at most
-    until its rim meets the other (the closing drive moves the rim by its input x the opening,
-    the lower lid's raise by its `raise` part of it, the levator lifts it by its `wide` angle;
-    the input is held where they meet); the modal face instead stops the lids where they touch,
-    position by position (lid_contact).  Drive inputs stay in 0..1."""
+    """The muscles' activations -> each force system's input.
+
+    A muscle's input is its activation, except for the drives (rig.drives): the jaw opens by the
+    digastric's activation less its strongest closer's (masseter, temporalis: the teeth stop it at
+    rest, so never below 0).  With `lid_room` (the full-space solver, which has no contact), a lid
+    closes at most until its rim meets the other (the closing drive moves the rim by its input x
+    the opening, the lower lid's raise by its `raise` part of it, the levator lifts it by its
+    `wide` angle; the input is held where they meet); the modal face instead stops the lids where
+    they touch, position by position (lid_contact).  Drive inputs stay in 0..1.
+
+    Parameters
+    ----------
+    muscles : list of Muscle
+        The rig's.
+    lid_room : bool
+        Hold each lid's input where its rim meets the other's.
+    """
 
     def __init__(self, muscles, lid_room: bool = True):
         names = [m.name for m in muscles]
@@ -495,14 +598,46 @@ class ActivationMap:
 
 
 def tether_springs(tether: float, k_length: float, mean_edge: float, mass: np.ndarray) -> np.ndarray:
-    """Per-node stiffness of the subcutaneous tethers to the skull: tether x an edge's
-    stiffness 2 k_L / l, shared out by the nodes' lumped areas."""
+    """Per-node stiffness of the subcutaneous tethers to the skull: tether x an edge's stiffness
+    2 k_L / l, shared out by the nodes' lumped areas.
+
+    Parameters
+    ----------
+    tether : float
+        The tethers' strength in edges' stiffness.
+    k_length : float
+        The shell's length stiffness k_L.
+    mean_edge : float
+        The skin's mean edge length l.
+    mass : (n,) float array
+        The nodes' lumped masses (areas).
+
+    Returns
+    -------
+    (n,) float array
+    """
     return tether * 2 * k_length / mean_edge * mass / mass.mean()
 
 
 def skin_system(rig, rotation: bool = True):
-    """The skin's shell, lumped masses, stiffness with the tethers, and rotation operator (None
-    without `rotation`)."""
+    """The skin's shell and the matrices every force system shares.
+
+    Parameters
+    ----------
+    rig : Rig
+    rotation : bool
+        Make the rotation operator too (modal warping).
+
+    Returns
+    -------
+    energy : ShellEnergy
+    mass : (n,) float array
+        Lumped masses.
+    K : (3n, 3n) sparse matrix
+        The shell's stiffness with the tethers.
+    W : sparse matrix or None
+        The rotation operator (rotation_operator), None without `rotation`.
+    """
     skin, p = rig.skin, rig.params
     energy = ShellEnergy.default(skin, k_area=SKIN_AREA, k_bend=SKIN_BEND)
     mass = lumped_mass(skin)
@@ -514,10 +649,22 @@ def skin_system(rig, rotation: bool = True):
 
 
 def precompute(rig, progress=None):
-    """One modal system per force type on the rig (Kim §VI): each muscle's over its ROI
-    (eq. 19), loaded at its spring nodes, and gravity's over the skin the skull does not hold;
-    systems the rig already carries are kept (those loaded from a file are read back).
-    progress(k, n, name) after each.  Returns the rig."""
+    """One modal system per force type on the rig (Kim §VI): each muscle's over its ROI (eq. 19),
+    loaded at its spring nodes, and gravity's over the skin the skull does not hold; systems the
+    rig already carries are kept (those loaded from a file are read back).
+
+    Parameters
+    ----------
+    rig : Rig
+        Changed in place: each muscle's `basis` and the rig's `gravity_basis` made.
+    progress : callable, optional
+        Called as progress(k, n, name) before each muscle's system.
+
+    Returns
+    -------
+    Rig
+        The rig.
+    """
     if "mean_edge" not in rig.params:
         raise MimicaError("rig: built by an older mimica; rebuild it with `mimica rig`")
     p = rig.params
@@ -595,7 +742,18 @@ def shell_stretch_mode(nodes: np.ndarray, bar: np.ndarray, modes: int = 8) -> tu
 def shell_stretch_modes(rig) -> list:
     """Every strip muscle's stretch (Muscle.stretch, the bar's) replaced by its shell stretch mode
     (shell_stretch_mode; `mimica rig --stretch shell`), before its modal system is made; the rig
-    records it (params "stretch").  Returns [(name, alignment, mode index)]."""
+    records it (params "stretch").
+
+    Parameters
+    ----------
+    rig : Rig
+        Its muscles' systems not made yet (MimicaError otherwise).
+
+    Returns
+    -------
+    list of tuple
+        (name, alignment in [0, 1], mode index) for each strip muscle.
+    """
     if any(m.basis is not None for m in rig.muscles if m.kind != "drive"):
         raise MimicaError("rig: its muscles' systems are already made; choose the stretch modes when building it")
     out = []
@@ -609,8 +767,25 @@ def shell_stretch_modes(rig) -> list:
 
 
 def region_system(rig, center: np.ndarray, radius: float, reach: float = 3.0):
-    """A modal system for a force on the skin within `radius` of `center` (a user pull):
-    its ROI is the skin within reach x radius; returns (basis, loaded nodes, weights)."""
+    """A modal system for a force on the skin within `radius` of `center` (a user pull).
+
+    Parameters
+    ----------
+    rig : Rig
+    center : (3,) float array
+    radius : float
+        The pull's reach on the skin (MimicaError where no skin is within it).
+    reach : float
+        Its ROI: the skin within reach x radius.
+
+    Returns
+    -------
+    basis : ModalBasis
+    nodes : (k,) int array
+        The skin nodes it loads.
+    weights : (k,) float array
+        Their share of the force, summing to 1.
+    """
     skin = rig.skin
     d = np.linalg.norm(skin.vertices - center, axis=1)
     nodes = np.nonzero(d < radius)[0]
@@ -624,22 +799,61 @@ def region_system(rig, center: np.ndarray, radius: float, reach: float = 3.0):
 
 
 def spring_stiffness(rig, spring: float) -> float:
-    """The muscle-to-skin spring (Kim eqs. 14-16): `spring` edges' stiffness, 2 k_L / l each."""
+    """The muscle-to-skin spring's stiffness (Kim eqs. 14-16).
+
+    Parameters
+    ----------
+    rig : Rig
+    spring : float
+        In edges' stiffness, 2 k_L / l each.
+
+    Returns
+    -------
+    float
+    """
     return spring * 2.0 * rig.params["k_length"] / rig.params["mean_edge"]
 
 
 def follow_activation(q, v, a, h, w):
-    """A muscle's stretch mode following its activation a, critically damped at angular
-    frequency w (Kim eq. 13), one implicit Euler step: (q', v').  Scalars or arrays."""
+    """A muscle's stretch mode following its activation, critically damped (Kim eq. 13), one
+    implicit Euler step.
+
+    Parameters
+    ----------
+    q, v : float or float array
+        The mode's coordinate and its velocity.
+    a : float or float array
+        The activation.
+    h : float
+        The step, seconds.
+    w : float
+        The angular frequency.
+
+    Returns
+    -------
+    q, v : float or float array
+        After the step.
+    """
     v = (v + h * w * w * (a - q)) / (1 + 2 * h * w + h * h * w * w)
     return q + h * v, v
 
 
 def skin_density(rig, frequency: float) -> float:
-    """Areal density that puts the softest muscle system's lowest mode at `frequency` Hz.
+    """The areal density that puts the softest system's lowest mode at `frequency` Hz.
 
-    The shell's stiffness is scale-free (ShellEnergy.default), so the time scale is set
-    here: the skin settles in a fraction of a second, as faces do.
+    The shell's stiffness is scale-free (ShellEnergy.default), so the time scale is set here: the
+    skin settles in a fraction of a second, as faces do.
+
+    Parameters
+    ----------
+    rig : Rig
+        Precomputed.
+    frequency : float
+        Hz.
+
+    Returns
+    -------
+    float
     """
     lam = [m.basis.lam.min() for m in rig.muscles if m.basis is not None]
     if rig.gravity_basis is not None:
@@ -648,7 +862,28 @@ def skin_density(rig, frequency: float) -> float:
 
 
 class FaceSimulator:
-    """Step a rig's muscles (activations in [-1, 1]: contraction > 0, relaxation < 0)."""
+    """Step a rig's muscles (activations in [-1, 1]: contraction > 0, relaxation < 0).
+
+    Parameters
+    ----------
+    rig : Rig
+        Precomputed here if it is not yet (precompute).
+    fps : float
+        Frames a second; each frame is `substeps` implicit steps.
+    substeps : int
+    spring : float
+        The muscle-to-skin springs' stiffness in edges' stiffness (spring_stiffness).
+    frequency : float
+        Hz of the softest system's lowest mode (skin_density).
+    damping, zeta : float
+        Rayleigh damping: the mass term (x 2 pi frequency) and the stiffness term.
+    warp : bool or None
+        Modal warping (Kim eq. 10); None: on unless `reduced` (see __init__).
+    reduced : float or None
+        A relative RMS tolerance for the reduced output model (see __init__).
+    springs : str
+        "linear" or "kim" (Kim's eq. 15, kim_spring).
+    """
 
     def __init__(self, rig, fps: float = 60.0, substeps: int = 4, spring: float = 4.0,
                  frequency: float = 4.0, damping: float = 1.6, zeta: float = 0.0005, warp: bool | None = None,
@@ -917,8 +1152,19 @@ class FaceSimulator:
 
 
 def displacement_cosine(u: np.ndarray, reference: np.ndarray, moving: float = 0.05) -> float:
-    """Cosine between two displacement fields (n, 3) over the reference's moving region
-    (nodes moving more than `moving` of its largest motion): the anatomy check."""
+    """The cosine between two displacement fields over the reference's moving region: the anatomy
+    check.
+
+    Parameters
+    ----------
+    u, reference : (n, 3) float arrays
+    moving : float
+        Nodes moving more than this share of the reference's largest motion count.
+
+    Returns
+    -------
+    float
+    """
     m = np.linalg.norm(reference, axis=1)
     sel = m > moving * m.max()
     a, b = u[sel], reference[sel]

@@ -35,8 +35,18 @@ LID_CLOSED = 1 / 3
 
 
 def muscle_fields(sim) -> np.ndarray:
-    """(m, n, 3): each muscle's skin displacement held at activation 1, at rest (steady state),
-    for a FaceSimulator (modal, unwarped).  The simulator is left at rest."""
+    """Each muscle's skin displacement held at activation 1, at rest (steady state), for a modal,
+    unwarped FaceSimulator.  The simulator is left at rest.
+
+    Parameters
+    ----------
+    sim : FaceSimulator
+
+    Returns
+    -------
+    (m, n, 3) float array
+        m muscles, n skin nodes.
+    """
     out = np.zeros((len(sim.systems), sim.rig.skin.n_vertices, 3))
     sim.reset()
     for i, sm in enumerate(sim.systems):
@@ -48,8 +58,17 @@ def muscle_fields(sim) -> np.ndarray:
 
 
 def skin_stiffness(rig):
-    """The rig's skin stiffness with its tethers (sparse, 3n x 3n), the shell's stiffnesses
-    recorded in rig.params as precompute does (the springs are scaled by them)."""
+    """The rig's skin stiffness with its tethers, the shell's stiffnesses recorded in rig.params as
+    precompute does (the springs are scaled by them).
+
+    Parameters
+    ----------
+    rig : Rig
+
+    Returns
+    -------
+    (3n, 3n) sparse matrix
+    """
     from .face import skin_system
     energy, _, K, _ = skin_system(rig, rotation=False)
     rig.params.update(k_area=energy.k_area, k_length=energy.k_length, k_bend=energy.k_bend)
@@ -57,10 +76,25 @@ def skin_stiffness(rig):
 
 
 def static_field(rig, m, K, spring: float = 4.0, motion=None) -> np.ndarray:
-    """(n, 3): one muscle's (or drive's) steady state at activation 1 by one sparse solve in full
-    space, (K + K_s) u = K_s u_m over its region of interest -- what its modal system settles to
-    (its static load shapes make that exact, tests/test_drives.py), without the modes.  K from
-    skin_stiffness; motion: a drive's anchors moved otherwise than at full activation."""
+    """One muscle's (or drive's) steady state at activation 1 by one sparse solve in full space,
+    (K + K_s) u = K_s u_m over its region of interest -- what its modal system settles to (its
+    static load shapes make that exact, tests/test_drives.py), without the modes.
+
+    Parameters
+    ----------
+    rig : Rig
+    m : Muscle
+    K : (3n, 3n) sparse matrix
+        skin_stiffness's.
+    spring : float
+        The springs' stiffness in edges' stiffness.
+    motion : (k, 3) float array or None
+        A drive's anchors moved otherwise than at full activation.
+
+    Returns
+    -------
+    (n, 3) float array
+    """
     import scipy.sparse as sp
     from ..solver import SPDSolver
     from .face import drive_load, drive_springs, strip_springs
@@ -77,8 +111,18 @@ def static_field(rig, m, K, spring: float = 4.0, motion=None) -> np.ndarray:
 
 
 def static_fields(rig, spring: float = 4.0) -> np.ndarray:
-    """(m, n, 3): static_field of every muscle of the rig, the same steady states as
-    muscle_fields -- what calibration (tools/calibrate_muscles.py) evaluates hundreds of times."""
+    """static_field of every muscle of the rig: the same steady states as muscle_fields, what
+    calibration (tools/calibrate_muscles.py) evaluates hundreds of times.
+
+    Parameters
+    ----------
+    rig : Rig
+    spring : float
+
+    Returns
+    -------
+    (m, n, 3) float array
+    """
     K = skin_stiffness(rig)
     return np.stack([static_field(rig, m, K, spring) for m in rig.muscles])
 
@@ -118,7 +162,24 @@ def _box_ls(M: np.ndarray, y: np.ndarray, upper: float) -> np.ndarray:
 
 @dataclass
 class MuscleFit:
-    """Fit activations to displacements of a rig's skin, many frames at a time."""
+    """Fit activations to displacements of a rig's skin, many frames at a time (a ridge-regularized
+    least squares on the muscles' fields, factored once; lid contact where the rig has lids).
+
+    Attributes
+    ----------
+    names : list of str
+        The muscles.
+    fields : (m, n, 3) float array
+        Their steady states at activation 1 (muscle_fields, static_fields).
+    weights : (n,) float array
+        Vertex weights of the misfit (1 on the muscles' reach, else 0).
+    inputs : ActivationMap or None
+        The rig's (the jaw's closers, the drives' range).
+    rest : (n, 3) float array or None
+        The rig's skin at rest, for lid contact (None: no lids).
+    lids : list of tuple
+        (closing drive's index, its info) for lid contact.
+    """
     names: list
     fields: np.ndarray           # (m, n, 3)
     weights: np.ndarray          # (n,) vertex weights of the misfit (1 on the muscles' reach, else 0)

@@ -12,6 +12,19 @@ import numpy as np
 
 
 class HD:
+    """A hyper-dual number f + a e1 + b e2 + ab e1e2 (Fike and Alonso 2011), vectorized: each part an
+    array, so one evaluation of a function gives its value, two first derivatives and the mixed
+    second derivative exactly (no truncation error).
+
+    Parameters
+    ----------
+    f : float array
+        The value.
+    a, b : float array
+        The derivatives along the two seeded directions.
+    ab : float array
+        The mixed second derivative.
+    """
     __slots__ = ("f", "a", "b", "ab")
 
     def __init__(self, f, a=0.0, b=0.0, ab=0.0):
@@ -63,7 +76,16 @@ class HD:
 
 
 def atan2(y: HD, x: HD) -> HD:
-    """atan2 with exact first and second derivatives."""
+    """atan2 with exact first and second derivatives.
+
+    Parameters
+    ----------
+    y, x : HD
+
+    Returns
+    -------
+    HD
+    """
     r2 = x.f * x.f + y.f * y.f
     ta = (x.f * y.a - y.f * x.a) / r2
     tb = (x.f * y.b - y.f * x.b) / r2
@@ -74,26 +96,79 @@ def atan2(y: HD, x: HD) -> HD:
 
 # 3-vectors as tuples of three HD scalars
 def sub(u, v):
+    """u - v for 3-vectors given as 3-tuples (of HD or arrays).
+
+    Parameters
+    ----------
+    u, v : tuple of 3
+
+    Returns
+    -------
+    tuple of 3
+    """
     return (u[0] - v[0], u[1] - v[1], u[2] - v[2])
 
 
 def dot(u, v):
+    """u . v for 3-vectors given as 3-tuples.
+
+    Parameters
+    ----------
+    u, v : tuple of 3
+
+    Returns
+    -------
+    HD or array
+    """
     return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
 
 
 def cross(u, v):
+    """u x v for 3-vectors given as 3-tuples.
+
+    Parameters
+    ----------
+    u, v : tuple of 3
+
+    Returns
+    -------
+    tuple of 3
+    """
     return (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
 
 
 def norm(u):
+    """|u| for a 3-vector given as a 3-tuple.
+
+    Parameters
+    ----------
+    u : tuple of 3
+
+    Returns
+    -------
+    HD or array
+    """
     return dot(u, u).sqrt()
 
 
 def local_derivatives(fn, x: np.ndarray, params=()):
-    """Value, gradient and Hessian of a per-element function of k stacked coordinates.
+    """Value, gradient and Hessian of a per-element function of k stacked coordinates (k (k + 1) / 2
+    hyper-dual evaluations).
 
-    fn(vars, *params) -> HD per element, vars a list of k HD arrays; x: (m, k) values.
-    Returns f (m,), g (m, k), H (m, k, k).
+    Parameters
+    ----------
+    fn : callable
+        fn(vars, *params) -> HD per element, vars a list of k HD arrays.
+    x : (m, k) float array
+        The values.
+    params : tuple
+        More arguments of fn.
+
+    Returns
+    -------
+    f : (m,) float array
+    g : (m, k) float array
+    H : (m, k, k) float array
     """
     m, k = x.shape
     zero = np.zeros(m)
@@ -113,7 +188,20 @@ def local_derivatives(fn, x: np.ndarray, params=()):
 
 
 def local_gradient(fn, x: np.ndarray, params=()):
-    """Value and gradient only (k evaluations)."""
+    """Value and gradient only (k hyper-dual evaluations).
+
+    Parameters
+    ----------
+    fn : callable
+        As local_derivatives'.
+    x : (m, k) float array
+    params : tuple
+
+    Returns
+    -------
+    f : (m,) float array
+    g : (m, k) float array
+    """
     m, k = x.shape
     zero = np.zeros(m)
     one = np.ones(m)

@@ -26,21 +26,34 @@ from .shell import ShellEnergy
 
 def rotation_operator(rest: np.ndarray, triangles: np.ndarray, smooth: float = 0, tangent: bool = False,
                       diffuse: bool = False):
-    """Sparse W (3n x 3n): displacements -> per-node infinitesimal rotation vectors.
+    """The linear map from displacements to per-node infinitesimal rotation vectors.
 
-    Per triangle, the displacement gradient on the tangent plane is completed by the
-    linearized normal change; the axial vector of its skew part is the rotation; nodes
-    take the area-weighted mean of their triangles.  Exact for infinitesimal rotations.
+    Per triangle, the displacement gradient on the tangent plane is completed by the linearized
+    normal change; the axial vector of its skew part is the rotation; nodes take the area-weighted
+    mean of their triangles.  Exact for infinitesimal rotations.
 
-    tangent: keep only the rotation about axes in the skin's tangent plane (its normal
-    tilting, as the skin bends) and drop the spin about the normal, the "drilling" rotation a
-    shell does not carry: a muscle sliding the skin along itself shears it, and the curl of
-    that shear is spin, not a turn of the material's frame (with it, a full smile warped
-    folds into itself: deviation from --solver full 0.522 against 0.367 without, the
-    linear modes' 0.333, at 4 rings; docs/benchmarks.md).
+    Parameters
+    ----------
+    rest : (n, 3) float array
+        The shell at rest.
+    triangles : (m, 3) int array
+    smooth : float
+        Average over this many rings; with diffuse, one implicit diffusion step of that time
+        instead, (I + smooth L)^-1 (one factorization, then a solve per use).
+    tangent : bool
+        Keep only the rotation about axes in the skin's tangent plane (its normal tilting, as the
+        skin bends) and drop the spin about the normal, the "drilling" rotation a shell does not
+        carry: a muscle sliding the skin along itself shears it, and the curl of that shear is
+        spin, not a turn of the material's frame (with it, a full smile warped folds into itself:
+        deviation from --solver full 0.522 against 0.367 without, the linear modes' 0.333, at 4
+        rings; docs/benchmarks.md).
+    diffuse : bool
+        Smooth by diffusion rather than ring averages.
 
-    smooth: average over this many rings; with diffuse, one implicit diffusion step of that
-    time instead, (I + smooth L)^-1 (one factorization, then a solve per use).
+    Returns
+    -------
+    sparse matrix or SmoothedRotation
+        W (3n x 3n), or the operator that applies it with its smoothing (`W @ X`).
     """
     x, t = rest, triangles
     e1, e2 = x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]]
@@ -109,8 +122,21 @@ def rotation_operator(rest: np.ndarray, triangles: np.ndarray, smooth: float = 0
 
 
 class SmoothedRotation:
-    """W followed by `rings` ring averages (and the tangent projection P, if any), as an
-    operator: (P S^rings W) @ X."""
+    """W followed by `rings` ring averages (or one diffusion solve) and the tangent projection P, if
+    any, as an operator: (P S^rings W) @ X.
+
+    Parameters
+    ----------
+    W : (3n, 3n) sparse matrix
+        The raw rotation operator.
+    S : (3n, 3n) sparse matrix
+        One ring average.
+    rings : int
+    P : (3n, 3n) sparse matrix or None
+        The projection onto the tangent axes.
+    diffusion : SPDSolver or None
+        (I + smooth L) factored, used instead of the ring averages.
+    """
 
     def __init__(self, W, S, rings, P=None, diffusion=None):
         self.W, self.S, self.rings, self.P, self.diffusion = W, S, rings, P, diffusion
@@ -133,10 +159,23 @@ def _skew(w: np.ndarray) -> np.ndarray:
 
 
 def rotations(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For rotation vectors w (k, 3): R(w) (Rodrigues), and Choi & Ko's warp R~(w), the
-    rotation integrated along the path, int_0^1 R(s w) ds = I + (1 - cos t)/t^2 [w]x +
-    (t - sin t)/t^3 [w]x^2 (t = |w|): the displacement of a node whose rotation grew with
-    its modal amplitudes, u = R~ Phi q (Choi & Ko 2005 §4, closed form for a fixed axis)."""
+    """Rotation matrices of rotation vectors, and Choi and Ko's warp.
+
+    The warp is the rotation integrated along the path, int_0^1 R(s w) ds = I + (1 - cos t)/t^2
+    [w]x + (t - sin t)/t^3 [w]x^2 (t = |w|): the displacement of a node whose rotation grew with its
+    modal amplitudes, u = R~ Phi q (Choi & Ko 2005 §4, closed form for a fixed axis).
+
+    Parameters
+    ----------
+    w : (k, 3) float array
+
+    Returns
+    -------
+    R : (k, 3, 3) float array
+        Rodrigues.
+    R_warp : (k, 3, 3) float array
+        R~(w).
+    """
     th = np.linalg.norm(w, axis=1)
     small = th < 1e-4
     t = np.where(small, 1.0, th)
@@ -155,7 +194,23 @@ def rotations(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass
 class ModalBasis:
-    """Precomputed modes of one shell with fixed nodes (Kim eq. 8)."""
+    """Precomputed modes of one shell with fixed nodes (Kim eq. 8).
+
+    Attributes
+    ----------
+    free : (n_free,) int array
+        The free nodes.
+    phi : (3 n_free, r) float array
+        Mass-normalized mode shapes.
+    lam : (r,) float array
+        Their eigenvalues.
+    mass : (n,) float array
+        Lumped masses.
+    n : int
+        The shell's nodes.
+    rotation : object
+        The skin's rotation operator, for psi (the modes' rotation fields, made on first use).
+    """
 
     free: np.ndarray          # (n_free,) free node indices
     phi: np.ndarray           # (3 n_free, r) mass-normalized mode shapes
@@ -281,7 +336,19 @@ class ModalBasis:
 
 
 class ModalWarpingSolver:
-    """Kim eq. 10 integrated per mode; `step(force)` advances one time step h."""
+    """Kim eq. 10 integrated per mode; `step(force)` advances one time step h.
+
+    Parameters
+    ----------
+    basis : ModalBasis
+    h : float
+        The time step, seconds.
+    xi, zeta : float
+        Rayleigh damping: c = xi + zeta lambda per mode.
+    density : float
+        Scales the mass (the basis was computed for density 1): eigenvalues and modal forces divide
+        by it, displacements are unchanged.
+    """
 
     def __init__(self, basis: ModalBasis, h: float, xi: float = 2.0, zeta: float = 0.01, density: float = 1.0):
         """density scales the mass (the basis was computed for density 1): eigenvalues and
@@ -360,14 +427,32 @@ class FullSolver:
     The step is the minimum over v' of implicit Euler's incremental potential
         Phi(v') = 1/2 |v' - v|_M^2 - h F.v' + E(x + h v') + h/2 v'^T C v'
     (its gradient is h times the residual above), found by Newton on a positive semi-definite
-    Hessian (ShellEnergy.hessian(project=True)) with a backtracking (Armijo) line search on
-    Phi: every iterate lowers the potential, so a strong activation that folds the skin slows
-    the solve down instead of making it diverge.
-    springs: optional per-node stiffness of linear springs to the rest position (the face's
-    tethers and subcutaneous springs), added to E.
-    Converged when the residual force is under tol (relative to the largest applied force) or
-    when an iterate moves no node by more than xtol (a length); `stats` counts the steps, the
-    Newton iterations and the steps that ran out of iterations.
+    Hessian (ShellEnergy.hessian(project=True)) with a backtracking (Armijo) line search on Phi:
+    every iterate lowers the potential, so a strong activation that folds the skin slows the solve
+    down instead of making it diverge.  Converged when the residual force is under tol (relative
+    to the largest applied force) or when an iterate moves no node by more than xtol (a length);
+    `stats` counts the steps, the Newton iterations and the steps that ran out of iterations.
+
+    Parameters
+    ----------
+    energy : ShellEnergy
+    mass : (n,) float array
+        Lumped masses.
+    fixed : (n,) bool array
+        Nodes held.
+    h : float
+        The time step.
+    xi, zeta : float
+        Rayleigh damping.
+    newton_iters : int
+        Newton iterations a step at most.
+    tol : float
+        The relative residual force that counts as converged.
+    springs : (n,) float array or None
+        Per-node stiffness of linear springs to the rest position (the face's tethers and
+        subcutaneous springs), added to E.
+    xtol : float
+        A step that moves no node by more than this has converged.
     """
 
     def __init__(self, energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, h: float,
@@ -461,9 +546,30 @@ class FullSolver:
 
 def against_full(energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, force: np.ndarray, h: float,
                  steps: int, r: int = 20, load_nodes=None, **damping) -> dict:
-    """Run the full Newton solver and the modal solver side by side under a constant force:
-    {'full': u, 'linear': dev, 'warped': dev, 'full_steps_per_s', 'modal_steps_per_s'}, dev the
-    largest nodal distance from the full solver's displacement over its largest displacement."""
+    """Run the full Newton solver and the modal solver side by side under a constant force.
+
+    Parameters
+    ----------
+    energy : ShellEnergy
+    mass : (n,) float array
+    fixed : (n,) bool array
+    force : (n, 3) float array
+    h : float
+    steps : int
+    r : int
+        Krylov vectors of the modal basis beyond its loads.
+    load_nodes : array or None
+        Where the force acts (the basis's loads).
+    **damping
+        xi, zeta.
+
+    Returns
+    -------
+    dict
+        {'full': u, 'linear': dev, 'warped': dev, 'full_steps_per_s', 'modal_steps_per_s'}, dev
+        the largest nodal distance from the full solver's displacement over its largest
+        displacement.
+    """
     full = FullSolver(energy, mass, fixed, h, **damping)
     t = time.perf_counter()
     for _ in range(steps):

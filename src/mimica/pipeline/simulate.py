@@ -128,7 +128,20 @@ def _check(o: SimulateOptions, tl_channels) -> None:
 
 
 def timeline_for(rig, o: SimulateOptions):
-    """The timeline the options name on this rig, and its duration in seconds."""
+    """The timeline the options name on this rig: their action, timeline file or preset.
+
+    Parameters
+    ----------
+    rig : Rig
+        The rig it drives (its muscles' names are the channels a file may use).
+    o : SimulateOptions
+
+    Returns
+    -------
+    timeline : anim.Timeline
+    duration : float
+        Seconds to simulate: the options' duration, else the file's, else 2.
+    """
     from ..anim import Timeline
     names = [m.name for m in rig.muscles]
     if o.action:
@@ -145,12 +158,36 @@ def timeline_for(rig, o: SimulateOptions):
 
 
 def engine_name(o: SimulateOptions) -> str:
-    """The physics engine (physics.ENGINES) the options choose."""
+    """The physics engine the options choose.
+
+    Parameters
+    ----------
+    o : SimulateOptions
+
+    Returns
+    -------
+    str
+        "modal", "full" or "sprung" (physics.make_engine's names).
+    """
     return "sprung" if o.engine == "sprung" else "full" if o.solver == "full" else "modal"
 
 
 def engine_for(rig, o: SimulateOptions, tl):
-    """The simulator the options name (physics.make_engine), its forces set."""
+    """The simulator the options name, its forces set (gravity, pulls).
+
+    Parameters
+    ----------
+    rig : Rig
+        The rig, precomputed (physics.precompute).
+    o : SimulateOptions
+    tl : anim.Timeline
+        The timeline it will play (a gravity channel turns gravity on).
+
+    Returns
+    -------
+    physics.Engine
+        From physics.make_engine: step, displacement, run.
+    """
     from ..physics import make_engine
     name = engine_name(o)
     if name != "modal":

@@ -209,7 +209,25 @@ def _point(d: dict, lm: np.ndarray) -> np.ndarray:
 
 
 def place_strip(mdef: MuscleDef, skin: Mesh, lm: np.ndarray, locator: TriangleLocator, normals: np.ndarray):
-    """Strip nodes (ROWS*COLS, 3) under the skin from origin (row 0) to insertion, and triangles."""
+    """A muscle strip placed under the skin, from its origin (row 0) to its insertion.
+
+    Parameters
+    ----------
+    mdef : MuscleDef
+        The library's definition (its origin and insertion in landmark terms, width, depths).
+    skin : Mesh
+    lm : (68, 3) float array
+    locator : TriangleLocator
+        Of the skin.
+    normals : (n, 3) float array
+        The skin's vertex normals.
+
+    Returns
+    -------
+    nodes : (ROWS * COLS, 3) float array
+    tris : (k, 3) int array
+        strip_triangles().
+    """
     cyl = face_cylinder(lm)
     right, up = cyl.axes[0], cyl.axes[1]
     ew = float(np.linalg.norm(lm[45] - lm[36]))
@@ -230,7 +248,12 @@ def place_strip(mdef: MuscleDef, skin: Mesh, lm: np.ndarray, locator: TriangleLo
 
 
 def strip_triangles() -> np.ndarray:
-    """The triangles of a muscle strip's ROWS x COLS grid of nodes (two a cell), origin row first."""
+    """The triangles of a muscle strip's ROWS x COLS grid of nodes (two a cell), origin row first.
+
+    Returns
+    -------
+    (2 (ROWS - 1) (COLS - 1), 3) int array
+    """
     g = np.arange(ROWS * COLS).reshape(ROWS, COLS)
     a, b, c, d = g[:-1, :-1].ravel(), g[:-1, 1:].ravel(), g[1:, 1:].ravel(), g[1:, :-1].ravel()
     return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
@@ -244,13 +267,21 @@ def _normal_at(locator, skin, normals, points):
 
 
 def stretch_mode(nodes: np.ndarray) -> np.ndarray:
-    """Kim eqs. 11-12: the muscle's stretch mode with its origin row fixed, (k, 3).
+    """Kim eqs. 11-12: the muscle's stretch mode with its origin row fixed.
 
-    A strip fixed at its origin and pulled along itself deforms, to first order, as a bar:
-    every node slides toward the origin along the strip, in proportion to its arc length
-    from the origin (so a muscle curved over the skull keeps following it).  Scaled so that
-    the insertion moves by the whole length: activation 1 with contraction c shortens the
-    muscle by c.  The origin row does not move.
+    A strip fixed at its origin and pulled along itself deforms, to first order, as a bar: every
+    node slides toward the origin along the strip, in proportion to its arc length from the origin
+    (so a muscle curved over the skull keeps following it).  Scaled so that the insertion moves by
+    the whole length: activation 1 with contraction c shortens the muscle by c.  The origin row
+    does not move.
+
+    Parameters
+    ----------
+    nodes : (ROWS * COLS, 3) float array
+
+    Returns
+    -------
+    (ROWS * COLS, 3) float array
     """
     g = nodes.reshape(ROWS, COLS, 3)
     seg = np.linalg.norm(np.diff(g, axis=0), axis=2)                 # (ROWS-1, COLS)
@@ -262,8 +293,26 @@ def stretch_mode(nodes: np.ndarray) -> np.ndarray:
 
 def strip_muscle(mdef: MuscleDef, skin: Mesh, lm: np.ndarray, near, alpha: float = 10.0,
                  contraction: float = 0.25, omega: float = 40.0) -> Muscle:
-    """One muscle of the library placed on the skin; near: (TriangleLocator, vertex normals,
-    cKDTree) of the skin, made once for all its muscles."""
+    """One muscle of the library placed on the skin: its strip, stretch mode, springs and ROI.
+
+    Parameters
+    ----------
+    mdef : MuscleDef
+    skin : Mesh
+    lm : (68, 3) float array
+    near : tuple
+        (TriangleLocator, vertex normals, cKDTree) of the skin, made once for all its muscles.
+    alpha : float
+        Kim eq. 19's ROI range.
+    contraction : float
+        Shortening at full activation.
+    omega : float
+        The stretch mode's frequency, rad/s.
+
+    Returns
+    -------
+    Muscle
+    """
     loc, normals, tree = near
     nodes, tris = place_strip(mdef, skin, lm, loc, normals)
     shape = stretch_mode(nodes)
@@ -291,8 +340,25 @@ FAN = 1.0
 
 
 def spring_fan(vertices: np.ndarray, nodes: np.ndarray, attach: np.ndarray, tree) -> tuple:
-    """(skin node, weight, strip node) of a strip's springs fanned out around each node's
-    attachment (FAN); tree: the cKDTree of the skin's vertices."""
+    """A strip's springs fanned out around each node's attachment (FAN).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float array
+        The skin's.
+    nodes : (ROWS * COLS, 3) float array
+        The strip's.
+    attach : (ROWS * COLS,) int array
+        The skin node each strip node is attached to.
+    tree : scipy.spatial.cKDTree
+        Of the skin's vertices.
+
+    Returns
+    -------
+    skin_node : (k,) int array
+    weight : (k,) float array
+    strip_node : (k,) int array
+    """
     g = nodes.reshape(ROWS, COLS, 3)
     spacing = max(np.linalg.norm(np.diff(g, axis=0), axis=2).mean(),
                   np.linalg.norm(np.diff(g, axis=1), axis=2).mean())
@@ -326,16 +392,40 @@ def _drive_muscle(name, skin, lm, tree, omega) -> Muscle:
 def build_rig(skin: Mesh, landmarks: np.ndarray, muscles=None, alpha: float = 10.0, modes: int = 8,
               contraction: float = 0.25, gravity: bool = True, muscle_omega: float = 40.0,
               tether: float = 0.02, progress=None) -> Rig:
-    """Place the muscles, springs and ROIs on a face (the modal system of each force is the
-    physics stage's: `mimica.physics.precompute(rig)`, or made when the rig is first simulated).
+    """Place the muscles, springs and ROIs on a face (the modal system of each force is the physics
+    stage's: `mimica.physics.precompute(rig)`, or made when the rig is first simulated).
 
-    alpha: Kim eq. 19 ROI range; contraction: muscle shortening at full activation (a calibrated
-    muscle's own, rig/calibration.json, is scaled by contraction / 0.25);
-    muscle_omega: the stretch mode's frequency (rad/s; the muscle follows its activation
-    critically damped, time constant 1/omega); tether: stiffness of the subcutaneous
-    layer that ties every skin node to the skull, relative to a skin edge (Viaud & Yahia's
-    rest-position feedback; without it the whole ROI slides as one sheet); modes and gravity:
-    the size of each force's modal system and whether gravity gets one (kept in params).
+    Parameters
+    ----------
+    skin : Mesh
+        The face.
+    landmarks : (68, 3) float array
+        All 68 are needed.
+    muscles : str or list of str or None
+        "all" (the calibrated library and the drives), "kim" (Kim's 8), or names (a list, or
+        one string separated by commas); None: "kim".
+    alpha : float
+        Kim eq. 19's ROI range.
+    modes : int
+        The size of each force's modal system (kept in params).
+    contraction : float
+        Muscle shortening at full activation (a calibrated muscle's own, rig/calibration.json,
+        is scaled by contraction / 0.25).
+    gravity : bool
+        Gravity gets a modal system (kept in params).
+    muscle_omega : float
+        The stretch mode's frequency (rad/s; the muscle follows its activation critically damped,
+        time constant 1/omega).
+    tether : float
+        Stiffness of the subcutaneous layer that ties every skin node to the skull, relative to a
+        skin edge (Viaud & Yahia's rest-position feedback; without it the whole ROI slides as one
+        sheet).
+    progress : callable, optional
+        Called as progress(k, n, name) before each muscle is placed.
+
+    Returns
+    -------
+    Rig
     """
     lm = np.asarray(landmarks, float)
     if not np.isfinite(lm).all():

@@ -90,8 +90,22 @@ JAW_CLOSERS = ("masseter", "temporalis")
 
 @dataclass
 class Drive:
-    """One drive placed on a face: anchors at the attached skin nodes, their motion at full
-    activation, and each attachment's weight."""
+    """One drive placed on a face: anchors at the attached skin nodes and their motion at full
+    activation.
+
+    Attributes
+    ----------
+    name : str
+        Its name in DRIVES (e.g. "digastric", "levator_palpebrae_R").
+    attach : (k,) int array
+        The skin nodes attached to the part.
+    weight : (k,) float array
+        Each attachment's strength, 0 to 1.
+    motion : (k, 3) float array
+        The anchors' displacement at activation 1.
+    info : dict
+        What the simulator needs (the jaw's frame, the lid's eye and margin pairs, ...).
+    """
     name: str
     attach: np.ndarray           # (k,) skin nodes attached to the part
     weight: np.ndarray           # (k,) attachment strength, 0..1
@@ -120,8 +134,21 @@ def _smooth(t):
 
 
 def jaw_weights(x, lm):
-    """(n,) how firmly each skin node is attached to the mandible: the chin and lower lip, fading
-    sideways over about a mouth width and above the lips' inner line, and below the chin."""
+    """How firmly each skin node is attached to the mandible: the chin and lower lip, fading sideways
+    over about a mouth width and above the lips' inner line, and below the chin.
+
+    Parameters
+    ----------
+    x : (n, 3) float array
+        The skin's positions.
+    lm : (68, 3) float array
+        Its landmarks.
+
+    Returns
+    -------
+    (n,) float array
+        0 to 1.
+    """
     right, up, fwd = _frame(lm)
     mc = 0.5 * (lm[62] + lm[66])
     mw = float(np.linalg.norm(lm[54] - lm[48]))
@@ -142,7 +169,18 @@ def jaw_weights(x, lm):
 
 
 def jaw_frame(lm) -> dict:
-    """The jaw's frame from the landmarks: its TMJ pivot, the face's axes, its full opening angle."""
+    """The jaw's frame from the landmarks.
+
+    Parameters
+    ----------
+    lm : (68, 3) float array
+
+    Returns
+    -------
+    dict
+        {"pivot": the TMJ pivot (3,), "right", "up", "fwd": the face's axes (3,) each, "angle": the
+        full opening in degrees, "ew": the eye-to-eye width}, as lists (a rig's JSON).
+    """
     right, up, fwd = _frame(lm)
     ew = float(np.linalg.norm(lm[45] - lm[36]))
     pivot = 0.5 * (lm[0] + lm[16]) + ew * (JAW_PIVOT[0] * up + JAW_PIVOT[1] * fwd)
@@ -151,8 +189,19 @@ def jaw_frame(lm) -> dict:
 
 
 def jaw_motion(x, lm, what: str):
-    """(n, 3) the mandible's displacement at the points x for one of its motions at full
-    activation: 'open' (turned about the TMJ axis), 'forward', 'left', 'right' (slides)."""
+    """The mandible's displacement at some points for one of its motions at full activation.
+
+    Parameters
+    ----------
+    x : (n, 3) float array
+    lm : (68, 3) float array
+    what : str
+        'open' (turned about the TMJ axis), 'forward', 'left' or 'right' (slides).
+
+    Returns
+    -------
+    (n, 3) float array
+    """
     j = jaw_frame(lm)
     if what == "open":
         m_s, m_c, _ = jaw_open_parts(x, j)
@@ -169,10 +218,22 @@ def jaw_motion(x, lm, what: str):
 
 
 def jaw_open_parts(x, info):
-    """The jaw's opening at the points x split so that any angle is exact: the anchors'
-    displacement at a fraction q of the full angle phi is
-    sin(q phi)/sin(phi) m_s + (1 - cos(q phi))/(1 - cos(phi)) m_c, and m_s + m_c at q = 1.
-    Returns (m_s, m_c, phi)."""
+    """The jaw's opening at some points, split so that any angle is exact: the anchors' displacement
+    at a fraction q of the full angle phi is sin(q phi)/sin(phi) m_s + (1 - cos(q phi))/(1 - cos(phi))
+    m_c, and m_s + m_c at q = 1.
+
+    Parameters
+    ----------
+    x : (n, 3) float array
+    info : dict
+        jaw_frame's.
+
+    Returns
+    -------
+    m_s, m_c : (n, 3) float arrays
+    phi : float
+        The full angle, radians (negative: opening).
+    """
     right, up, fwd = (np.asarray(info[k], float) for k in ("right", "up", "fwd"))
     a = np.asarray(x, float) - np.asarray(info["pivot"], float)
     f, u = a @ fwd, a @ up
@@ -183,13 +244,40 @@ def jaw_open_parts(x, info):
 
 
 def jaw_open_factors(q, phi):
-    """The weights of (m_s, m_c) at a fraction q of the jaw's full opening angle phi."""
+    """The weights of (m_s, m_c) (jaw_open_parts) at a fraction of the jaw's full opening.
+
+    Parameters
+    ----------
+    q : float or float array
+        The fraction.
+    phi : float
+        The full angle, radians.
+
+    Returns
+    -------
+    tuple of float or float array
+        sin(q phi) / sin(phi), (1 - cos(q phi)) / (1 - cos(phi)).
+    """
     return np.sin(q * phi) / np.sin(phi), (1 - np.cos(q * phi)) / (1 - np.cos(phi))
 
 
 def eye_geometry(lm, side: str):
-    """The eye's centre, opening width, and its rims as angles in the (forward, up) plane
-    about the centre against the lateral position: (centre, width, s_of, upper_rim(s), lower_rim(s))."""
+    """An eye's centre, its opening's width, and its rims as angles in the (forward, up) plane about
+    the centre against the lateral position.
+
+    Parameters
+    ----------
+    lm : (68, 3) float array
+    side : str
+        "R" or "L".
+
+    Returns
+    -------
+    tuple
+        (centre (3,), width, s_of(points) -> lateral position across the eye, psi(points) -> angle
+        about the centre, upper_rim(s) -> angle, lower_rim(s) -> angle, (s of the outer corner,
+        s of the inner corner)).
+    """
     right, up, fwd = _frame(lm)
     outer, top, lower, inner = ((36, (37, 38), (41, 40), 39) if side == "R" else (45, (44, 43), (46, 47), 42))
     mid = 0.5 * (lm[outer] + lm[inner])
@@ -212,9 +300,27 @@ def eye_geometry(lm, side: str):
 
 
 def lid_drive(x, lm, side: str, what: str):
-    """(weights (n,), motion (n, 3), info) of one lid motion at full activation: 'close' turns
-    the upper lid about the eyeball's centre until its rim lies on the lower rim (less the
-    margin), never past it; 'wide' lifts the upper lid; 'raise' lifts the lower lid."""
+    """One lid motion at full activation.
+
+    Parameters
+    ----------
+    x : (n, 3) float array
+        The skin's positions.
+    lm : (68, 3) float array
+    side : str
+        "R" or "L".
+    what : str
+        'close' turns the upper lid about the eyeball's centre until its rim lies on the lower rim
+        (less the margin), never past it; 'wide' lifts the upper lid; 'raise' lifts the lower lid
+        (and draws it toward the nose).
+
+    Returns
+    -------
+    weights : (n,) float array
+    motion : (n, 3) float array
+    info : dict
+        The eye, its centre, up and fwd, the margin pairs ("rims"), the widest opening.
+    """
     right, up, fwd = _frame(lm)
     c, width, s_of, psi, upper, lower, (s0, s1) = eye_geometry(lm, side)
     lo_s, hi_s = min(s0, s1), max(s0, s1)
@@ -284,13 +390,36 @@ def lid_drive(x, lm, side: str, what: str):
 
 
 def lid_pairs(info) -> np.ndarray:
-    """(k, 2) the facing (upper, lower) margin nodes of a closing lid drive."""
+    """The facing margin nodes of a closing lid drive.
+
+    Parameters
+    ----------
+    info : dict
+        The drive's (lid_drive).
+
+    Returns
+    -------
+    (k, 2) int array
+        (upper, lower) skin nodes.
+    """
     return np.asarray(info.get("rims", []), int).reshape(-1, 2)
 
 
 def margin_opening(xp, info) -> np.ndarray:
-    """The lid opening at each pair of facing margin nodes, from their positions xp (..., k, 2, 3)
-    (radians about the eyeball's centre, upper minus lower: negative where the lids cross)."""
+    """The lid opening at each pair of facing margin nodes.
+
+    Parameters
+    ----------
+    xp : (..., k, 2, 3) float array
+        The pairs' positions.
+    info : dict
+        The drive's (its eye's centre, up and fwd).
+
+    Returns
+    -------
+    (..., k) float array
+        Radians about the eyeball's centre, upper minus lower: negative where the lids cross.
+    """
     c, up, fwd = (np.asarray(info[k], float) for k in ("centre", "up", "fwd"))
     a = np.asarray(xp, float) - c
     psi = np.arctan2(a @ up, a @ fwd)
@@ -298,22 +427,57 @@ def margin_opening(xp, info) -> np.ndarray:
 
 
 def open_pairs(rest_opening) -> np.ndarray:
-    """The margin pairs open at least half the widest at rest (bool): where a closed lid's gap
-    is measured (the figure; the corners' folds are left out)."""
+    """The margin pairs where a closed lid's gap is measured (the figure; the corners' folds are left
+    out).
+
+    Parameters
+    ----------
+    rest_opening : (k,) float array
+        Each pair's opening at rest (margin_opening).
+
+    Returns
+    -------
+    (k,) bool array
+        Open at least half the widest at rest.
+    """
     rest_opening = np.asarray(rest_opening, float)
     return rest_opening >= 0.5 * rest_opening.max()
 
 
 def lid_opening(x, info) -> np.ndarray:
-    """margin_opening of skin positions x (n, 3) or (F, n, 3)."""
+    """margin_opening of skin positions.
+
+    Parameters
+    ----------
+    x : (n, 3) or (F, n, 3) float array
+    info : dict
+        The closing drive's.
+
+    Returns
+    -------
+    (k,) or (F, k) float array
+    """
     return margin_opening(np.asarray(x, float)[..., lid_pairs(info), :], info)
 
 
 def cheek_drive(x, lm, side: str):
-    """(weights (n,), motion (n, 3)) of the cheek pushed out by the air in the mouth: around a
-    point between the mouth corner and the jaw line, fading over cheek_radius eye widths, away
-    from the mouth's cavity (its centre cheek_cavity eye widths behind the lips; the skin's own
-    normal measured 0.24-0.32 against ICT's cheekPuff, which swells mostly forward: 0.88)."""
+    """The cheek pushed out by the air in the mouth: around a point between the mouth corner and the
+    jaw line, fading over cheek_radius eye widths, away from the mouth's cavity (its centre
+    cheek_cavity eye widths behind the lips; the skin's own normal measured 0.24-0.32 against ICT's
+    cheekPuff, which swells mostly forward: 0.88).
+
+    Parameters
+    ----------
+    x : (n, 3) float array
+    lm : (68, 3) float array
+    side : str
+        "R" or "L".
+
+    Returns
+    -------
+    weights : (n,) float array
+    motion : (n, 3) float array
+    """
     right, up, fwd = _frame(lm)
     ew = float(np.linalg.norm(lm[45] - lm[36]))
     corner, jaw = (lm[48], 0.5 * (lm[3] + lm[4])) if side == "R" else (lm[54], 0.5 * (lm[13] + lm[12]))
@@ -328,7 +492,22 @@ def cheek_drive(x, lm, side: str):
 
 
 def place_drive(name: str, x, lm, min_weight: float = 0.02) -> Drive:
-    """One drive of DRIVES placed on the skin x (n, 3) with landmarks lm (68, 3)."""
+    """One drive of DRIVES placed on the skin.
+
+    Parameters
+    ----------
+    name : str
+        A key of DRIVES.
+    x : (n, 3) float array
+        The skin's positions.
+    lm : (68, 3) float array
+    min_weight : float
+        Skin nodes attached less firmly are left out.
+
+    Returns
+    -------
+    Drive
+    """
     part, what = DRIVES[name]
     if part.startswith("cheek"):
         w, motion = cheek_drive(x, lm, part[-1])

@@ -28,15 +28,41 @@ _GL_W = 0.5 * _GL_W
 
 
 def dilation(d_init, age, age0=AGE_0, age_max=AGE_MAX, dil_max=DIL_MAX):
-    """Eq. 10: the arc length a wrinkle's cross-section reaches at `age`."""
+    """V&Y eq. 10: the arc length a wrinkle's cross-section reaches at an age.
+
+    Parameters
+    ----------
+    d_init : float or float array
+        The arc length at age0.
+    age : float or float array
+        Years.
+    age0, age_max : float
+        The age the dilation starts at, and the age it reaches dil_max at.
+    dil_max : float
+        The relative growth at age_max.
+
+    Returns
+    -------
+    float array
+    """
     return np.asarray(d_init) * np.maximum(1.0, 1.0 + (np.asarray(age) - age0) * dil_max / (age_max - age0))
 
 
 def control_points(d, a, alpha, skew=1.0):
-    """Eqs. 11-12 for arrays d, a, alpha (broadcast): P0, P0', P1', P1 as (..., 2) each.
+    """V&Y eqs. 11-12: the Bezier control points of a wrinkle's cross-section.
 
-    skew < 1 gives the asymmetric section (V&Y §5.2, nasolabial folds): the tangent at P1
-    has `skew` times the norm and the angle of the one at P0, so the fuller side is P0's.
+    skew < 1 gives the asymmetric section (V&Y §5.2, nasolabial folds): the tangent at P1 has
+    `skew` times the norm and the angle of the one at P0, so the fuller side is P0's.
+
+    Parameters
+    ----------
+    d, a, alpha : float arrays
+        Half-width, height and the tangents' angle (broadcast together).
+    skew : float
+
+    Returns
+    -------
+    P0, P0p, P1p, P1 : (..., 2) float arrays
     """
     d, a, alpha = np.broadcast_arrays(np.asarray(d, float), np.asarray(a, float), np.asarray(alpha, float))
     z = np.zeros_like(d)
@@ -48,7 +74,20 @@ def control_points(d, a, alpha, skew=1.0):
 
 
 def curve(d, a, alpha, u, skew=1.0):
-    """Points of the cross-section C(u), (..., len(u), 2)."""
+    """Points of the cross-section C(u).
+
+    Parameters
+    ----------
+    d, a, alpha : float arrays
+        As control_points'.
+    u : (k,) float array
+        Curve parameters in [0, 1].
+    skew : float
+
+    Returns
+    -------
+    (..., k, 2) float array
+    """
     p0, p0p, p1p, p1 = (p[..., None, :] for p in control_points(d, a, alpha, skew))
     u = np.asarray(u)[:, None]
     b = [(1 - u) ** 3, 3 * u * (1 - u) ** 2, 3 * u ** 2 * (1 - u), u ** 3]
@@ -56,7 +95,18 @@ def curve(d, a, alpha, u, skew=1.0):
 
 
 def arc_length(d, a, alpha, skew=1.0):
-    """Eq. 13 by 48-point Gauss-Legendre quadrature (the reference the table stands in for)."""
+    """V&Y eq. 13 by 48-point Gauss-Legendre quadrature (the reference ArcLengthTable stands in for).
+
+    Parameters
+    ----------
+    d, a, alpha : float arrays
+    skew : float
+
+    Returns
+    -------
+    float array
+        The broadcast shape of d, a, alpha.
+    """
     p0, p0p, p1p, p1 = (p[..., None, :] for p in control_points(d, a, alpha, skew))
     u = _GL_U[:, None]
     dc = 3 * ((1 - u) ** 2 * (p0p - p0) + 2 * u * (1 - u) * (p1p - p0p) + u ** 2 * (p1 - p1p))
@@ -67,11 +117,19 @@ def arc_length(d, a, alpha, skew=1.0):
 class ArcLengthTable:
     """S(d, a, alpha) tabulated, trilinear lookup (eq. 14) and its inversion (§5.1).
 
-    The table's axes are (d, rho = a / d, alpha).  A Bezier segment scales with its control
-    points, S(l d, l a, alpha) = l S(d, a, alpha), so S is exactly linear in d at fixed
-    (rho, alpha): along d the trilinear interpolation is exact and the grid needs no d
-    resolution; the error is that of (rho, alpha) alone.  (V&Y's uniform (d, a) grid with
-    unit steps is 77 % off for short, high wrinkles, where a >> d.)
+    The table's axes are (d, rho = a / d, alpha).  A Bezier segment scales with its control points,
+    S(l d, l a, alpha) = l S(d, a, alpha), so S is exactly linear in d at fixed (rho, alpha): along
+    d the trilinear interpolation is exact and the grid needs no d resolution; the error is that of
+    (rho, alpha) alone.  (V&Y's uniform (d, a) grid with unit steps is 77 % off for short, high
+    wrinkles, where a >> d.)
+
+    Attributes
+    ----------
+    rho : (p,) float array
+    alpha : (q,) float array
+    s : (p, q) float array
+        S(1, rho, alpha).
+    skew : float
     """
 
     rho: np.ndarray

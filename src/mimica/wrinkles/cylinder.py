@@ -20,6 +20,18 @@ from ..errors import MimicaError
 
 @dataclass
 class CylinderFit:
+    """A cylinder fitted to points (fit_cylinder).
+
+    Attributes
+    ----------
+    origin : (3,) float array
+        A point on the axis.
+    axis : (3,) float array
+        Unit direction.
+    radius : float
+    energy : float
+        The fit's energy (V&Y eq. 1) at the end.
+    """
     origin: np.ndarray        # a point on the axis
     axis: np.ndarray          # unit direction
     radius: float
@@ -40,7 +52,24 @@ def _unpack(p, k, z0):
 
 
 def energy_and_gradient(p, P, k, z0):
-    """E (eq. 1) and its gradient (eqs. 2-7) for parameters p = (x, y, z, a, b, r)."""
+    """V&Y's cylinder energy (eq. 1) and its gradient (eqs. 2-7).
+
+    Parameters
+    ----------
+    p : (6,) float array
+        (x, y, z, a, b, r): a point of the axis, the axis's two free components, the radius.
+    P : (n, 3) float array
+        The points.
+    k : int
+        The axis component held fixed.
+    z0 : float
+        Its value.
+
+    Returns
+    -------
+    E : float
+    gradient : (6,) float array
+    """
     g, d, r = _unpack(p, k, z0)
     gp = P - g                                      # GP_i
     c = np.cross(gp, d)                             # GP_i ^ d
@@ -60,10 +89,23 @@ def energy_and_gradient(p, P, k, z0):
 
 def fit_cylinder(points, axis_guess=(0.0, 1.0, 0.0), origin_guess=None, radius_guess=None,
                  tol=1e-10, max_iter=2000) -> CylinderFit:
-    """Fit a cylinder to points (n, 3) by conjugate gradient (V&Y §3.1).
+    """Fit a cylinder to points by conjugate gradient (V&Y §3.1).
 
-    axis_guess must not be orthogonal to the answer (the paper's condition); its largest
-    component is the one held fixed.
+    Parameters
+    ----------
+    points : (n, 3) float array
+        At least 6, finite.
+    axis_guess : (3,) float array
+        Must not be orthogonal to the answer (the paper's condition); its largest component is the
+        one held fixed.
+    origin_guess : (3,) float array or None
+    radius_guess : float or None
+    tol : float
+    max_iter : int
+
+    Returns
+    -------
+    CylinderFit
     """
     P = np.asarray(points, float)
     if P.ndim != 2 or P.shape[1] != 3 or len(P) < 6 or not np.isfinite(P).all():
@@ -93,10 +135,21 @@ def fit_cylinder(points, axis_guess=(0.0, 1.0, 0.0), origin_guess=None, radius_g
 
 
 def flatten(points, cyl: CylinderFit, forward=None) -> np.ndarray:
-    """Cylindrical projection unrolled to the plane: (arc length r*theta, height), (n, 2).
+    """Points projected on a cylinder and unrolled to the plane.
 
-    theta = 0 faces `forward` (default: the points' mean direction from the axis), so two
-    faces flattened with the same forward direction line up.
+    theta = 0 faces `forward` (default: the points' mean direction from the axis), so two faces
+    flattened with the same forward direction line up.
+
+    Parameters
+    ----------
+    points : (n, 3) float array
+    cyl : CylinderFit
+    forward : (3,) float array or None
+
+    Returns
+    -------
+    (n, 2) float array
+        (arc length r theta, height).
     """
     v = np.asarray(points) - cyl.origin
     h = v @ cyl.axis
@@ -112,5 +165,16 @@ def flatten(points, cyl: CylinderFit, forward=None) -> np.ndarray:
 
 
 def radial_distance(points, cyl: CylinderFit) -> np.ndarray:
+    """The points' distances from the cylinder's axis.
+
+    Parameters
+    ----------
+    points : (n, 3) float array
+    cyl : CylinderFit
+
+    Returns
+    -------
+    (n,) float array
+    """
     v = np.asarray(points) - cyl.origin
     return np.linalg.norm(v - np.outer(v @ cyl.axis, cyl.axis), axis=1)

@@ -20,7 +20,22 @@ from ..image.raster import rasterize
 
 
 def texel_points(mesh: Mesh, size: int):
-    """Rest-surface points under the texels: (rows, cols, points (m, 3))."""
+    """The rest-surface points under a uv map's texels.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        With texture coordinates (MimicaError otherwise).
+    size : int
+        The map's side, texels.
+
+    Returns
+    -------
+    rows, cols : (m,) int arrays
+        The texels covered.
+    points : (m, 3) float array
+        The surface point under each.
+    """
     tuv = mesh.uv_triangles
     if tuv is None:
         raise MimicaError(f"{mesh.name or 'mesh'}: has no texture coordinates, so it cannot carry a map")
@@ -33,7 +48,17 @@ def texel_points(mesh: Mesh, size: int):
 
 
 def world_per_uv(mesh: Mesh) -> float:
-    """Average length on the skin of one unit of texture space."""
+    """The average length on the skin of one unit of texture space.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        With uv.
+
+    Returns
+    -------
+    float
+    """
     t, tuv = mesh.triangles, mesh.uv_triangles
     v, uv = mesh.vertices, mesh.uv
     a3 = 0.5 * np.linalg.norm(np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]), axis=1).sum()
@@ -43,10 +68,30 @@ def world_per_uv(mesh: Mesh) -> float:
 
 
 def bake(layer, mesh: Mesh, X, age: float, size: int = 1024, emphasis=None):
-    """Height image (size, size) in skin units and the tangent-space normal image (size, size, 3)
-    of the wrinkles at positions X of the layer's mesh; `mesh` (with uv) lies on the same rest
-    surface (the coarse mesh the layer's was refined from, or the same one); emphasis: a factor
-    per wrinkle (its muscles', WrinkleLayer.muscle_emphasis)."""
+    """The wrinkles' height and normal maps at some positions of the layer's mesh.
+
+    Parameters
+    ----------
+    layer : WrinkleLayer
+    mesh : Mesh
+        With uv, on the same rest surface as the layer's (the coarse mesh the layer's was refined
+        from, or the same one).
+    X : (n, 3) float array
+        The layer mesh's positions (a frame).
+    age : float
+        Years.
+    size : int
+        The maps' side, texels.
+    emphasis : (w,) float array or None
+        A factor per wrinkle (its muscles', WrinkleLayer.muscle_emphasis).
+
+    Returns
+    -------
+    height : (size, size) float array
+        In skin units.
+    normal : (size, size, 3) float array
+        Tangent-space normals.
+    """
     rows, cols, pts = texel_points(mesh, size)
     b = layer.bind(pts)
     h = np.zeros((size, size))
@@ -59,8 +104,20 @@ def bake(layer, mesh: Mesh, X, age: float, size: int = 1024, emphasis=None):
 
 
 def save_maps(prefix, h, n) -> list[Path]:
-    """<prefix>_displacement.png (16-bit, 0.5 = no displacement), <prefix>_normal.png and
-    <prefix>_maps.json (the displacement's scale in skin units)."""
+    """Write a height and a normal map: <prefix>_displacement.png (16-bit, 0.5 = no displacement),
+    <prefix>_normal.png and <prefix>_maps.json (the displacement's scale in skin units).
+
+    Parameters
+    ----------
+    prefix : str or Path
+    h : (size, size) float array
+    n : (size, size, 3) float array
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
     prefix = Path(prefix)
     scale = float(max(np.abs(h).max(), 1e-12))
     disp = np.round(32767.5 + 32767.0 * h / scale).astype(np.uint16)
@@ -78,8 +135,19 @@ def save_maps(prefix, h, n) -> list[Path]:
 
 
 def wrinkle_regions(names) -> dict:
-    """{region: [wrinkle indices]}: a wrinkle's name without its number (crows_feet_2_R ->
-    crows_feet_R, forehead_3 -> forehead), one region a side."""
+    """Wrinkles grouped into regions: a wrinkle's name without its number (crows_feet_2_R ->
+    crows_feet_R, forehead_3 -> forehead), one region a side.
+
+    Parameters
+    ----------
+    names : list of str
+        The mask's wrinkles.
+
+    Returns
+    -------
+    dict
+        {region: [wrinkle indices]}.
+    """
     import re
     out: dict = {}
     for i, n in enumerate(names):
@@ -89,12 +157,33 @@ def wrinkle_regions(names) -> dict:
 
 def engine_maps(layer, mesh: Mesh, carried, ages, emphasis, size: int, folder) -> dict:
     """The engine-style set of a clip's wrinkles (as game engines blend them): per region
-    (wrinkle_regions) a displacement and a normal map at the frame where that region is
-    deepest, a mask of the texels it covers, and per frame a weight in [0, 1] (the region's
-    deepest point then, over its deepest in the clip), in `folder`:
-    <region>_displacement.png / _normal.png / _mask.png, weights.csv (time, one column a
-    region), maps.json.  An engine shades frame f with each region's normal map blended in by
-    weight x mask.  Returns {region: (peak frame, peak height)}."""
+    (wrinkle_regions) a displacement and a normal map at the frame where that region is deepest,
+    a mask of the texels it covers, and per frame a weight in [0, 1] (the region's deepest point
+    then, over its deepest in the clip).  An engine shades frame f with each region's normal map
+    blended in by weight x mask.
+
+    Parameters
+    ----------
+    layer : WrinkleLayer
+    mesh : Mesh
+        With uv (as bake's).
+    carried : list of (n, 3) float arrays
+        The layer mesh's positions, a frame each.
+    ages : (F,) float array
+        Years, a frame each.
+    emphasis : (F, w) float array or None
+        Each wrinkle's factor a frame.
+    size : int
+        The maps' side.
+    folder : str or Path
+        Where <region>_displacement.png / _normal.png / _mask.png, weights.csv (time, one column a
+        region) and maps.json are written.
+
+    Returns
+    -------
+    dict
+        {region: (peak frame, peak height)}.
+    """
     folder = Path(folder)
     regions = wrinkle_regions(layer.mask.names())
     b = layer.vertex_binding

@@ -56,12 +56,30 @@ BOUNDARY = [
 
 
 def anchor_names() -> list[str]:
+    """The names of a mask's anchors: the 68 landmarks' ('eye.left.0', ...), then the boundary's.
+
+    Returns
+    -------
+    list of str
+    """
     from ..landmarks import NAMES
     return list(NAMES) + [b[0] for b in BOUNDARY]
 
 
 @dataclass
 class Wrinkle:
+    """One wrinkle of a mask: a curve of control points on the face (V&Y §3).
+
+    Attributes
+    ----------
+    name : str
+    points : (k, 3) float array
+        Its control points on the surface.
+    muscles : tuple of str
+        The muscles whose contraction deepens it.
+    emphasis : float
+        A factor on its depth.
+    """
     name: str
     points: np.ndarray                  # (k, 3) control points on the surface
     muscles: tuple = ()
@@ -78,6 +96,18 @@ class Wrinkle:
 
 @dataclass
 class WrinkleMask:
+    """A face's wrinkles and the anchors that place them (V&Y §3.2); saved as a .wrinkles JSON.
+
+    Attributes
+    ----------
+    wrinkles : list of Wrinkle
+    anchors : (68 + len(BOUNDARY), 3) float array
+        The 68 landmarks, then the mask boundary's anchors; NaN = missing.
+    face : str
+        The face it lies on.
+    extra : dict
+        More of the file's keys, kept.
+    """
     wrinkles: list
     anchors: np.ndarray                 # (68 + len(BOUNDARY), 3), NaN = missing
     face: str = ""
@@ -167,7 +197,12 @@ def _point(p, bad, what):
 
 
 def reference_mask() -> WrinkleMask:
-    """The shipped reference mask on the ICT-FaceKit generic neutral face."""
+    """The shipped reference mask on the ICT-FaceKit generic neutral face.
+
+    Returns
+    -------
+    WrinkleMask
+    """
     ref = resources.files("mimica.wrinkles").joinpath("reference.wrinkles")
     return WrinkleMask.from_json(json.loads(ref.read_text()), "reference.wrinkles")
 
@@ -248,7 +283,19 @@ def _mirror_landmarks(L):
 
 
 def define_reference(mesh: Mesh, landmarks: np.ndarray, face: str = "") -> WrinkleMask:
-    """Draw the reference wrinkles on a face from its 68 landmarks (V&Y §3, after Hjortsjö)."""
+    """Draw the reference wrinkles on a face from its 68 landmarks (V&Y §3, after Hjortsjö).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    landmarks : (68, 3) float array
+    face : str
+        Its name, recorded.
+
+    Returns
+    -------
+    WrinkleMask
+    """
     frame = FaceFrame(landmarks)
     L = frame.to_local(landmarks)[:, :2]
     specs = _centre(L) + _right_side(L)
@@ -274,7 +321,19 @@ def define_reference(mesh: Mesh, landmarks: np.ndarray, face: str = "") -> Wrink
 
 
 def boundary_anchors(mesh: Mesh, landmarks: np.ndarray, vertices=None) -> np.ndarray:
-    """The mask boundary's anchors on a face, by the same rule as the reference's."""
+    """The mask boundary's anchors on a face, by the same rule as the reference's.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    landmarks : (68, 3) float array
+    vertices : (n, 3) float array or None
+        Positions to use (None: the mesh's).
+
+    Returns
+    -------
+    (len(BOUNDARY), 3) float array
+    """
     frame = FaceFrame(landmarks)
     L = frame.to_local(landmarks)[:, :2]
     b3, _ = frame.front_map(mesh, vertices).points(_anchors_local(L))

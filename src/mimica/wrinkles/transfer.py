@@ -31,6 +31,18 @@ from .surface import FaceFrame
 
 @dataclass
 class MaskTransferInfo:
+    """How a wrinkle mask's transfer went (transfer_mask).
+
+    Attributes
+    ----------
+    iterations : int
+        Of the spring relaxation (relax).
+    residual : float
+        The largest spring force left, relative to the mean rest length.
+    seconds : float
+    cylinder_radius : float
+        The radius of the cylinder fitted to the target's face (wrinkles.cylinder).
+    """
     iterations: int
     residual: float           # largest spring force left, relative to the mean rest length
     seconds: float
@@ -50,10 +62,31 @@ def _cylinder(vertices, anchors, frame: FaceFrame):
 
 
 def relax(rest2d, start2d, fixed, edges, damping=0.9, tol=1e-7, max_iter=20000):
-    """Eq. 8 by semi-implicit Euler with velocity damping until the nodes stop moving.
+    """V&Y eq. 8 by semi-implicit Euler with velocity damping until the nodes stop moving: a spring
+    network relaxed with some nodes held.
 
-    rest2d: (n, 2) reference positions (rest lengths); start2d: (n, 2) with the fixed nodes
-    already at their new places.  Returns (positions, iterations, residual)."""
+    Parameters
+    ----------
+    rest2d : (n, 2) float array
+        Reference positions (the springs' rest lengths).
+    start2d : (n, 2) float array
+        Where the nodes start, the fixed ones already at their new places.
+    fixed : (n,) bool array
+    edges : (m, 2) int array
+        The springs.
+    damping : float
+        The velocity kept a step.
+    tol : float
+        Stop when no node moves more than this (relative to the mean rest length).
+    max_iter : int
+
+    Returns
+    -------
+    positions : (n, 2) float array
+    iterations : int
+    residual : float
+        The largest spring force left, relative to the mean rest length.
+    """
     i, j = edges[:, 0], edges[:, 1]
     L0 = np.linalg.norm(rest2d[i] - rest2d[j], axis=1)
     if (L0 <= 0).any():
@@ -84,7 +117,30 @@ def relax(rest2d, start2d, fixed, edges, damping=0.9, tol=1e-7, max_iter=20000):
 
 def transfer_mask(mask: WrinkleMask, reference: Mesh, target: Mesh, target_landmarks: np.ndarray,
                   target_anchors: np.ndarray | None = None, name: str = "") -> tuple[WrinkleMask, MaskTransferInfo]:
-    """The mask (lying on `reference`) carried onto `target` (any topology) by V&Y §3.2."""
+    """A wrinkle mask carried onto a face of any topology (V&Y §3.2): both faces unrolled on their
+    fitted cylinders, the mask's anchors placed at the target's landmarks, the rest of its points
+    relaxed as a spring network (relax), then lifted onto the target's surface.
+
+    Parameters
+    ----------
+    mask : WrinkleMask
+        Lying on `reference`.
+    reference : Mesh
+    target : Mesh
+    target_landmarks : (68, 3) float array
+    target_anchors : (k, 3) float array or None
+        The target's anchors (its 68 landmarks, then the mask's boundary anchors) as a mask
+        already on this face placed them, which the transfer keeps; None: made from the
+        landmarks (boundary_anchors).
+    name : str
+        The face's name, recorded in the mask.
+
+    Returns
+    -------
+    mask : WrinkleMask
+        On the target.
+    info : MaskTransferInfo
+    """
     t0 = time.perf_counter()
     ref_anchors = mask.anchors
     if np.isfinite(ref_anchors[:68]).all(1).sum() < 20:
@@ -158,16 +214,42 @@ def _moved(mask: WrinkleMask, move, face="") -> WrinkleMask:
 
 
 def snap_mask(mask: WrinkleMask, mesh: Mesh) -> tuple[WrinkleMask, np.ndarray]:
-    """The mask's points moved onto the closest points of the mesh's surface (after edits),
-    and how far each wrinkle control point was from it."""
+    """A mask's points moved onto the closest points of a mesh's surface (after edits).
+
+    Parameters
+    ----------
+    mask : WrinkleMask
+    mesh : Mesh
+
+    Returns
+    -------
+    mask : WrinkleMask
+    distance : (k,) float array
+        How far each wrinkle control point was from the surface.
+    """
     loc = TriangleLocator(mesh.vertices, mesh.triangles)
     dist = loc.closest(np.vstack([w.points for w in mask.wrinkles]))[3]
     return _moved(mask, lambda p: loc.closest(p)[2]), dist
 
 
 def carry_mask(mask: WrinkleMask, reference: Mesh, vertices: np.ndarray, face="") -> WrinkleMask:
-    """The mask on another shape of the reference's own topology (an identity, an expression):
-    each point keeps its triangle and barycentric coordinates."""
+    """A mask on another shape of the reference's own topology (an identity, an expression): each
+    point keeps its triangle and barycentric coordinates.
+
+    Parameters
+    ----------
+    mask : WrinkleMask
+        On `reference`.
+    reference : Mesh
+    vertices : (n, 3) float array
+        The other shape.
+    face : str
+        Its name, recorded in the mask.
+
+    Returns
+    -------
+    WrinkleMask
+    """
     loc = TriangleLocator(reference.vertices, reference.triangles)
     tri = reference.triangles
 
@@ -178,7 +260,19 @@ def carry_mask(mask: WrinkleMask, reference: Mesh, vertices: np.ndarray, face=""
 
 
 def mask_on(path, skin: Mesh, what: str = "") -> WrinkleMask:
-    """A mask file read and snapped onto `skin`; an error if it was made for another face."""
+    """A mask file read and snapped onto a skin; an error if it was made for another face.
+
+    Parameters
+    ----------
+    path : str or Path
+    skin : Mesh
+    what : str
+        How the message names the file.
+
+    Returns
+    -------
+    WrinkleMask
+    """
     mask, d = snap_mask(WrinkleMask.load(path), skin)
     size = float(np.linalg.norm(np.ptp(skin.vertices, axis=0)))
     if np.median(d) > 0.02 * size:
@@ -188,9 +282,24 @@ def mask_on(path, skin: Mesh, what: str = "") -> WrinkleMask:
 
 
 def mask_for(face: Mesh, landmarks: np.ndarray, anchors=None, reference=None) -> tuple[WrinkleMask, str]:
-    """The reference mask (or the mask file `reference`) on a face, and how it got there:
-    carried exactly on ICT-FaceKit topology, else by V&Y §3.2 (transfer_mask).  anchors: a mask
-    file on this face whose anchors the transfer keeps."""
+    """The reference mask (or a mask file) on a face, and how it got there: carried exactly on
+    ICT-FaceKit topology, else by V&Y §3.2 (transfer_mask).
+
+    Parameters
+    ----------
+    face : Mesh
+    landmarks : (68, 3) float array
+    anchors : str or Path or None
+        A mask file on this face whose anchors the transfer keeps.
+    reference : str or Path or None
+        A mask file to carry instead of the reference mask.
+
+    Returns
+    -------
+    mask : WrinkleMask
+    how : str
+        One line saying how it was placed.
+    """
     from ..data import ICT_FACE_AREA_VERTICES, ICT_HEAD_VERTICES, ICTModel, is_ict_topology
     from .mask import reference_mask
     mask = reference_mask() if reference is None else WrinkleMask.load(reference)

@@ -26,15 +26,37 @@ MESH_SUFFIXES = (".obj", ".ply", ".glb", ".gltf", ".fbx")
 
 
 def natural_order(path: Path):
-    """Sort key: frame2 before frame10."""
+    """A sort key that puts frame2 before frame10.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    list of tuple
+        The file name's runs of digits as numbers, the rest as lower-case text.
+    """
     import re
     return [(0, int(t), "") if t.isdigit() else (1, 0, t.lower()) for t in re.split(r"(\d+)", Path(path).name) if t]
 
 
 def sequence_files(folder) -> tuple[list[Path], list[str]]:
-    """The frames of a folder of meshes, in natural order, and the files left out: a sequence is
-    one format, so files of another (a previous run's animation.glb beside OBJ frames) are not
-    frames.  A folder with no mesh file is refused in one line."""
+    """The frames of a folder of meshes, in natural order, and the files left out: a sequence is one
+    format, so files of another (a previous run's animation.glb beside OBJ frames) are not frames.
+
+    Parameters
+    ----------
+    folder : str or Path
+        A folder holding mesh files (MimicaError where it holds none).
+
+    Returns
+    -------
+    frames : list of Path
+        The files of the folder's most common mesh format, in natural order.
+    skipped : list of str
+        The names of the others.
+    """
     folder = Path(folder)
     files = sorted((f for f in folder.iterdir() if f.suffix.lower() in MESH_SUFFIXES), key=natural_order)
     if not files:
@@ -45,7 +67,19 @@ def sequence_files(folder) -> tuple[list[Path], list[str]]:
 
 
 def read_json(path, what="file"):
-    """Parse a JSON file; a missing, unreadable or malformed one is a one-line MimicaError."""
+    """Parse a JSON file; a missing, unreadable or malformed one is a one-line MimicaError.
+
+    Parameters
+    ----------
+    path : str or Path
+    what : str
+        How the message names the file ("landmark file", "take", ...).
+
+    Returns
+    -------
+    object
+        The parsed document.
+    """
     import json
     path = Path(path)
     try:
@@ -154,8 +188,22 @@ def read_vertices(path) -> np.ndarray:
 
 
 def read_morph_targets(path) -> tuple[Mesh, dict, str]:
-    """(the work mesh, {name: (n, 3) positions}, the mesh's unit) of a head's morph targets: a
-    glTF's (gltf.read_morph_targets) or an FBX's shape keys (fbx.read_fbx_shapes)."""
+    """A head's morph targets: a glTF's (gltf.read_morph_targets) or an FBX's shape keys
+    (fbx.read_fbx_shapes).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    mesh : Mesh
+        The head as solved (its welded work mesh).
+    targets : dict
+        {name: (n, 3) float array} positions on it.
+    unit : str
+        The mesh's unit as the file gives it.
+    """
     path = Path(path)
     if path.suffix.lower() == ".fbx":
         if not path.is_file():

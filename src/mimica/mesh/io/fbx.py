@@ -40,7 +40,21 @@ Z_UP_TO_Y_UP[:3, :3] = facts.Z_UP_TO_Y_UP
 
 @dataclass
 class FbxPiece:
-    """One mesh object of the file."""
+    """One mesh object of an FBX file.
+
+    Attributes
+    ----------
+    name : str
+    world : (4, 4) float array
+        The object's vertices -> work space.
+    vertex : (n,) int array
+        The work vertex of each of the object's vertices.
+    first_face : int
+        Its first polygon in the work mesh.
+    n_faces : int
+    keys : list of str
+        Its shape keys' names (Basis first).
+    """
 
     name: str
     world: np.ndarray              # (4, 4) the object's vertices -> work space
@@ -59,7 +73,23 @@ class FbxPiece:
 
 @dataclass
 class FbxLayout:
-    """Where an FBX file's vertices went in the work mesh read_fbx made of it."""
+    """Where an FBX file's vertices went in the work mesh read_fbx made of it.
+
+    Attributes
+    ----------
+    path : Path
+    pieces : list of FbxPiece
+    n_vertices, n_faces : int
+        The work mesh's.
+    notes : list of str
+        What reading it did that a user should know.
+    extras : dict
+        (glTF's mimica keys: an FBX has none.)
+    targets : dict
+        Shape key name -> (n, 3) work positions.
+    unit : str
+        "m".
+    """
 
     path: Path
     pieces: list
@@ -72,8 +102,18 @@ class FbxLayout:
 
 
 def blender_command(script: Path) -> list:
-    """The command that runs `script` in Blender's Python, or a one-line MimicaError saying how
-    to get one."""
+    """The command that runs a script in Blender's Python.
+
+    Parameters
+    ----------
+    script : Path
+
+    Returns
+    -------
+    list of str
+        $MIMICA_BLENDER_PYTHON (a Python with bpy), else `blender` on PATH in the background;
+        a one-line MimicaError saying how to get one otherwise.
+    """
     exe = os.environ.get("MIMICA_BLENDER_PYTHON")
     if exe:
         if not Path(exe).is_file():
@@ -100,8 +140,19 @@ def _blender(path: Path, *args, what="read") -> None:
 
 
 def read_fbx_layout(path) -> tuple[Mesh, FbxLayout]:
-    """The work mesh of an FBX file (every mesh object in world space, y up, metres) and where
-    its vertices came from; its shape keys as `targets` on the layout."""
+    """The work mesh of an FBX file (every mesh object in world space, y up, metres) and where its
+    vertices came from, read through Blender's importer.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    mesh : Mesh
+    layout : FbxLayout
+        Its shape keys as `targets`.
+    """
     path = Path(path)
     with tempfile.TemporaryDirectory(prefix="mimica-fbx-") as d:
         _blender(path, "read", path, Path(d) / "scene")
@@ -167,11 +218,35 @@ def _build(path: Path, objects: list, a: dict) -> tuple[Mesh, FbxLayout]:
 
 
 def read_fbx(path) -> Mesh:
+    """The work mesh of an FBX file (read_fbx_layout).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    Mesh
+    """
     return read_fbx_layout(path)[0]
 
 
 def read_fbx_shapes(path) -> tuple[Mesh, dict, str]:
-    """(the work mesh, {shape key name: (n, 3) world positions}, "m") of an FBX file."""
+    """An FBX head's shape keys.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    mesh : Mesh
+        The work mesh.
+    shapes : dict
+        {shape key name: (n, 3) world positions}.
+    unit : str
+        "m".
+    """
     from .checks import validate
     path = Path(path)
     mesh = validate(read_fbx(path), str(path))

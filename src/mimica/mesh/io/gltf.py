@@ -40,7 +40,33 @@ _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "M
 @dataclass
 class VertexSet:
     """One POSITION accessor as one node places it: the vertices of the primitives that share it
-    (mimica writes every material's primitive on one set; Blender writes a set a primitive)."""
+    (mimica writes every material's primitive on one set; Blender writes a set a primitive).
+
+    Attributes
+    ----------
+    node : int or None
+        The node placing it (None: a mesh no node places).
+    mesh : int
+        The glTF mesh.
+    position : int
+        Its POSITION accessor.
+    world : (4, 4) float array
+        The node's world matrix (the identity for a skinned mesh).
+    scale : float
+        Metres per unit of the work mesh in the file (mimica's own files).
+    primitives : list of int
+        The primitives (triangles, strips or fans).
+    triangles : list of (m, 3) int arrays
+        Per primitive, its triangles' file vertex indices.
+    first_face : list of int
+        Per primitive, its first face in the work mesh.
+    vertex : (count,) int array or None
+        The work vertex of each file vertex.
+    own : bool
+        The first node placing its mesh: the one written back.
+    offset : int
+        Its first vertex among all sets' file vertices.
+    """
 
     node: int | None               # the node placing it (None: a mesh no node places)
     mesh: int                      # the glTF mesh
@@ -67,7 +93,23 @@ class VertexSet:
 @dataclass
 class GltfLayout:
     """Where a glTF file's vertices went in the work mesh `read_gltf` made of it, for writing the
-    result back into the file (`write_gltf_layout`)."""
+    result back into the file (`write_gltf_layout`).
+
+    Attributes
+    ----------
+    path : Path
+        The file.
+    sets : list of VertexSet
+        In the work mesh's order.
+    unit : str
+        The work mesh's unit ("m" unless mimica wrote the file).
+    n_vertices, n_faces : int
+        The work mesh's.
+    notes : list of str
+        What the reading did that a user should know (seams welded, skins in their bind pose, ...).
+    extras : dict
+        The meshes' extras, merged (mimica's keys).
+    """
 
     path: Path
     sets: list                     # VertexSet, in the work mesh's order
@@ -99,7 +141,17 @@ def _load(path: Path):
 
 
 def node_matrix(node) -> np.ndarray:
-    """(4, 4) a node's local matrix: its `matrix` (column-major) or T R S."""
+    """A node's local matrix.
+
+    Parameters
+    ----------
+    node : pygltflib.Node
+
+    Returns
+    -------
+    (4, 4) float array
+        Its `matrix` (stored column-major), else T R S.
+    """
     if node.matrix:
         return np.asarray(node.matrix, np.float64).reshape(4, 4).T
     from scipy.spatial.transform import Rotation
@@ -166,12 +218,25 @@ def read_gltf_layout(path, g=None) -> tuple[Mesh, GltfLayout]:
     """The work mesh of a glTF file (every mesh of its default scene, every primitive, in world
     space, welded) and where its vertices came from.
 
-    Faces are the primitives' triangles in file order; groups are their materials; uv (the
-    first set) stays per face corner.  Vertices a writer split are welded: within a primitive
-    every exact copy where the surface stays a manifold (Mesh.welded), across primitives the
-    two sides of a seam a writer split at a material (boundary edges that coincide, oriented
-    opposite); a file mimica wrote keeps its own vertices (VERTEX_MAP).  g: the file already
-    parsed (_load), else it is."""
+    Faces are the primitives' triangles in file order; groups are their materials; uv (the first
+    set) stays per face corner.  Vertices a writer split are welded: within a primitive every exact
+    copy where the surface stays a manifold (Mesh.welded), across primitives the two sides of a
+    seam a writer split at a material (boundary edges that coincide, oriented opposite); a file
+    mimica wrote keeps its own vertices (VERTEX_MAP).
+
+    Parameters
+    ----------
+    path : str or Path
+        A .gltf or .glb file.
+    g : pygltflib.GLTF2 or None
+        The file already parsed, else it is here.
+
+    Returns
+    -------
+    mesh : Mesh
+        The work mesh (`mesh.layout` is the layout).
+    layout : GltfLayout
+    """
     path = Path(path)
     g = _load(path) if g is None else g
     try:
@@ -312,15 +377,37 @@ def _labels(g, sets, raw, tris, piece) -> tuple[np.ndarray, bool]:
 
 
 def read_gltf(path) -> Mesh:
-    """The work mesh of a glTF/GLB file (read_gltf_layout); `mesh.layout` says where its
-    vertices came from."""
+    """The work mesh of a glTF/GLB file (read_gltf_layout).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    Mesh
+        `mesh.layout` says where its vertices came from.
+    """
     return read_gltf_layout(path)[0]
 
 
 def morph_targets(g, layout: GltfLayout, mesh: Mesh) -> dict:
-    """{name: (n, 3) work positions} of every morph target of the layout's meshes (unnamed ones
-    `target<i>`; a vertex of a mesh without that target stays at rest).  A work vertex takes the
-    target of its first file vertex."""
+    """Every morph target of the layout's meshes, on the work mesh.  A work vertex takes the target
+    of its first file vertex; a vertex of a mesh without that target stays at rest.
+
+    Parameters
+    ----------
+    g : pygltflib.GLTF2
+        The parsed file.
+    layout : GltfLayout
+    mesh : Mesh
+        The work mesh.
+
+    Returns
+    -------
+    dict
+        {name: (n, 3) float array} work positions; unnamed targets are `target<i>`.
+    """
     def names(s):
         gm = g.meshes[s.mesh]
         given = list((gm.extras or {}).get("targetNames") or []) if isinstance(gm.extras, dict) else []
@@ -338,9 +425,23 @@ def morph_targets(g, layout: GltfLayout, mesh: Mesh) -> dict:
 
 
 def read_morph_targets(path) -> tuple[Mesh, dict, str]:
-    """(the work mesh, {target name: (n, 3) positions}, the mesh's unit ("m" unless mimica wrote
-    the file)) of a glTF file with morph targets (named by the mesh's extras.targetNames, else
-    target0, target1, ...), in world space on the work mesh's vertices."""
+    """A glTF file's morph targets, in world space on the work mesh's vertices.
+
+    Parameters
+    ----------
+    path : str or Path
+        A .gltf or .glb with morph targets (named by the mesh's extras.targetNames, else target0,
+        target1, ...).
+
+    Returns
+    -------
+    mesh : Mesh
+        The work mesh.
+    targets : dict
+        {name: (n, 3) float array} positions.
+    unit : str
+        The mesh's unit ("m" unless mimica wrote the file).
+    """
     from .checks import validate
     path = Path(path)
     if not path.is_file():
@@ -391,10 +492,24 @@ def _json_of(path: Path) -> dict:
 
 
 def open_for_edit(path):
-    """(the parsed file (pygltflib's, to read accessors from), its JSON as a dict, a _Buffers
-    holding all its bytes as one buffer, notes) of a glTF file to add to: its buffers merged
-    (the buffer views re-pointed), its images put inside it (glTF allows that in .gltf too), so
-    the result stands on its own anywhere."""
+    """A glTF file opened to add to: its buffers merged into one (the buffer views re-pointed), its
+    images put inside it (glTF allows that in .gltf too), so the result stands on its own anywhere.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    g : pygltflib.GLTF2
+        The parsed file, to read accessors from.
+    doc : dict
+        Its JSON.
+    buf : _Buffers
+        All its bytes as one buffer, to add to.
+    notes : list of str
+        What could not be put inside (an image not beside the file keeps its uri).
+    """
     path = Path(path)
     g = _load(path)
     try:
@@ -434,7 +549,18 @@ def open_for_edit(path):
 
 
 def save_edited(doc: dict, buf: "_Buffers", path, binary: bool = True) -> None:
-    """Write a glTF document (a dict) with its bytes: a GLB, or a .gltf with them inside."""
+    """Write a glTF document with its bytes, whole or not at all.
+
+    Parameters
+    ----------
+    doc : dict
+        The glTF JSON.
+    buf : _Buffers
+        Its one buffer.
+    path : str or Path
+    binary : bool
+        A GLB; else a .gltf with its bytes inside (a data URI).
+    """
     import base64
     import json
     import struct
@@ -498,17 +624,38 @@ def _corners(s: VertexSet, tri: np.ndarray, n_read: int):
 
 def write_gltf_layout(path, layout: GltfLayout, mesh: Mesh, targets: dict | None = None, binary: bool = True,
                       extras: dict | None = None, sparse: float = SPARSE_TOLERANCE) -> dict:
-    """The file `layout` was read from, written to `path` with the result `mesh` (the work mesh's
-    faces in their order: its vertices moved, and a cut's vertices appended after the read
-    ones with corners re-pointed to them) and morph targets {name: (n, 3) positions of `mesh`'s
-    vertices} added to each of its meshes, in each node's own space.  Everything else -- nodes,
-    transforms, materials, textures (put inside the file), skins, animations (weights
-    animations given the new targets at zero), extensions, meshes outside the scene -- comes
-    back as it was.  Morph targets move only positions (normals are the client's).
-    sparse: metres (the file's unit) below which a target's vertex is stored as still.
-    extras: added to the extras of the mesh with the most vertices.
-    Returns {"appended": file vertices added, "accessors": target accessors written, "sparse": how
-    many of them sparse, "notes": [...]}."""
+    """Write the file `layout` was read from back, with a result and its morph targets.
+
+    The result `mesh` has the work mesh's faces in their order: its vertices moved, and a cut's
+    vertices appended after the read ones with corners re-pointed to them.  The morph targets are
+    added to each of the file's meshes, in each node's own space.  Everything else -- nodes,
+    transforms, materials, textures (put inside the file), skins, animations (weights animations
+    given the new targets at zero), extensions, meshes outside the scene -- comes back as it was.
+    Morph targets move only positions (normals are the client's).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    layout : GltfLayout
+        From read_gltf_layout.
+    mesh : Mesh
+        The result.
+    targets : dict or None
+        {name: (n, 3) positions of `mesh`'s vertices}.
+    binary : bool
+        GLB, else .gltf.
+    extras : dict or None
+        Added to the extras of the mesh with the most vertices.
+    sparse : float
+        Metres (the file's unit) below which a target's vertex is stored as still.
+
+    Returns
+    -------
+    dict
+        {"appended": file vertices added, "accessors": target accessors written, "sparse": how many
+        of them sparse, "notes": [...]}.
+    """
     if mesh.n_faces != layout.n_faces:
         raise ValueError(f"the result has {mesh.n_faces} faces; the file was read with {layout.n_faces}")
     g, doc, buf, notes = open_for_edit(layout.path)
@@ -622,13 +769,38 @@ def _grow_weights(g, doc, buf, grow: dict) -> None:
 
 
 def buffer_bytes(g, i) -> bytes:
-    """The bytes of buffer i (the GLB's own chunk, or a data URI)."""
+    """The bytes of one of a glTF's buffers.
+
+    Parameters
+    ----------
+    g : pygltflib.GLTF2
+    i : int
+        The buffer.
+
+    Returns
+    -------
+    bytes
+        The GLB's own chunk, or a data URI's.
+    """
     return g.binary_blob() if g.buffers[i].uri is None else g.get_data_from_buffer_uri(g.buffers[i].uri)
 
 
 def read_accessor(g, index, normalize: bool = True) -> np.ndarray:
-    """The accessor's rows (sparse ones made whole); normalized integers (KHR_mesh_quantization)
-    as the floats they stand for, or as stored (normalize=False: to copy them)."""
+    """An accessor's rows, sparse ones made whole.
+
+    Parameters
+    ----------
+    g : pygltflib.GLTF2
+    index : int
+        The accessor.
+    normalize : bool
+        Normalized integers (KHR_mesh_quantization) as the floats they stand for; False: as stored
+        (to copy them).
+
+    Returns
+    -------
+    (count, components) array
+    """
     acc = g.accessors[index]
     if acc.sparse is not None:                    # zeros (or its buffer view), then the listed rows
         dt, nc = np.dtype(_COMPONENT[acc.componentType]), _NCOMP[acc.type]
@@ -745,8 +917,20 @@ class _Buffers:
 
 
 def glb_units(mesh: Mesh, units: str = "auto") -> tuple[str, float]:
-    """(the mesh's unit, metres per unit).  auto: a head up to 3 units tall is in metres, up to
-    100 in centimetres (ICT-FaceKit: 33), taller in millimetres."""
+    """A mesh's unit, for writing it in glTF's metres.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    units : str
+        "m", "cm", "mm", or "auto": a head up to 3 units tall is in metres, up to 100 in
+        centimetres (ICT-FaceKit: 33), taller in millimetres.
+
+    Returns
+    -------
+    unit : str
+    metres_per_unit : float
+    """
     if units != "auto":
         if units not in UNITS:
             raise MimicaError(f"units {units!r}: use one of auto, {', '.join(UNITS)}")
@@ -771,8 +955,19 @@ def _gltf_vertices(mesh: Mesh):
 
 
 def unit_normals(mesh: Mesh, vertices: np.ndarray) -> np.ndarray:
-    """Unit vertex normals; a vertex no triangle uses (no normal) gets +z, as glTF wants unit
-    normals on every vertex."""
+    """Unit vertex normals, as glTF wants them on every vertex.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    vertices : (n, 3) float array
+        The positions to take them at.
+
+    Returns
+    -------
+    (n, 3) float array
+        A vertex no triangle uses gets +z.
+    """
     n = mesh.vertex_normals(vertices)
     n[np.linalg.norm(n, axis=1) < 0.5] = (0.0, 0.0, 1.0)
     return n
@@ -798,22 +993,40 @@ def _reachable_normal_change(n0: np.ndarray, n1: np.ndarray) -> np.ndarray:
 
 def write_glb(path: Path, mesh: Mesh, morph_targets=None, binary=True, fps=None, units: str = "auto",
               sparse: float | None = None, weights=None, extras: dict | None = None, quantize: bool = False) -> dict:
-    """Write a triangulated mesh, optionally with named morph targets {name: (n,3) positions}.
+    """Write a triangulated mesh as glTF, optionally with named morph targets.
 
-    fps: also write an animation that plays the morph targets in order, one per frame at
-    this rate (weights interpolated linearly between frames), for frame sequences.
-    units: the mesh's unit ("m", "cm", "mm", or "auto": glb_units); glTF is in metres, so the
-    positions are scaled to metres and the unit is kept in the primitive's extras, which
-    mimica's reader undoes.  Returns {"units": the unit used, "sparse": how many targets were
-    written sparse}.
-    sparse: morph targets as sparse accessors: a vertex that moves less than this many metres
-    (SPARSE_TOLERANCE: 0.01 mm) keeps zero, as does a normal that turns less than
-    SPARSE_NORMAL; None writes every target dense.
-    weights: with fps, the animation's weights per frame (F, number of targets) instead of one
-    target per frame (a clip as a few basis shapes, export.compact).
-    extras: more of the mesh's extras (with targetNames).
-    quantize: morph targets in KHR_mesh_quantization's normalized integers (moves to 0.015 mm,
-    QUANTIZE_ERROR; about half the size), the extension then required of readers.
+    Parameters
+    ----------
+    path : Path
+    mesh : Mesh
+    morph_targets : dict or None
+        {name: (n, 3) positions}.
+    binary : bool
+        GLB, else .gltf.
+    fps : float or None
+        Also write an animation that plays the morph targets in order, one per frame at this rate
+        (weights interpolated linearly between frames), for frame sequences.
+    units : str
+        The mesh's unit ("m", "cm", "mm", or "auto": glb_units); glTF is in metres, so the
+        positions are scaled to metres and the unit is kept in the primitive's extras, which
+        mimica's reader undoes.
+    sparse : float or None
+        Morph targets as sparse accessors: a vertex that moves less than this many metres
+        (SPARSE_TOLERANCE: 0.01 mm) keeps zero, as does a normal that turns less than
+        SPARSE_NORMAL; None writes every target dense.
+    weights : (F, k) float array or None
+        With fps, the animation's weights per frame instead of one target per frame (a clip as a
+        few basis shapes, export.compact).
+    extras : dict or None
+        More of the mesh's extras (with targetNames).
+    quantize : bool
+        Morph targets in KHR_mesh_quantization's normalized integers (moves to 0.015 mm,
+        QUANTIZE_ERROR; about half the size), the extension then required of readers.
+
+    Returns
+    -------
+    dict
+        {"units": the unit used, "sparse": how many targets were written sparse}.
     """
     # glTF keeps one uv per vertex: a vertex on a uv seam is written once per uv it has, and the
     # map from the file's vertices back to the mesh's is kept (VERTEX_MAP) for mimica's reader

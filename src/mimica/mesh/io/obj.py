@@ -12,6 +12,19 @@ from ..core import Mesh
 
 
 def read_obj(path: Path) -> Mesh:
+    """Read a Wavefront OBJ: its vertices, polygons (any size, negative indices too), uv and
+    groups.
+
+    Parameters
+    ----------
+    path : Path
+
+    Returns
+    -------
+    Mesh
+        A broken file (no vertices, indices out of range, non-finite numbers) is one MimicaError
+        naming it.
+    """
     try:
         text = path.read_text(errors="replace")
     except OSError as e:
@@ -66,8 +79,17 @@ def _obj_groups(lines):
 
 
 def read_obj_vertices(path: Path) -> np.ndarray:
-    """Only the 'v' lines, (n, 3), checked finite: several times faster than a full read, for
-    frame sequences whose topology is known already."""
+    """Only an OBJ's 'v' lines, checked finite: several times faster than a whole read, for frame
+    sequences whose topology is known already.
+
+    Parameters
+    ----------
+    path : Path
+
+    Returns
+    -------
+    (n, 3) float array
+    """
     try:
         text = path.read_text(errors="replace")
     except OSError as e:
@@ -132,6 +154,14 @@ def _first_bad_line(lines):
 
 
 def write_obj(mesh: Mesh, path: Path) -> None:
+    """Write a mesh as an OBJ: its vertices, polygons and, where it has them, its uv.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    path : Path
+        Written whole or not at all.
+    """
     out = [f"# written by mimica: {mesh.n_vertices} vertices, {mesh.n_faces} faces\n"]
     out.append("".join(f"v {x:.8g} {y:.8g} {z:.8g}\n" for x, y, z in mesh.vertices.tolist()))
     fi = (mesh.face_indices + 1).astype(str)
