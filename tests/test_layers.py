@@ -225,3 +225,20 @@ def test_the_command_line_only_parses_calls_and_prints():
         for node in ast.walk(ast.parse(text)):
             if isinstance(node, ast.FunctionDef):
                 assert node.end_lineno - node.lineno + 1 <= 40, f"{path.name}: {node.name} is too long"
+
+
+def test_public_definitions_carry_numpydoc_sections():
+    """At least 95 % of the package's public functions and classes (module level, no leading
+    underscore, in modules without one) have numpydoc sections: Parameters, Returns or
+    Attributes (a function of no arguments: Returns)."""
+    total, missing = 0, []
+    for name, path in modules().items():
+        if any(p.startswith("_") for p in name.split(".")[1:]):
+            continue
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, (ast.FunctionDef, ast.ClassDef)) and not node.name.startswith("_"):
+                total += 1
+                doc = ast.get_docstring(node) or ""
+                if not any(f"{s}\n---" in doc for s in ("Parameters", "Returns", "Attributes", "Yields")):
+                    missing.append(f"{name}.{node.name}")
+    assert len(missing) <= 0.05 * total, f"{len(missing)} of {total} without numpydoc sections: {missing}"

@@ -22,7 +22,22 @@ TARGETS = [("identity A", {"identity000": -0.9, "identity003": 1.2, "identity006
 
 
 def run_demo(out: Path, quick=False, shown: Path | None = None) -> int:
-    """Write the demo into `out` (`shown`: the folder named in the messages, if `out` is a stage)."""
+    """Write the demo: ICT's expressions moved onto other faces, rendered, and what to try next.
+
+    Parameters
+    ----------
+    out : Path
+        The folder.
+    quick : bool
+        A smaller demo (the tests').
+    shown : Path or None
+        The folder named in the messages, if `out` is a stage.
+
+    Returns
+    -------
+    int
+        The exit status.
+    """
     t0 = time.perf_counter()
     log = lambda m: print(m, file=sys.stderr)  # noqa: E731
     model = ICTModel(ICT_HEAD_VERTICES)

@@ -33,7 +33,12 @@ EXPRESSIONS = ("happiness", "sadness", "surprise", "anger", "disgust", "fear")
 
 
 class TakeError(ValueError):
-    """A take that cannot be read; its message names the file and, where it can, the line."""
+    """A take that cannot be read; its message names the file and, where it can, the line.
+
+    Parameters
+    ----------
+    message : str
+    """
 
 
 def _timecode(text: str) -> tuple[int, float]:

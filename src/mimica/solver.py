@@ -38,13 +38,25 @@ KINDS = ("cholmod", "cholespy", "scipy")
 
 
 def available() -> list[str]:
-    """The backends installed here, fastest first."""
+    """The sparse Cholesky backends installed here, fastest first.
+
+    Returns
+    -------
+    list of str
+        Of "cholmod" (scikit-sparse), "cholespy", "scipy" (SuperLU, always there).
+    """
     have = {"cholmod": _cholmod_cholesky is not None, "cholespy": _cholespy is not None, "scipy": True}
     return [k for k in KINDS if have[k]]
 
 
 def backend() -> str:
-    """The backend a solver gets by default: MIMICA_SOLVER if installed, else the fastest."""
+    """The backend a solver gets by default.
+
+    Returns
+    -------
+    str
+        $MIMICA_SOLVER if installed, else the fastest available.
+    """
     want = os.environ.get("MIMICA_SOLVER", "")
     have = available()
     return want if want in have else have[0]
@@ -61,7 +73,15 @@ def _cholespy_factor(m: sp.csc_matrix):
 
 
 class SPDSolver:
-    """Factor a sparse SPD matrix once; `solve(B)` for B of shape (n,) or (n, k)."""
+    """Factor a sparse symmetric positive definite matrix once; `solve(B)` for B of shape (n,) or
+    (n, k); `refactor(m)` for a matrix of the same pattern.  One solve at a time per factor.
+
+    Parameters
+    ----------
+    m : (n, n) sparse matrix
+    kind : str or None
+        "cholmod", "cholespy" or "scipy" (None: backend()).
+    """
 
     def __init__(self, m: sp.spmatrix, kind: str | None = None):
         self.kind = kind or backend()

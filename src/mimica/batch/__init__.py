@@ -65,8 +65,13 @@ def _done(job: Job, out: Path) -> bool:
 
 
 class LocalEngine:
-    """`workers` processes, each its own single-process pool: jobs sent to worker w always run
-    in the same process (and find its caches) until it dies."""
+    """Jobs in `workers` local processes, each its own single-process pool: jobs sent to worker w
+    always run in the same process (and find its caches) until it dies.
+
+    Parameters
+    ----------
+    workers : int
+    """
 
     def __init__(self, workers: int):
         import multiprocessing as mp
@@ -107,7 +112,14 @@ class LocalEngine:
 
 
 class RayEngine:
-    """Ray actors, one per worker; `address` "auto" joins a running cluster or starts a local one."""
+    """Jobs on Ray actors, one per worker.
+
+    Parameters
+    ----------
+    workers : int
+    address : str
+        A Ray cluster's address; "auto" joins a running cluster or starts a local one.
+    """
 
     def __init__(self, workers: int, address: str):
         from .._extras import require
@@ -159,10 +171,30 @@ class RayEngine:
 
 def run_batch(manifest, out, workers: int | None = None, ray: str | None = None, retry: int = 2,
               progress=None) -> dict:
-    """Run the manifest's jobs into `out`; returns the report also written to out/batch.json.
+    """Run a manifest's jobs into a folder, in-process through the pipeline; a job whose inputs and
+    options have not changed since it last succeeded is not run again.
 
-    progress(event) is called with {"done": k, "total": n, "job": id, "status": ...} once at the
-    start (status "started", done 0) and as jobs finish (the command line draws a bar from it)."""
+    Parameters
+    ----------
+    manifest : str or Path
+        The manifest (TOML).
+    out : str or Path
+        The batch's folder.
+    workers : int or None
+        Processes (1 to 256; None: the CPU count).
+    ray : str or None
+        A Ray cluster's address to run on instead ("auto": join or start one).
+    retry : int
+        Times a job whose worker died is tried again.
+    progress : callable, optional
+        Called with {"done": k, "total": n, "job": id, "status": ...} once at the start (status
+        "started", done 0) and as jobs finish.
+
+    Returns
+    -------
+    dict
+        The report, also written to out/batch.json.
+    """
     out = Path(out)
     if workers is not None and not 1 <= workers <= 256:
         raise MimicaError(f"--workers {workers}: expected 1 to 256")
@@ -294,9 +326,21 @@ def _write_json(path: Path, data) -> None:
 
 
 def batch_status(out) -> dict:
-    """What the folder says of its batch, read from the folder alone: each planned job done
-    (its marker holds the planned key and its output exists), failed (the last report says so,
-    with why), or pending."""
+    """What a folder says of its batch, read from the folder alone: each planned job done (its marker
+    holds the planned key and its output exists), failed (the last report says so, with why), or
+    pending.
+
+    Parameters
+    ----------
+    out : str or Path
+        The batch's folder.
+
+    Returns
+    -------
+    dict
+        {"done": [{"id", "seconds", "machine"}, ...], "failed": [{"id", "error"}, ...],
+        "pending": [{"id"}, ...]}.
+    """
     out = Path(out)
     try:
         planned = json.loads((out / META / "plan.json").read_text())

@@ -30,8 +30,14 @@ CACHE_TRANSFERS = 8                 # ExpressionTransfers a worker keeps (oldest
 
 
 def watch_parent(pid: int) -> None:
-    """In a local pool's worker: leave as soon as the batch that started it is gone (killed
-    with SIGKILL it cannot stop its workers, which would wait for jobs forever)."""
+    """In a local pool's worker: leave as soon as the batch that started it is gone (killed with
+    SIGKILL it cannot stop its workers, which would wait for jobs forever).
+
+    Parameters
+    ----------
+    pid : int
+        The batch's process.
+    """
     import os
     import threading
 
@@ -43,13 +49,37 @@ def watch_parent(pid: int) -> None:
 
 
 def marker_path(root: Path, job_id: str) -> Path:
+    """Where a job's done-marker lives in the batch's folder.
+
+    Parameters
+    ----------
+    root : Path
+        The batch's folder.
+    job_id : str
+
+    Returns
+    -------
+    Path
+    """
     return root / ".batch" / "done" / (job_id.replace("/", "__") + ".json")
 
 
 def run_job(job: dict, root: str) -> dict:
-    """Run one job (Job.to_dict() and its upstream outputs under "inputs"); its outputs are
-    written atomically, then its marker.  Returns its record: status done or failed, the one
-    line of a failure, seconds, where it ran, what it said."""
+    """Run one job in-process through the pipeline; its outputs are written whole, then its marker.
+
+    Parameters
+    ----------
+    job : dict
+        Job.to_dict(), with its upstream outputs under "inputs".
+    root : str
+        The batch's folder.
+
+    Returns
+    -------
+    dict
+        Its record: status done or failed, the one line of a failure, seconds, where it ran, what
+        it said.
+    """
     from .._memory import keep_memory
     keep_memory()                                  # a worker is mimica's process, as the command line's
     root = Path(root)

@@ -24,7 +24,12 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The parser of every command, in the order `mimica --help` lists them."""
+    """The parser of every command, in the order `mimica --help` lists them.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
     p = _Parser(prog="mimica", description="Anatomy-aware facial animation toolkit.")
     sub = p.add_subparsers(dest="cmd", required=True)
     for command in COMMANDS:
@@ -37,6 +42,16 @@ def _terminate(signum, frame):
 
 
 def main(argv=None) -> int:
+    """Run the `mimica` command line (a MimicaError: one line on stderr, exit status 2).
+
+    Parameters
+    ----------
+    argv : list of str or None
+
+    Returns
+    -------
+    int
+    """
     import signal
     from .._memory import keep_memory
     from ..outputs import os_error

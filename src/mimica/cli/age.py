@@ -34,7 +34,13 @@ def cmd_age(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica age` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     ag = sub.add_parser("age", help="a face with its wrinkles at several ages, neutral and with an expression")
     ag.add_argument("face", help="face mesh (OBJ/PLY/glTF)")
     ag.add_argument("--ages", default=",".join(f"{x:g}" for x in D.ages), help="ages in years, comma-separated")

@@ -39,7 +39,13 @@ def cmd_animate(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica animate` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     an = sub.add_parser("animate", help="play an ARKit take (a Live Link Face CSV) on a head's ARKit blendshapes")
     an.add_argument("head", help="the head's ARKit blendshapes, a .glb (as `mimica blendshapes` writes it)")
     an.add_argument("--arkit", help="the take: a Live Link Face CSV (Timecode, BlendShapeCount, the "

@@ -59,7 +59,13 @@ def cmd_batch(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica batch` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     bt = sub.add_parser("batch", help="many heads x many performances from a manifest (TOML), resumable, "
                         "on this machine's cores or a Ray cluster",
                         description="Jobs whose inputs and options did not change since they finished are skipped; "

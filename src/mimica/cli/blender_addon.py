@@ -15,7 +15,13 @@ def cmd_blender_addon(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica blender-addon` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     b = sub.add_parser("blender-addon", help="write the Blender add-on (a zip) into a folder, to install in Blender")
     b.add_argument("--out", required=True, help="the folder to put mimica_blender.zip in")
     b.set_defaults(func=cmd_blender_addon)

@@ -73,7 +73,13 @@ def cmd_blendshapes(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica blendshapes` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     bs = sub.add_parser("blendshapes", help="the 52 ARKit blendshapes on any head mesh, as one GLB")
     bs.add_argument("head", help="head mesh (OBJ/PLY/glTF), any topology, neutral")
     bs.add_argument("--landmarks", help="68-point landmark JSON (found automatically otherwise)")

@@ -13,7 +13,13 @@ def cmd_demo(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica demo` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     d = sub.add_parser("demo", help="transfer bundled ICT-FaceKit expressions; write meshes and a contact sheet")
     d.add_argument("--out", default="out/demo")
     d.add_argument("--quick", action="store_true", help="fewer faces and expressions")

@@ -51,7 +51,13 @@ def cmd_error(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica error` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     e = sub.add_parser("error", help="Song's per-vertex error of a result against a reference, as a PNG map")
     e.add_argument("result", help="transferred expression")
     e.add_argument("reference", help="reference expression (same topology)")

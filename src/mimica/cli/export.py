@@ -42,7 +42,13 @@ def cmd_export(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica export` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     ex = sub.add_parser("export", help="a sequence of meshes as one glTF animation, or as OBJ/PLY files")
     ex.add_argument("frames", nargs="+", help="mesh files or a folder, one topology")
     ex.add_argument("--out", required=True, help="anim.glb / anim.gltf, anim.usd / .usda / .usdc (UsdSkel), or a folder")

@@ -30,7 +30,13 @@ def cmd_fit_muscles(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica fit-muscles` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     fm = sub.add_parser("fit-muscles", help="the muscle activations that best make target shapes or an ARKit "
                                             "take, as a timeline simulate plays")
     fm.add_argument("rig", help="rig file from `mimica rig`")

@@ -70,7 +70,13 @@ def _draw_points(img, xy):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica landmarks` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     lm = sub.add_parser("landmarks", help="find the 68 feature points on a photo or a mesh")
     lm.add_argument("face", help="photo (JPEG/PNG/GIF...) or mesh (OBJ/PLY/glTF)")
     lm.add_argument("--out", help="landmark JSON to write (pixels for photos, 3D for meshes)")

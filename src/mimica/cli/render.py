@@ -27,7 +27,13 @@ def cmd_render(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica render` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     rd = sub.add_parser("render", help="pictures and videos of a face or a sequence (no GPU needed)")
     rd.add_argument("face", help="a mesh, or a folder of meshes (a sequence)")
     rd.add_argument("--out", required=True, help=".png (views, contact sheet) or .mp4 (sequence or turntable)")

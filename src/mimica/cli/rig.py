@@ -24,7 +24,13 @@ def cmd_rig(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica rig` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     r = sub.add_parser("rig", help="place muscles, springs and regions of interest on a face (Kim 2020)")
     r.add_argument("face", help="face mesh (OBJ/PLY/glTF)")
     r.add_argument("--landmarks", help="68-point landmark JSON (built in for ICT-FaceKit)")

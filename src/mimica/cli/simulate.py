@@ -62,7 +62,13 @@ def _wrinkle_args(s) -> None:
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica simulate` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     s = sub.add_parser("simulate", help="animate a rig by its muscles")
     s.add_argument("rig", help="rig file from `mimica rig`")
     g = s.add_mutually_exclusive_group()

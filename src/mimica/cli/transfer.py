@@ -53,7 +53,13 @@ def cmd_transfer(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica transfer` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     t = sub.add_parser("transfer", help="move expressions of a source face onto a target face (Song et al.)",
                        description="Writes, for every SOURCE_EXPR, a file of the same name into --out: the "
                                    "target wearing that expression, in the target's own topology.")

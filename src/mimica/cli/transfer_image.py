@@ -43,7 +43,13 @@ def cmd_transfer_image(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica transfer-image` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     ti = sub.add_parser("transfer-image", help="move the expression of one photo pair onto another photo (Song §VI)",
                         description="Feature points come from PHOTO.landmarks.json beside a photo when present "
                                     "(see `mimica landmarks`), else they are found automatically.")

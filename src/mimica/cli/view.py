@@ -61,7 +61,13 @@ def _busy(port: int, e: OSError):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica view` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     vw = sub.add_parser("view", help="a live viewer in the browser: muscles, facial actions, age, presets, "
                                      "a timeline, a second face")
     vw.add_argument("face", help="face mesh (OBJ/PLY/glTF); with --rig, the rig's own face is shown")

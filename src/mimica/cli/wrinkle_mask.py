@@ -25,7 +25,13 @@ def cmd_wrinkle_mask(a):
 
 
 def add_args(sub) -> None:
-    """The command's options on the `mimica` parser."""
+    """Put `mimica wrinkle-mask` and its options on the `mimica` parser.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The parser's commands (ArgumentParser.add_subparsers).
+    """
     w = sub.add_parser("wrinkle-mask", help="carry the reference wrinkle mask onto a face (Viaud & Yahia §3.2)")
     w.add_argument("face", help="face mesh (OBJ/PLY/glTF), any topology")
     w.add_argument("--landmarks", help="68-point landmark JSON (built in for ICT-FaceKit)")

@@ -67,9 +67,24 @@ def _samples(v: np.ndarray, path: list[int], k: int):
 
 
 def contour_samples(mesh: Mesh, landmarks: np.ndarray, names=None, per_segment: int = PER_SEGMENT):
-    """{contour name: (k, 3) vertex pairs and weights as (i, j, t) rows} for every contour whose
-    landmarks are all present and whose segments could be traced; sample order is the same on
-    every mesh, so the same contour on two faces pairs sample by sample."""
+    """The lid and lip contours traced on a mesh between their landmarks, sampled in the same order on
+    every mesh, so the same contour on two faces pairs sample by sample.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    landmarks : (68, 3) float array
+    names : list of str or None
+        The contours wanted (None: all of CONTOURS).
+    per_segment : int
+        Samples between two landmarks.
+
+    Returns
+    -------
+    dict
+        {contour name: (k, 3) float array of (i, j, t) rows: a point (1 - t) at vertex i, t at j},
+        for every contour whose landmarks are all present and whose segments could be traced.
+    """
     lm = np.asarray(landmarks, float)
     g = _graph(mesh)
     tree = cKDTree(mesh.vertices)
@@ -93,14 +108,43 @@ def contour_samples(mesh: Mesh, landmarks: np.ndarray, names=None, per_segment: 
 
 
 def rows_matrix(samples: np.ndarray, n: int) -> sp.csr_matrix:
-    """(k, n) rows: sample (i, j, t) -> (1 - t) at i, t at j."""
+    """Contour samples as rows of vertex weights.
+
+    Parameters
+    ----------
+    samples : (k, 3) float array
+        (i, j, t) rows.
+    n : int
+        The mesh's vertices.
+
+    Returns
+    -------
+    (k, n) sparse matrix
+        (1 - t) at i, t at j.
+    """
     i, j, t = samples[:, 0].astype(int), samples[:, 1].astype(int), samples[:, 2]
     r = np.arange(len(samples))
     return sp.csr_matrix((np.r_[1 - t, t], (np.r_[r, r], np.r_[i, j])), shape=(len(samples), n))
 
 
 def matched_contours(source: Mesh, source_lm, target: Mesh, target_lm):
-    """The contours found on both faces, as (source rows (k, n_s), target points (k, 3), names)."""
+    """The contours found on both faces.
+
+    Parameters
+    ----------
+    source : Mesh
+    source_lm : (68, 3) float array
+    target : Mesh
+    target_lm : (68, 3) float array
+
+    Returns
+    -------
+    rows : (k, n_s) sparse matrix
+        The source's samples.
+    points : (k, 3) float array
+        The target's samples, in the same order.
+    names : list of str
+    """
     s = contour_samples(source, source_lm)
     t = contour_samples(target, target_lm)
     names = [c for c in CONTOURS if c in s and c in t]

@@ -31,6 +31,21 @@ INSIDE = 3                # ... and resolved: at least this many vertices inside
 
 @dataclass
 class EyeCut:
+    """A head's one-surface eyes cut loose from their lids (cut_eyes), or why not.
+
+    Attributes
+    ----------
+    mesh : Mesh
+        The cut mesh: the input's vertices first, then the copies.
+    copies_of : (k,) int array
+        For each appended vertex, the vertex it copies.
+    eyes : dict
+        Side -> the vertices of its eye (the copies included).
+    rims : dict
+        Side -> the lid margin's loop (the lids' vertices).
+    why : dict
+        Side -> why a sealed eye was left whole.
+    """
     mesh: Mesh                         # the cut mesh: the input's vertices first, then the copies
     copies_of: np.ndarray              # (k,) for each appended vertex, the vertex it copies
     eyes: dict = field(default_factory=dict)      # side -> vertices of its eye (the copies included)
@@ -43,8 +58,18 @@ class EyeCut:
 
 
 def inside_polygon(q: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """(m,) whether each 2D point of q (m, 2) lies inside the closed polygon poly (k, 2): the
-    even-odd rule, one ray to +x a point (a few lines, not a plotting library's)."""
+    """Whether 2D points lie inside a closed polygon: the even-odd rule, one ray to +x a point (a few
+    lines, not a plotting library's).
+
+    Parameters
+    ----------
+    q : (m, 2) float array
+    poly : (k, 2) float array
+
+    Returns
+    -------
+    (m,) bool array
+    """
     x, y = q[:, :1], q[:, 1:]
     a, b = poly, np.roll(poly, -1, axis=0)
     cross = (a[:, 1] > y) != (b[:, 1] > y)
@@ -126,8 +151,18 @@ def _closed_over(mesh: Mesh, lm: np.ndarray) -> list[str]:
 
 
 def cut_eyes(mesh: Mesh, landmarks) -> EyeCut:
-    """The mesh with each sealed eye's inside cut loose from its lids along their margin;
-    unchanged where the eyes open already (a boundary at the lids) or the landmarks are missing."""
+    """A head with each sealed eye's inside cut loose from its lids along their margin; unchanged
+    where the eyes open already (a boundary at the lids) or the landmarks are missing.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    landmarks : (68, 3) float array
+
+    Returns
+    -------
+    EyeCut
+    """
     from ..align import face_cylinder
     lm = np.asarray(landmarks, float)
     out = EyeCut(mesh, np.zeros(0, np.int64))

@@ -21,8 +21,18 @@ UV_TOLERANCE = 2e-5          # of the uv square: a float32 file and a text file 
 
 
 def same_mesh(source: Mesh, target: Mesh) -> np.ndarray | None:
-    """(n_target,) the source vertex each target vertex is, where the target is the source's
-    mesh in another layout; None otherwise (another mesh, or no uv)."""
+    """Whether the target is the source's own mesh in another vertex layout (a DCC's export), found by
+    its uv.
+
+    Parameters
+    ----------
+    source, target : Mesh
+
+    Returns
+    -------
+    (n_target,) int array or None
+        The source vertex each target vertex is; None otherwise (another mesh, or no uv).
+    """
     if source.uv is None or target.uv is None or source.face_uv_indices is None or target.face_uv_indices is None:
         return None
     if target.n_vertices < source.n_vertices:

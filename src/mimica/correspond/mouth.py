@@ -29,6 +29,21 @@ SNAP = 0.15               # ... within this share of the mouth's width of its la
 
 @dataclass
 class MouthCut:
+    """A head's sealed lips cut apart (cut_mouth), or why they were left.
+
+    Attributes
+    ----------
+    mesh : Mesh
+        The cut mesh: the input's vertices first, then the copies.
+    copies_of : (k,) int array
+        For each appended vertex, the vertex it copies.
+    seam : (s,) int array
+        The seam's vertices, corner to corner.
+    inward : (n + k, 3) float array or None
+        Offsets into each seam vertex's own lip (0 elsewhere): where its correspondence is looked up.
+    why : str
+        Sealed lips left uncut: why (the seam tried is `seam`).
+    """
     mesh: Mesh                    # the cut mesh (the input's vertices first, then the copies)
     copies_of: np.ndarray         # (k,) for each appended vertex, the vertex it copies
     seam: np.ndarray              # the seam's vertices, corner to corner
@@ -41,8 +56,18 @@ class MouthCut:
 
 
 def mouth_is_open(mesh: Mesh, landmarks) -> bool:
-    """A boundary between the lips at the middle of the mouth: the mouth already opens (a
-    small hole elsewhere, at a corner, does not open it)."""
+    """Whether the mouth already opens: a boundary between the lips at the middle of the mouth (a
+    small hole elsewhere, at a corner, does not open it).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    landmarks : (68, 3) float array
+
+    Returns
+    -------
+    bool
+    """
     lm = np.asarray(landmarks, float)
     width = float(np.linalg.norm(lm[64] - lm[60]))
     centre = lm[[62, 66]].mean(0)
@@ -54,7 +79,18 @@ def mouth_is_open(mesh: Mesh, landmarks) -> bool:
 
 
 def sealed_eyes(mesh: Mesh, landmarks) -> list[str]:
-    """The eyes ("left", "right") whose lids are one closed surface: no boundary at the eye."""
+    """The eyes whose lids are one closed surface: no boundary at the eye.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    landmarks : (68, 3) float array
+
+    Returns
+    -------
+    list of str
+        "left", "right".
+    """
     lm = np.asarray(landmarks, float)
     b = mesh.boundary_vertices()
     out = []
@@ -119,7 +155,20 @@ def _seam(mesh: Mesh, lm, crease: float = CREASE, valley_corners: bool = False, 
 
 
 def cut_mouth(mesh: Mesh, landmarks) -> MouthCut:
-    """The mesh with its lips cut apart along the seam; unchanged when the mouth is open."""
+    """A head with its lips cut apart along the seam between them (the valley from one inner corner
+    to the other); unchanged when the mouth is open.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    landmarks : (68, 3) float array
+        The inner lips' (60-67) are needed.
+
+    Returns
+    -------
+    MouthCut
+        `why` says why sealed lips were left uncut.
+    """
     lm = np.asarray(landmarks, float)
     none = MouthCut(mesh, np.zeros(0, np.int64), np.zeros(0, np.int64))
     if not np.isfinite(lm[60:68]).all() or mouth_is_open(mesh, lm):

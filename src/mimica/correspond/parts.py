@@ -46,7 +46,20 @@ _NAMED = [(re.compile(r"teeth|tooth|dent", re.I), "teeth"), (re.compile(r"gum|to
 
 @dataclass
 class Parts:
-    """A head split into parts: per vertex its part and its role (an index into ROLES)."""
+    """A head split into parts: per vertex its part and its role.
+
+    Attributes
+    ----------
+    label : (n,) int array
+        The part of each vertex.
+    names : list of str
+        The name of each part.
+    role : (n,) int array
+        Index into ROLES: skin, skull (still with the head), jaw (moves with it), the left and
+        right eye (rigid), follow (lashes, shells: ride with the skin).
+    skin_faces : (f,) int array
+        The skin's polygons (all their corners skin).
+    """
 
     label: np.ndarray            # (n,) part index of each vertex
     names: list                  # name of each part
@@ -82,7 +95,19 @@ def _eye_centres(lm):
 
 
 def fit_sphere(p):
-    """Least-squares sphere through points: (centre, radius, RMS residual / radius)."""
+    """The least-squares sphere through points.
+
+    Parameters
+    ----------
+    p : (m, 3) float array
+
+    Returns
+    -------
+    centre : (3,) float array
+    radius : float
+    residual : float
+        RMS residual over the radius.
+    """
     a = np.c_[2 * p, np.ones(len(p))]
     x, *_ = np.linalg.lstsq(a, (p * p).sum(1), rcond=None)
     c = x[:3]
@@ -147,9 +172,22 @@ def _split_mouth(mesh, lm, idx, role):
 
 
 def split_parts(mesh: Mesh, landmarks=None, eyes: dict | None = None) -> Parts:
-    """The parts of `mesh` (landmarks: its 68 positions, (68, 3), used to place eyes and mouth;
-    eyes: {"left"/"right": vertices} of eyes cut loose from their lids (correspond.eyes), each
-    the eye of its side whatever its shape)."""
+    """The parts of a head: its connected pieces told apart by their shape and place (eyeballs,
+    teeth and tongue, lashes and shells, the skin) and given their roles (ROLES).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    landmarks : (68, 3) float array or None
+        Used to place the eyes and the mouth.
+    eyes : dict or None
+        {"left"/"right": vertices} of eyes cut loose from their lids (correspond.eyes), each the
+        eye of its side whatever its shape.
+
+    Returns
+    -------
+    Parts
+    """
     from ..data import ICT_HEAD_VERTICES, is_ict_topology
     lm = None if landmarks is None else np.asarray(landmarks, float)
     if lm is not None and not (np.isfinite(lm[[8, 36, 45]]).all() and np.isfinite(lm[17:27]).any()):

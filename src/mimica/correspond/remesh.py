@@ -23,6 +23,17 @@ from ..mesh.query import SurfaceMap
 
 @dataclass
 class Resampled:
+    """A face remeshed (resample_face) and where each new vertex lies on the original.
+
+    Attributes
+    ----------
+    mesh : Mesh
+        The new mesh.
+    triangle : (n,) int array
+        The original's triangle (of `original_triangles`) under each new vertex.
+    bary : (n, 3) float array
+    original_triangles : (m, 3) int array
+    """
     mesh: Mesh
     triangle: np.ndarray      # (n,) triangle of the original's `triangles` under each vertex
     bary: np.ndarray          # (n, 3)
@@ -41,8 +52,27 @@ SEALS = {"mouth": [list(range(60, 68)) + [48, 54]], "eyes": [list(range(36, 42))
 
 def resample_face(mesh: Mesh, landmarks: np.ndarray, n_vertices: int = 12000, seed: int = 0,
                   nostril_holes: bool = True, rings: int = 6, seal=()) -> Resampled:
-    """seal: openings ("mouth", "eyes") bridged by the new triangulation instead of cut, as
-    scans and game heads have them: the lips (or lids) joined by a membrane of triangles."""
+    """A face remeshed to another topology of about `n_vertices` (for tests and benchmarks with a
+    known truth): points spread evenly on its cylinder map, triangulated, lifted onto the surface.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    landmarks : (68, 3) float array
+    n_vertices : int
+    seed : int
+    nostril_holes : bool
+        Leave the nostrils open.
+    rings : int
+        Rings of points kept along the openings' rims.
+    seal : tuple of str
+        Openings ("mouth", "eyes") bridged by the new triangulation instead of cut, as scans and
+        game heads have them: the lips (or lids) joined by a membrane of triangles.
+
+    Returns
+    -------
+    Resampled
+    """
     rng = np.random.default_rng(seed)
     cyl = face_cylinder(landmarks)
     uv, r = cyl.project(mesh.vertices)

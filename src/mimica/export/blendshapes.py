@@ -15,8 +15,17 @@ ARKIT_52 = list(facts.ARKIT_52)      # Apple's 52, in Live Link Face's order
 
 
 def ict_sources(arkit: str) -> list[str]:
-    """ICT-FaceKit shapes whose deltas sum to an ARKit shape.  ICT splits browInnerUp and
-    cheekPuff into halves and has no tongue (tongueOut stays at rest)."""
+    """The ICT-FaceKit shapes whose deltas sum to an ARKit shape.  ICT splits browInnerUp and cheekPuff
+    into halves and has no tongue (tongueOut stays at rest).
+
+    Parameters
+    ----------
+    arkit : str
+
+    Returns
+    -------
+    list of str
+    """
     if arkit in ("browInnerUp", "cheekPuff"):
         return [f"{arkit}_L", f"{arkit}_R"]
     if arkit == "tongueOut":
@@ -109,10 +118,22 @@ def arkit_blendshapes(head, landmarks=None, progress=None, store=None, cut_mouth
 
 
 def cut_corners(head, mesh) -> dict:
-    """Where a cut (the mouth's, the eyes') changed `head` into `mesh` (the same polygons, its
-    vertices first, the cut's copies after them): {"cut_copies": (k,) the head's vertex each added
-    vertex copies, "cut_corners": (m, 3) rows (polygon, corner in the polygon, added vertex)} --
-    what a DCC applies to its own mesh to cut it as mimica did; {} where nothing was cut."""
+    """Where a cut (the mouth's, the eyes') changed a head into the mesh the shapes are on -- what a
+    DCC applies to its own mesh to cut it as mimica did.
+
+    Parameters
+    ----------
+    head : Mesh
+        As given.
+    mesh : Mesh
+        The same polygons, the head's vertices first, the cut's copies after them.
+
+    Returns
+    -------
+    dict
+        {"cut_copies": (k,) the head's vertex each added vertex copies, "cut_corners": (m, 3) rows
+        (polygon, corner in the polygon, added vertex)}; {} where nothing was cut.
+    """
     n = head.n_vertices
     if mesh.n_vertices == n:
         return {}
@@ -128,7 +149,12 @@ BLENDSHAPE_SUFFIXES = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".npz", ".fbx"
 
 
 def check_blendshapes_path(path) -> None:
-    """Raise MimicaError where `path`'s suffix is not a kind of file `write_blendshapes` writes."""
+    """Raise MimicaError where a path's suffix is not a kind of file `write_blendshapes` writes.
+
+    Parameters
+    ----------
+    path : str or Path
+    """
     from pathlib import Path
     if Path(path).suffix.lower() not in BLENDSHAPE_SUFFIXES:
         raise MimicaError(f"{path}: blendshapes are written as glTF (.glb or .gltf), FBX (an FBX head's own file), "

@@ -17,6 +17,17 @@ import numpy as np
 
 @dataclass
 class Compact:
+    """A clip as a few basis shapes and their weights a frame (compact_clip).
+
+    Attributes
+    ----------
+    basis : (k, n, 3) float array
+        The basis shapes' displacements.
+    weights : (F, k) float array
+        Per frame.
+    max_error : float
+        The largest distance of a vertex from the clip's, over all frames.
+    """
     basis: np.ndarray        # (k, n, 3) displacements of the basis shapes
     weights: np.ndarray      # (F, k) per frame
     max_error: float         # the largest distance of a vertex from the clip's, over all frames
@@ -26,8 +37,21 @@ class Compact:
 
 
 def compact_clip(rest: np.ndarray, frames: np.ndarray, max_error: float) -> Compact | None:
-    """The fewest basis shapes that keep every vertex within max_error (mesh units) of the
-    clip; None when that needs half as many shapes as frames or more."""
+    """The fewest basis shapes (a truncated SVD of the frames' displacements) that keep every vertex
+    within max_error of the clip.
+
+    Parameters
+    ----------
+    rest : (n, 3) float array
+    frames : (F, n, 3) float array
+    max_error : float
+        Mesh units.
+
+    Returns
+    -------
+    Compact or None
+        None when that needs half as many shapes as frames or more.
+    """
     f = np.asarray(frames, float)
     n_f = len(f)
     d = (f - rest).reshape(n_f, -1)

@@ -31,9 +31,28 @@ def _pxr():
 
 def write_usd(path, mesh: Mesh, shapes: dict, weights=None, fps: float | None = None, units: str = "auto",
               tolerance: float = SPARSE_TOLERANCE) -> dict:
-    """shapes: {name: (n, 3) positions}; weights (F, len(shapes)) with fps: an animation.
-    tolerance: metres below which a vertex's offset is left out of its blend shape.
-    Written atomically (beside `path`, then moved into place)."""
+    """Write a mesh with blend shapes as USD (usd-core), whole or not at all.
+
+    Parameters
+    ----------
+    path : str or Path
+        .usd, .usda or .usdc.
+    mesh : Mesh
+    shapes : dict
+        {name: (n, 3) positions}.
+    weights : (F, len(shapes)) float array or None
+        With fps: an animation (a SkelAnimation of the blend shapes' weights).
+    fps : float or None
+    units : str
+        The mesh's unit ("auto": glb_units); the stage's metersPerUnit says it.
+    tolerance : float
+        Metres below which a vertex's offset is left out of its blend shape.
+
+    Returns
+    -------
+    dict
+        {"units": the unit used, "shapes": how many blend shapes}.
+    """
     import os
     path = Path(path)
     if path.suffix.lower() not in USD_SUFFIXES:

@@ -15,6 +15,16 @@ LIGHT_RIGHT = (0.45, 0.5, 0.75)
 
 
 class ICTPhotos:
+    """Photos with exact truth: ICT-FaceKit faces rendered under a chosen light, with their 68
+    landmark vertices projected (for benchmarks and tests of the 2D path).
+
+    Parameters
+    ----------
+    size : tuple of int
+        (w, h) pixels.
+    zoom : float
+        The face's framing grown by this.
+    """
     def __init__(self, size=(311, 419), zoom=1.3):
         self.model = ICTModel()
         c, half = face_framing(self.model.neutral[ICT_LANDMARKS_68])

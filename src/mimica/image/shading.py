@@ -48,8 +48,21 @@ _FLOOR = np.float32(0.02)          # shading below this (a face turned from the 
 
 
 class FaceModel:
-    """A generic face (ICT-FaceKit's neutral face area) and its expression shapes: what a photo's
-    68 points say of a face's 3D pose and expression."""
+    """A generic face (ICT-FaceKit's neutral face area) and its expression shapes: what a photo's 68
+    points say of a face's 3D pose and expression.
+
+    Attributes
+    ----------
+    names : list of str
+        The expression shapes (ICT's but the gaze and the pupils).
+    vertices : (n, 3) float array
+        The neutral.
+    triangles : (m, 3) int array
+    deltas : (K, n, 3) float array
+        Each shape's displacement.
+    landmarks : (68,) int array
+        The landmark vertices.
+    """
 
     def __init__(self):
         from ..data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel, default_store, ict_expression_names
@@ -88,7 +101,12 @@ class FaceModel:
 
 @lru_cache(maxsize=1)
 def face_model() -> FaceModel:
-    """The one generic face model of a process (its shapes read once, through the store's cache)."""
+    """The one generic face model of a process (its shapes read once, through the store's cache).
+
+    Returns
+    -------
+    FaceModel
+    """
     return FaceModel()
 
 
@@ -104,7 +122,19 @@ class TargetShading:
 
     The light is fitted at every pixel (per-pixel normals, once); the ratio, smoothed over several
     pixels anyway, is made per vertex, interpolated on a grid `step` times coarser than the photo,
-    smoothed there and resampled (a 430x480 face box of a 640x480 frame: 31 -> 10 ms)."""
+    smoothed there and resampled (a 430x480 face box of a 640x480 frame: 31 -> 10 ms).
+
+    Parameters
+    ----------
+    luminance : (h, w) float array
+        The target's.
+    points : (68, 2) float array
+        Its feature points.
+    where : (h, w) bool array or None
+        The pixels to fit the light on (None: the face).
+    model : FaceModel or None
+        None: face_model().
+    """
 
     def __init__(self, luminance: np.ndarray, points: np.ndarray, where: np.ndarray | None = None,
                  model: FaceModel | None = None):

@@ -18,7 +18,21 @@ def _ffmpeg():
 
 
 def frame_source(path):
-    """(number of frames or None, frames per second, iterator of float RGB frames)."""
+    """A video's (or a folder of images') frames, read as they are used.
+
+    Parameters
+    ----------
+    path : str or Path
+        A video file (imageio-ffmpeg) or a folder of images (in name order).
+
+    Returns
+    -------
+    count : int or None
+        The frames, where known.
+    fps : float
+    frames : iterator of (h, w, 3) float arrays
+        RGB in [0, 1].
+    """
     path = Path(path)
     if path.is_dir():
         files = sorted(f for f in path.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
@@ -44,7 +58,13 @@ def frame_source(path):
 
 
 class VideoWriter:
-    """H.264 MP4 through imageio-ffmpeg; written to a temporary file, moved into place on close."""
+    """H.264 MP4 through imageio-ffmpeg; written to a temporary file, moved into place on close.
+
+    Parameters
+    ----------
+    path : str or Path
+    fps : float
+    """
 
     def __init__(self, path, fps=25.0):
         import os

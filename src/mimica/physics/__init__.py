@@ -20,8 +20,22 @@ __all__ = ["ENGINES", "Engine", "FaceSimulator", "FullFaceSimulator", "SprungFac
 
 
 def make_engine(name: str, rig, fps: float = 60.0, **options) -> Engine:
-    """The engine `name` ("modal", "full" or "sprung") on a rig; `options` are its own
-    (face.FaceSimulator's warp and springs; none for the others)."""
+    """A physics engine on a rig, chosen by name.
+
+    Parameters
+    ----------
+    name : str
+        "modal" (face.FaceSimulator, Kim's modal warping), "full" (the full nonlinear shell) or
+        "sprung" (Viaud and Yahia's sprung skin).
+    rig : Rig
+    fps : float
+    **options
+        The engine's own (FaceSimulator's warp and springs; none for the others).
+
+    Returns
+    -------
+    Engine
+    """
     kinds = {"modal": FaceSimulator, "full": FullFaceSimulator, "sprung": SprungFace}
     if name in kinds:
         return kinds[name](rig, fps=fps, **options)

@@ -45,14 +45,32 @@ class Engine(Protocol):
 
 
 def explosion_limit(rest: np.ndarray) -> float:
-    """The largest displacement a frame may have: ten times the face's size."""
+    """The largest displacement a frame may have: ten times the face's size.
+
+    Parameters
+    ----------
+    rest : (n, 3) float array
+
+    Returns
+    -------
+    float
+    """
     return 10.0 * float(np.linalg.norm(np.ptp(rest, axis=0)))
 
 
 def check_frame(u: np.ndarray, limit: float, t: float) -> None:
-    """Stop before anything is written when a frame's displacement `u` is not finite or has
-    exploded past `limit` (an unstable step, or non-finite input).  Two reductions, no
-    temporary: NaN propagates through min and max, so one comparison catches both."""
+    """Stop before anything is written when a frame's displacement is not finite or has exploded
+    past the limit (an unstable step, or non-finite input).  Two reductions, no temporary: NaN
+    propagates through min and max, so one comparison catches both.
+
+    Parameters
+    ----------
+    u : (n, 3) float array
+    limit : float
+        explosion_limit's.
+    t : float
+        The frame's time, for the message.
+    """
     lo, hi = float(u.min()), float(u.max())
     if not (-limit <= lo and hi <= limit):
         what = "is not finite" if not (np.isfinite(lo) and np.isfinite(hi)) else "moved beyond ten face sizes"
@@ -61,10 +79,26 @@ def check_frame(u: np.ndarray, limit: float, t: float) -> None:
 
 
 def run_frames(sim, activation_at, duration: float, progress=None, before_step=None) -> np.ndarray:
-    """Frames (F, n, 3) of skin positions from a simulator with rig, fps, substeps, step() and
-    displacement(); activation_at(t) -> (n_muscles,); before_step(t) is called before each step.
-    A non-finite activation or an exploded frame stops the run (MimicaError) before any frame
-    is handed back."""
+    """Frames of skin positions from a simulator; a non-finite activation or an exploded frame stops
+    the run (MimicaError) before any frame is handed back.
+
+    Parameters
+    ----------
+    sim : Engine
+        With rig, fps, substeps, step() and displacement().
+    activation_at : callable
+        activation_at(t) -> (n_muscles,) activations.
+    duration : float
+        Seconds.
+    progress : callable, optional
+        Called as progress(done, total) as frames are made.
+    before_step : callable, optional
+        Called as before_step(t) before each step.
+
+    Returns
+    -------
+    (F, n, 3) float array
+    """
     h = 1.0 / (sim.fps * sim.substeps)
     n_frames = int(round(duration * sim.fps)) + 1
     rest = sim.rig.skin.vertices

@@ -26,7 +26,32 @@ from .shell import ShellEnergy, lumped_mass
 
 
 class FullFaceSimulator:
-    """Step a rig's muscles on the full nonlinear skin; the interface of FaceSimulator.run."""
+    """Step a rig's muscles on the full nonlinear skin (implicit Euler, projected Newton:
+    modal.FullSolver); the Engine interface.
+
+    The physical parameters are FaceSimulator's.  Implicit Euler is stable at any step, so one step
+    a frame.
+
+    Parameters
+    ----------
+    rig : Rig
+    fps : float
+    substeps : int
+    spring, frequency, damping, zeta : float
+        As FaceSimulator's.
+    newton_iters : int
+    tol : float
+        Newton's relative residual force.
+    xtol : float
+        Relative to the rig's mean edge: Newton ends once no node moves further (at 1e-2 the ICT
+        face under a full smile took 2-10 iterations a step, and a smaller step did not take
+        fewer).
+    footprint : float
+        The radius, in mean edges, over which each spring's insertion (its fan, rig.spring_fan) is
+        spread again (0: on the fan alone, as in the modal face).
+    engage : float
+        The muscle stretch |q| at which its springs are fully on.
+    """
 
     def __init__(self, rig, fps: float = 60.0, substeps: int = 1, spring: float = 4.0, frequency: float = 4.0,
                  damping: float = 1.6, zeta: float = 0.0005, newton_iters: int = 30, tol: float = 1e-6,

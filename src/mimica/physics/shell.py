@@ -144,7 +144,17 @@ def _edge_hessian_psd(p, rest_len) -> np.ndarray:
 
 
 def hinges_of(triangles: np.ndarray) -> np.ndarray:
-    """(h, 4) interior edges with their two opposite vertices: [x0, x1, x2, x3]."""
+    """The interior edges of a triangle mesh with their two opposite vertices.
+
+    Parameters
+    ----------
+    triangles : (m, 3) int array
+
+    Returns
+    -------
+    (h, 4) int array
+        [x0, x1, x2, x3]: the edge x0-x1 and the opposite corners of its two triangles.
+    """
     t = triangles
     he = np.concatenate([t[:, [0, 1, 2]], t[:, [1, 2, 0]], t[:, [2, 0, 1]]])   # edge a->b, opposite c
     key = np.sort(he[:, :2], axis=1)
@@ -158,7 +168,17 @@ def hinges_of(triangles: np.ndarray) -> np.ndarray:
 
 @dataclass
 class ShellEnergy:
-    """Kim eq. 4 on a triangle mesh at rest positions `rest`."""
+    """Kim eq. 4 (after Grinspun et al.'s discrete shells) on a triangle mesh: area, length and
+    bending (hinge) terms, its gradient and Hessian exact by hyper-dual numbers.
+
+    Attributes
+    ----------
+    rest : (n, 3) float array
+        The shell at rest.
+    triangles : (m, 3) int array
+    k_area, k_length, k_bend : float
+        The three terms' stiffness.
+    """
 
     rest: np.ndarray
     triangles: np.ndarray
@@ -263,12 +283,33 @@ class ShellEnergy:
 
 
 def lumped_mass(mesh: Mesh, density: float = 1.0) -> np.ndarray:
-    """Per-vertex mass: a third of the adjacent triangles' area times the areal density."""
+    """Per-vertex mass: a third of the adjacent triangles' area times the areal density.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    density : float
+
+    Returns
+    -------
+    (n,) float array
+    """
     t = mesh.triangles
     a = mesh.triangle_areas()
     return density * np.bincount(t.ravel(), weights=np.repeat(a / 3, 3), minlength=mesh.n_vertices)
 
 
 def rayleigh_damping(mass: np.ndarray, stiffness: sp.spmatrix, xi: float, zeta: float) -> sp.csr_matrix:
-    """C = xi M + zeta K (Kim, after eq. 6), M lumped (n,) expanded to 3n dofs."""
+    """C = xi M + zeta K (Kim, after eq. 6), M lumped, expanded to 3n dofs.
+
+    Parameters
+    ----------
+    mass : (n,) float array
+    stiffness : (3n, 3n) sparse matrix
+    xi, zeta : float
+
+    Returns
+    -------
+    (3n, 3n) sparse matrix
+    """
     return (xi * sp.diags(np.repeat(mass, 3)) + zeta * stiffness).tocsr()

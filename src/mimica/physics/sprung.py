@@ -22,7 +22,26 @@ MAX_DT = 1.0 / 120.0                  # seconds: the longest step of the sprung 
 
 
 class SprungFace:
-    """Viaud & Yahia's sprung skin, with the rig's muscles as force fields."""
+    """Viaud and Yahia's sprung skin (springs along the edges, tethers to rest, semi-implicit steps),
+    with the rig's muscles as force fields; the Engine interface.
+
+    Parameters
+    ----------
+    rig : Rig
+    fps : float
+    substeps : int
+        At least what keeps the step stable (MAX_DT).
+    k_spring : float
+        The edges' springs.
+    k_rest : float
+        The tethers to rest, relative to a spring's k (unit mean mass).
+    damping : float
+        V&Y's h per unit mass (1/s).
+    falloff : float
+        The reach of a muscle's pull around each of its strip's nodes, in 0.3 eye widths.
+    strength : float
+        The muscles' force, relative to a spring's k.
+    """
 
     def __init__(self, rig, fps: float = 60.0, substeps: int = 2, k_spring: float = 1.0,
                  k_rest: float = 0.05, damping: float = 8.0, falloff: float = 1.5, strength: float = 5.0):

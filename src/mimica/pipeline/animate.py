@@ -91,8 +91,30 @@ def _check(head: Path, out: Path, take, video, o: AnimateOptions) -> bool:
 
 
 def weights_from_video(head, video, rest_frame: int = 0, progress=None):
-    """A video fitted through the head's blendshapes (export.video): (times (F,), {ARKit name and
-    head angle: (F,)}, fps, figures)."""
+    """A video fitted through the head's blendshapes (export.video): dlib's 68 points tracked, the
+    ARKit weights and the head's angles fitted a frame.
+
+    Parameters
+    ----------
+    head : str or Path
+        A GLB `blendshapes` wrote (its landmarks stored).
+    video : str or Path
+        A video or a folder of frames.
+    rest_frame : int
+        The frame showing the performer at rest.
+    progress : callable, optional
+        Called with a line of text as frames are tracked.
+
+    Returns
+    -------
+    times : (F,) float array
+    weights : dict
+        {ARKit name, headYaw, headPitch, headRoll: (F,) float array}.
+    fps : float
+    figures : dict
+        {"frames", "track_fps", "fit_fps", "misfit_median" (face widths), "unseen": shapes 68
+        points cannot see}.
+    """
     from ..export import ARKIT_52
     from ..export.video import UNSEEN, fit_weights, head_angles, landmark_basis, track_video
     basis = landmark_basis(head)
@@ -110,8 +132,26 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None):
 
 
 def take_usd(head: Path, out, times, weights: dict, rate: float) -> dict:
-    """The take as USD: the head's blend shapes (read from its GLB) and a SkelAnimation of
-    their weights, resampled on the take's own rate (USD keys whole time codes)."""
+    """The take as USD: the head's blend shapes (read from its GLB) and a SkelAnimation of their
+    weights, resampled on the take's own rate (USD keys whole time codes).
+
+    Parameters
+    ----------
+    head : Path
+        The head's GLB.
+    out : str or Path
+        The .usd/.usda/.usdc to write.
+    times : (F,) float array
+    weights : dict
+        {ARKit name: (F,) float array}.
+    rate : float
+        Frames a second.
+
+    Returns
+    -------
+    dict
+        {"driven": targets the take drives, "pivot": None, "bending": 0}.
+    """
     from ..export.usd import write_usd
     from ..mesh.io import read_morph_targets
     mesh, targets, unit = read_morph_targets(head)

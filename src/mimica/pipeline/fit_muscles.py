@@ -47,8 +47,21 @@ class FitResult:
 
 
 def sequence_timeline(names, activations: np.ndarray, seconds: float = 1.0):
-    """A timeline playing fitted activations (T, m) one after another: each ramps in over 0.3 s,
-    holds, and lets go before the next (the i-th from i x seconds)."""
+    """A timeline playing fitted activations one after another: each ramps in over 0.3 s, holds, and
+    lets go before the next (the i-th from i x seconds).
+
+    Parameters
+    ----------
+    names : list of str
+        The muscles.
+    activations : (T, m) float array
+    seconds : float
+        Each one's turn.
+
+    Returns
+    -------
+    anim.Timeline
+    """
     from ..anim import Channel, Timeline
     ch = {}
     for j, n in enumerate(names):
@@ -62,8 +75,19 @@ def sequence_timeline(names, activations: np.ndarray, seconds: float = 1.0):
 
 
 def rig_arkit_shapes(path, rig):
-    """The ARKit shapes' displacements on the rig's skin, from a head's ARKit GLB of that face:
-    ([(n, 3) per shape], names)."""
+    """The ARKit shapes' displacements on a rig's skin, from a head's ARKit GLB of that face.
+
+    Parameters
+    ----------
+    path : str or Path
+        The GLB (`blendshapes`' of the rig's face).
+    rig : Rig
+
+    Returns
+    -------
+    shapes : list of (n, 3) float arrays
+    names : list of str
+    """
     from ..export import ARKIT_52
     from ..mesh.io import read_morph_targets
     mesh, targets, _ = read_morph_targets(path)

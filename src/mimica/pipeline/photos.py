@@ -47,8 +47,24 @@ class PhotoOptions:
 
 
 def image_points(img, path, face: int = 0, detector: str = "mediapipe") -> np.ndarray:
-    """A photo's 68 feature points, (68, 2) pixels: from PHOTO.landmarks.json beside it if present
-    (landmarks.detect2d's file), else detected (its face number `face`, by size)."""
+    """A photo's 68 feature points: from PHOTO.landmarks.json beside it if present (landmarks.detect2d's
+    file), else detected.
+
+    Parameters
+    ----------
+    img : (h, w, 3) float array
+    path : str or Path
+        The photo's file.
+    face : int
+        Which face, by size (0: the largest).
+    detector : str
+        "mediapipe" or "dlib".
+
+    Returns
+    -------
+    (68, 2) float array
+        Pixels.
+    """
     from ..landmarks import detect2d
     side = Path(path).with_suffix(".landmarks.json")
     if side.is_file():
@@ -62,7 +78,17 @@ def image_points(img, path, face: int = 0, detector: str = "mediapipe") -> np.nd
 
 
 def tile(img, like) -> np.ndarray:
-    """img as uint8 at the size of `like` (contact sheets of photos of different sizes)."""
+    """A picture as uint8 at the size of another (contact sheets of photos of different sizes).
+
+    Parameters
+    ----------
+    img : (h, w, 3) array
+    like : (H, W, 3) array
+
+    Returns
+    -------
+    (H, W, 3) uint8 array
+    """
     from PIL import Image
     from ..image.io import to_uint8
     im = Image.fromarray(to_uint8(img))

@@ -148,8 +148,21 @@ class RenderOptions:
 
 
 def read_values(path, n: int):
-    """Per-vertex values from .npy, a text file (one number a line), or a mesh of the same
-    topology: (the path, (n,) values or (n, 3) positions)."""
+    """Per-vertex values for a picture: from .npy, a text file (one number a line), or a mesh of the
+    same topology.
+
+    Parameters
+    ----------
+    path : str or Path
+    n : int
+        The mesh's vertices.
+
+    Returns
+    -------
+    path : Path
+    values : (n,) or (n, 3) float array
+        Values, or positions (a mesh).
+    """
     from ..mesh import MESH_SUFFIXES, read_vertices
     p = Path(path)
     if not p.is_file():

@@ -151,8 +151,20 @@ def prepare_transfer(source: Mesh, target: Mesh, frames: np.ndarray, options: Tr
 
 
 def result_names(names, target: Mesh, target_path=None) -> list[str]:
-    """The results' file names: the source expressions' own, or, for a target read from glTF
-    (written back into its own file), with the target's suffix."""
+    """The results' file names: the source expressions' own, or, for a target read from glTF (written
+    back into its own file), with the target's suffix.
+
+    Parameters
+    ----------
+    names : list of str
+        The source expressions' file names.
+    target : Mesh
+    target_path : str or Path or None
+
+    Returns
+    -------
+    list of str
+    """
     from ..mesh.io import GltfLayout
     if isinstance(target.layout, GltfLayout) and target_path is not None:
         suffix = Path(target_path).suffix.lower()
@@ -161,8 +173,24 @@ def result_names(names, target: Mesh, target_path=None) -> list[str]:
 
 
 def write_results(out, names, mesh: Mesh, results: np.ndarray, about: dict | None = None) -> list[Path]:
-    """Each result (F, n, 3) as `mesh` with those vertices, into the folder `out` (written whole
-    beside it, then put in its place: a failure leaves no half-written folder)."""
+    """Each result as the mesh with those vertices, into a folder written whole beside it and then put
+    in its place (a failure leaves no half-written folder).
+
+    Parameters
+    ----------
+    out : str or Path
+        The folder.
+    names : list of str
+        A file name a result (its suffix chooses the format).
+    mesh : Mesh
+    results : (F, n, 3) float array
+    about : dict or None
+        Recorded in the folder's .mimica-run.json.
+
+    Returns
+    -------
+    list of Path
+    """
     from ..mesh import write_mesh
     from ..outputs import staged_dir
     with staged_dir(out, about or {"command": "transfer"}) as d:

@@ -22,8 +22,21 @@ _ROLE_KEY = {"skin": 0, "skull": 1, "jaw": 2, "eye.left": 3, "eye.right": 3, "fo
 
 
 def transfer_picture(xfer, title: str = "", size: int = 420) -> np.ndarray:
-    """The target of an ExpressionTransfer in two views, coloured by what the transfer does,
-    and a front view of the correspondence's confidence (red 0 -> yellow 0.5 -> green 1)."""
+    """The target of an ExpressionTransfer in two views, coloured by what the transfer does to each
+    vertex (solved, rigid part, filled, cut, ...), and a front view of the correspondence's
+    confidence (red 0 -> yellow 0.5 -> green 1), with a legend.
+
+    Parameters
+    ----------
+    xfer : ExpressionTransfer
+    title : str
+    size : int
+        Each view's side.
+
+    Returns
+    -------
+    (h, w, 3) uint8 array
+    """
     mesh = xfer.output_mesh
     r = xfer.vertex_report()
     role_key = np.array([_ROLE_KEY[ROLES[i]] for i in range(len(ROLES))])[r["role"]]
@@ -52,7 +65,17 @@ LOW = Correspondence.LOW
 
 
 def confidence_colors(c: np.ndarray) -> np.ndarray:
-    """Confidence in [0, 1] -> RGB: red at 0, yellow at 0.5, green at 1."""
+    """Confidence -> RGB: red at 0, yellow at 0.5, green at 1.
+
+    Parameters
+    ----------
+    c : (n,) float array
+        In [0, 1] (clipped).
+
+    Returns
+    -------
+    (n, 3) float array
+    """
     c = np.clip(np.asarray(c, float), 0, 1)[:, None]
     red, yellow, green = np.array([0.85, 0.15, 0.1]), np.array([0.95, 0.85, 0.2]), np.array([0.2, 0.7, 0.3])
     lo = red + (yellow - red) * np.clip(2 * c, 0, 1)

@@ -17,11 +17,38 @@ NO_MOTION = (0.75, 0.75, 0.75)
 
 
 def bin_labels(bins) -> tuple[str, ...]:
+    """The legend's labels of error bins.
+
+    Parameters
+    ----------
+    bins : tuple of float
+        Increasing thresholds (shares, 0.001 = 0.1 %).
+
+    Returns
+    -------
+    tuple of str
+        "< 0.1%", "0.1% - 0.5%", ..., ">= 2%".
+    """
     pct = [f"{100 * b:g}%" for b in bins]
     return tuple([f"< {pct[0]}"] + [f"{a} - {b}" for a, b in zip(pct, pct[1:])] + [f">= {pct[-1]}"])
 
 
 def error_colors(err: np.ndarray, bins=BINS, colors=COLORS) -> np.ndarray:
+    """Per-vertex colours of an error by bin (Song Fig. 11's levels by default).
+
+    Parameters
+    ----------
+    err : (n,) float array
+        NaN: a vertex that does not move (drawn grey).
+    bins : tuple of float
+    colors : tuple of RGB
+        One more than bins.
+
+    Returns
+    -------
+    (n, 3) float array
+        RGB in [0, 1].
+    """
     idx = np.digitize(np.nan_to_num(err, nan=0.0), bins)
     col = np.asarray(colors, float)[np.minimum(idx, len(colors) - 1)]
     col[~np.isfinite(err)] = NO_MOTION
@@ -29,7 +56,22 @@ def error_colors(err: np.ndarray, bins=BINS, colors=COLORS) -> np.ndarray:
 
 
 def error_map_image(mesh: Mesh, err: np.ndarray, title="", size=420, bins=BINS) -> np.ndarray:
-    """Front and three-quarter views coloured by error level (3 thresholds, 4 colours)."""
+    """Front and three-quarter views coloured by error level (3 thresholds, 4 colours), with a legend.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    err : (n,) float array
+    title : str
+    size : int
+        Each view's side, pixels.
+    bins : tuple of float
+        Three increasing thresholds.
+
+    Returns
+    -------
+    (h, w, 3) uint8 array
+    """
     if len(bins) != 3 or list(bins) != sorted(bins):
         raise ValueError("bins: three increasing thresholds")
     col = error_colors(err, bins)
@@ -53,4 +95,18 @@ def error_map_image(mesh: Mesh, err: np.ndarray, title="", size=420, bins=BINS) 
 
 
 def error_map_png(path, mesh: Mesh, err: np.ndarray, title="", bins=BINS):
+    """Write error_map_image as a PNG.
+
+    Parameters
+    ----------
+    path : str or Path
+    mesh : Mesh
+    err : (n,) float array
+    title : str
+    bins : tuple of float
+
+    Returns
+    -------
+    Path
+    """
     return save_png(path, error_map_image(mesh, err, title, bins=bins))

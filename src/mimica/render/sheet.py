@@ -16,7 +16,26 @@ def _font(size=14):
 
 
 def contact_sheet(tiles, labels=None, columns=None, title=None, row_labels=None, pad=6) -> np.ndarray:
-    """Grid of equally sized (h, w, 3) tiles with captions under each, (H, W, 3) uint8."""
+    """A grid of equally sized tiles with captions under each.
+
+    Parameters
+    ----------
+    tiles : list of (h, w, 3) uint8 arrays
+    labels : list of str or None
+        A caption a tile.
+    columns : int or None
+        None: one row.
+    title : str or None
+        Over the grid.
+    row_labels : list of str or None
+        Left of each row.
+    pad : int
+        Pixels between tiles.
+
+    Returns
+    -------
+    (H, W, 3) uint8 array
+    """
     tiles = list(tiles)
     h, w = tiles[0].shape[:2]
     cols = columns or len(tiles)
@@ -42,7 +61,18 @@ def contact_sheet(tiles, labels=None, columns=None, title=None, row_labels=None,
 
 
 def colormap(t: np.ndarray) -> np.ndarray:
-    """Perceptually ordered blue -> green -> yellow -> red for t in [0, 1], (m, 3) in [0, 1]."""
+    """A perceptually ordered ramp, blue -> green -> yellow -> red.
+
+    Parameters
+    ----------
+    t : (m,) float array
+        In [0, 1] (clipped).
+
+    Returns
+    -------
+    (m, 3) float array
+        RGB in [0, 1].
+    """
     stops = np.array([[0.19, 0.25, 0.62], [0.13, 0.57, 0.55], [0.45, 0.78, 0.30],
                       [0.99, 0.85, 0.22], [0.86, 0.19, 0.15]])
     t = np.clip(np.asarray(t, float), 0, 1) * (len(stops) - 1)
@@ -52,6 +82,15 @@ def colormap(t: np.ndarray) -> np.ndarray:
 
 
 def heat_colors(values: np.ndarray) -> np.ndarray:
-    """Per-vertex colours on a continuous ramp scaled to the largest value."""
+    """Per-vertex colours on the colormap, scaled to the largest value.
+
+    Parameters
+    ----------
+    values : (n,) float array
+
+    Returns
+    -------
+    (n, 3) float array
+    """
     v = np.asarray(values, float)
     return colormap(v / max(np.nanmax(v), 1e-12))

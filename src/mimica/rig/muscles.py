@@ -22,6 +22,26 @@ from ..store import shape_names
 
 @dataclass(frozen=True)
 class MuscleDef:
+    """A muscle of the library, placed on any face by its landmarks.
+
+    Attributes
+    ----------
+    name : str
+    origin, insertion : dict
+        Landmark index -> weight: the ends as weighted means of landmarks.
+    origin_lift, insertion_lift : float
+        Moved along the face's up axis, in eye widths.
+    origin_out, insertion_out : float
+        Moved sideways, away from the mid-line, in eye widths.
+    width : float
+        The strip's width, eye widths.
+    origin_depth, insertion_depth : float
+        Under the skin, eye widths.
+    alpha : float or None
+        Kim eq. 19's ROI range for this muscle (None: the rig's).
+    contraction : float or None
+        Shortening at full activation (None: the rig's).
+    """
     name: str
     origin: dict                  # landmark index -> weight
     insertion: dict
@@ -117,8 +137,13 @@ ICT_SHAPES = {
 
 
 def coverage_shapes() -> list[str]:
-    """ICT-FaceKit's expression shapes that muscles and the jaw make (the coverage
-    figure; what calibration's --joint-all fits): all but the gaze (eyeLook*) and the pupils."""
+    """ICT-FaceKit's expression shapes that muscles and the jaw make (the coverage figure; what
+    calibration's --joint-all fits): all but the gaze (eyeLook*) and the pupils.
+
+    Returns
+    -------
+    list of str
+    """
     return [n for n in shape_names() if not n.startswith(("eyeLook", "Pupil", "identity", "generic"))]
 
 
@@ -174,15 +199,37 @@ FACIAL_ACTIONS = {
 
 
 def weights_on(weights: dict, muscle_names) -> np.ndarray:
-    """(len(muscle_names),) float: a {muscle: value} map of the library's names (a preset, a
-    facial action) on a rig's muscles -- a side's muscle ("zygomaticus_major_L") takes its
-    muscle's value ("zygomaticus_major"), else its own name's, else 0.  The one place presets
-    and actions reach a rig (anim.Timeline, the viewer)."""
+    """A {muscle: value} map of the library's names (a preset, a facial action) on a rig's muscles:
+    a side's muscle ("zygomaticus_major_L") takes its muscle's value ("zygomaticus_major"), else
+    its own name's, else 0.  The one place presets and actions reach a rig (anim.Timeline, the
+    viewer).
+
+    Parameters
+    ----------
+    weights : dict
+    muscle_names : list of str
+        The rig's.
+
+    Returns
+    -------
+    (len(muscle_names),) float array
+    """
     return np.array([float(weights.get(n.rsplit("_", 1)[0], weights.get(n, 0.0))) for n in muscle_names])
 
 
 def action_activations(action: str, muscle_names) -> np.ndarray:
-    """Activations (n_muscles,) of one facial action for the muscles a rig has."""
+    """The activations of one facial action for the muscles a rig has.
+
+    Parameters
+    ----------
+    action : str
+        A key of FACIAL_ACTIONS.
+    muscle_names : list of str
+
+    Returns
+    -------
+    (n_muscles,) float array
+    """
     if action not in FACIAL_ACTIONS:
         raise MimicaError(f"unknown facial action {action!r}; actions: {', '.join(FACIAL_ACTIONS)}")
     return weights_on(FACIAL_ACTIONS[action], muscle_names)

@@ -31,8 +31,21 @@ BAND = 0.12                  # the lid margin that moves with the rim, in eye wi
 
 
 def closure(lm_rest: np.ndarray, lm: np.ndarray, side: str):
-    """1 - lid gap / rest gap from the landmark pairs of one eye; lm: (68, 3), or (F, 68, 3)
-    for every frame at once."""
+    """How far an eye is closed: 1 - lid gap / rest gap, from the landmark pairs of one eye (37-41,
+    38-40 or 43-47, 44-46).
+
+    Parameters
+    ----------
+    lm_rest : (68, 3) float array
+    lm : (68, 3) or (F, 68, 3) float array
+        One frame, or every frame at once.
+    side : str
+        "left" or "right".
+
+    Returns
+    -------
+    float or (F,) float array
+    """
     return 1.0 - _lid_gap(lm, side) / max(float(_lid_gap(lm_rest, side)), 1e-12)
 
 
@@ -173,7 +186,15 @@ def _opening(mesh: Mesh, centre, radius) -> np.ndarray:
 
 
 class LidContacts:
-    """Per target: its open eyes' rims, paired; `apply` closes them as the source's close."""
+    """A target's open eyes' rims, paired; `apply` closes them as far as the source's close.
+
+    Parameters
+    ----------
+    target : Mesh
+    target_lm : (68, 3) float array
+    source_lm_rest : (68, 3) float array
+        The source's landmarks at rest.
+    """
 
     def __init__(self, target: Mesh, target_lm: np.ndarray, source_lm_rest: np.ndarray):
         up = face_cylinder(target_lm).axes[1]

@@ -286,7 +286,19 @@ def _combine(Z: np.ndarray, coef: np.ndarray, x0: np.ndarray, block: int = 8, ou
 
 
 def static_vertices(source_neutral: np.ndarray, frames: np.ndarray, rtol=1e-7) -> np.ndarray:
-    """Vertices of the source that move in none of the frames (bool (n,))."""
+    """The source's vertices that move in none of the frames.
+
+    Parameters
+    ----------
+    source_neutral : (n, 3) float array
+    frames : (F, n, 3) float array
+    rtol : float
+        A move under this share of the face's size counts as none.
+
+    Returns
+    -------
+    (n,) bool array
+    """
     scale = np.linalg.norm(source_neutral.max(0) - source_neutral.min(0))
     d = np.abs(np.asarray(frames) - source_neutral).max(axis=(0, 2)) if len(frames) else \
         np.zeros(len(source_neutral))
@@ -294,16 +306,29 @@ def static_vertices(source_neutral: np.ndarray, frames: np.ndarray, rtol=1e-7) -
 
 
 class TransferSolver:
-    """Factor once per (source neutral, target neutral, correspondence); apply to many frames.
+    """The expression transfer's linear system (Song et al. §IV; Sumner and Popović for DT), factored
+    once per (source neutral, target neutral, correspondence) and applied to many frames.
 
-    source, target: the two neutral meshes, already aligned (same frame and scale).
-    vertex_map: sparse (n_target x n_source) rows of barycentric weights mapping target
-        vertices to source surface points, or None for the same topology (identity).
-    matched: bool (n_target,) target vertices that have a partner; the others keep their
-        rest shape (Q = identity).
-    fixed: bool (n_target,) target vertices held at their rest position.
-    dt_weight: weight of a per-triangle (DT) term added to a VTC energy (DT_STABILIZER is
-        what ExpressionTransfer uses across topologies); 0 for Song's energy alone.
+    Parameters
+    ----------
+    source, target : Mesh
+        The two neutral meshes, already aligned (same frame and scale).
+    method : str
+        "vtc" or "dt".
+    vertex_map : (n_target, n_source) sparse matrix or None
+        Rows of barycentric weights mapping target vertices to source surface points; None for
+        the same topology (identity).
+    matched : (n_target,) bool array or None
+        Target vertices that have a partner; the others keep their rest shape (Q = identity).
+    fixed : (n_target,) bool array or None
+        Target vertices held at their rest position.
+    solver_kind : str or None
+        The sparse solver (SPDSolver).
+    weighting : str
+        How elements weigh in the energy ("area").
+    dt_weight : float
+        The weight of a per-triangle (DT) term added to a VTC energy (DT_STABILIZER is what
+        ExpressionTransfer uses across topologies); 0 for Song's energy alone.
     """
 
     def __init__(self, source: Mesh, target: Mesh, method="vtc", vertex_map=None,

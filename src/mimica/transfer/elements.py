@@ -22,6 +22,24 @@ from ..mesh import Mesh
 
 @dataclass(eq=False)
 class Elements:
+    """The elements of a deformation energy: VTC's vertex one-rings (Song §IV) or DT's triangles.
+
+    Attributes
+    ----------
+    kind : str
+        "vtc" or "dt".
+    n_vertices : int
+    center : (E,) int array
+        Each element's centre vertex.
+    nbrs : (E, K) int array
+        Its neighbour vertices, -1 = padding.
+    triangles : (T, 3) int array
+        The triangulation used for normals.
+    ring_length : (n,) float array or None
+        VTC: the rest mean one-ring edge length per vertex.
+    tangent_u, tangent_v : sparse matrix or None
+        VTC: linear maps to two tangents per vertex, whose cross product is the vertex normal.
+    """
     kind: str
     n_vertices: int
     center: np.ndarray        # (E,) centre vertex
@@ -111,7 +129,16 @@ def _cross(a, b):
 
 
 def vtc_elements(mesh: Mesh) -> Elements:
-    """One element per vertex: its polygon one-ring (Song §IV, Fig. 2)."""
+    """One element per vertex: its polygon one-ring (Song §IV, Fig. 2).
+
+    Parameters
+    ----------
+    mesh : Mesh
+
+    Returns
+    -------
+    Elements
+    """
     a = mesh.adjacency
     deg = np.diff(a.indptr)
     k = max(int(deg.max()), 1) if len(deg) else 1
@@ -161,16 +188,36 @@ def _tangent_operators(mesh: Mesh, nbrs: np.ndarray):
 
 
 def dt_elements(mesh: Mesh) -> Elements:
-    """One element per triangle of the (fan) triangulation (Sumner & Popović 2004)."""
+    """One element per triangle of the (fan) triangulation (Sumner & Popović 2004).
+
+    Parameters
+    ----------
+    mesh : Mesh
+
+    Returns
+    -------
+    Elements
+    """
     t = mesh.triangles
     return Elements("dt", mesh.n_vertices, t[:, 0].copy(), t[:, 1:].copy(), t)
 
 
 def gradient_operator(el: Elements, vertices: np.ndarray) -> sp.csr_matrix:
-    """Sparse A (3E x (n+E)) with A @ [x; tips] stacking Q_e^T row-blocks, Q_e = w'_e G_e.
+    """The sparse operator stacking each element's transformation from the rest frame.
 
-    G_e = w_e^T (w_e w_e^T)^{-1} from the rest frame (Song eq. 2 / eq. 6), so that
-    Q_e = w'_e w_e^T (w_e w_e^T)^{-1}: row 3e+j holds column j of Q_e^T, i.e. Q_e[:, j].
+    A @ [x; tips] stacks Q_e^T row-blocks, Q_e = w'_e G_e, G_e = w_e^T (w_e w_e^T)^{-1} from the
+    rest frame (Song eq. 2 / eq. 6), so that Q_e = w'_e w_e^T (w_e w_e^T)^{-1}: row 3e+j holds
+    column j of Q_e^T, i.e. Q_e[:, j].
+
+    Parameters
+    ----------
+    el : Elements
+    vertices : (n, 3) float array
+        The rest positions.
+
+    Returns
+    -------
+    (3E, n + E) sparse matrix
     """
     n, e = el.n_vertices, el.n_elements
     w = el.frames(vertices, el.tips(vertices))              # (E, 3, K+1)

@@ -21,6 +21,22 @@ from ..solver import SPDSolver
 
 
 class LowConfidenceFill:
+    """Skin whose correspondence has low confidence takes its motion from the skin around it: a
+    harmonic fill (Laplace's equation, factored once) blended in by how low the confidence is.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The target.
+    confidence : (n,) float array
+    low : float
+        Below it a vertex is filled.
+
+    Attributes
+    ----------
+    ok : bool
+        Whether there is anything to fill.
+    """
     def __init__(self, mesh: Mesh, confidence: np.ndarray, low: float):
         c = np.asarray(confidence, float)
         weak = c < low

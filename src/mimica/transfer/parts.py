@@ -19,8 +19,26 @@ from ..mesh.query import TriangleLocator
 
 
 class PartMotion:
-    """Precomputed for one (source, target) pair of split heads; `apply` fills the non-skin
-    target vertices of each frame from the source frames and the transferred skin."""
+    """The motion of a split head's other parts, precomputed for one (source, target) pair; `apply`
+    fills the non-skin target vertices of each frame from the source frames and the transferred
+    skin (eyeballs and teeth rigid, lashes and shells riding the skin).
+
+    Parameters
+    ----------
+    source : Mesh
+    ps : Parts
+        The source's.
+    target : Mesh
+    pt : Parts
+        The target's.
+    skin : Mesh
+        The target's skin.
+    skin_index : (k,) int array
+        The skin's vertices in the target.
+    similarity : Similarity
+        The target's alignment onto the source.
+    source_landmarks : (68, 3) float array
+    """
 
     def __init__(self, source: Mesh, ps: Parts, target: Mesh, pt: Parts, skin: Mesh, skin_index: np.ndarray,
                  similarity: Similarity, source_landmarks: np.ndarray):

@@ -44,9 +44,19 @@ IN_FLIGHT = 2
 
 
 def port_in_use(port: int) -> OSError | None:
-    """Why 127.0.0.1:`port` cannot be listened on now (the error), or None (0: any free port).
-    Asked before minutes of work, so that a busy port is said at once; the server still says
-    it should the port be taken in between."""
+    """Why 127.0.0.1:`port` cannot be listened on now, asked before minutes of work, so that a busy
+    port is said at once (the server still says it should the port be taken in between).
+
+    Parameters
+    ----------
+    port : int
+        0: any free port (always free).
+
+    Returns
+    -------
+    OSError or None
+        The error; None where it is free.
+    """
     import socket
     with socket.socket() as s:
         try:
@@ -61,6 +71,22 @@ def _frame(kind: int, arr) -> bytes:
 
 
 class ViewerServer:
+    """The viewer's local server: the page and three.js over HTTP, the simulation's frames over a
+    WebSocket, bound to 127.0.0.1 with a token in the page's address.
+
+    Parameters
+    ----------
+    session : ViewerSession
+        What the page plays.
+    vendor : Path
+        The folder holding three.js (ensure_three).
+    title : str
+    host : str
+    port : int
+        0: a free one.
+    log : callable, optional
+        Called with lines worth logging.
+    """
     def __init__(self, session, vendor: Path, title="mimica", host="127.0.0.1", port=0, log=None):
         from .._extras import require
         require("websockets", "viewer", "the viewer")

@@ -9,6 +9,16 @@ from ..errors import MimicaError
 
 
 class ViewerSession:
+    """What the viewer's page plays: a rig's reduced simulation driven by muscles, facial actions and
+    presets, the wrinkle layer at an age, and a second face the expression is transferred onto.
+
+    Parameters
+    ----------
+    rig : Rig
+    mask : WrinkleMask or None
+        The wrinkles (None: none).
+    fps : float
+    """
     def __init__(self, rig, mask=None, fps: float = 60.0):
         from ..anim import PRESETS
         from ..physics.face import FaceSimulator

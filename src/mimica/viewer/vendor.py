@@ -23,12 +23,34 @@ FILES = {
 
 
 def vendor_dir() -> Path:
+    """Where three.js is cached.
+
+    Returns
+    -------
+    Path
+        cache_dir()/three-<version>.
+    """
     from ..store import cache_dir
     return cache_dir() / f"three-{THREE_VERSION}"
 
 
 def ensure_three(url: str = THREE_URL, timeout: float = 60.0, progress=None) -> Path:
-    """The folder holding three.js's files, downloading and checking them on first use."""
+    """The folder holding three.js's files, downloaded from the npm registry and checked (sha256) on
+    first use.
+
+    Parameters
+    ----------
+    url : str
+        The pinned tarball.
+    timeout : float
+        Seconds the download may stall.
+    progress : callable, optional
+        Called with a line of text when it downloads.
+
+    Returns
+    -------
+    Path
+    """
     from .._extras import require
     require("websockets", "viewer", "the viewer")          # said before anything is fetched or built
     d = vendor_dir()

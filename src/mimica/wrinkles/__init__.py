@@ -20,7 +20,15 @@ from .transfer import carry_mask, mask_for, mask_on, snap_mask, transfer_mask
 @dataclass
 class WrinkledSkin:
     """A skin mesh refined along the mask's lines and its wrinkle layer: `frame(X, age)` takes
-    positions of the coarse skin (a simulated frame) to the wrinkled fine skin."""
+    positions of the coarse skin (a simulated frame) to the wrinkled fine skin.
+
+    Attributes
+    ----------
+    refined : Refined or None
+        The refinement (None: the skin as it is).
+    layer : WrinkleLayer
+        On the refined skin.
+    """
     refined: Refined | None
     layer: WrinkleLayer
 
@@ -52,7 +60,23 @@ class WrinkledSkin:
 
 @dataclass
 class WrinkledFrames:
-    """Simulated frames with the wrinkle layer on (wrinkle_frames)."""
+    """Simulated frames with the wrinkle layer on (wrinkle_frames).
+
+    Attributes
+    ----------
+    skin : WrinkledSkin
+    frames : (F, n_fine, 3) float array
+        The wrinkled fine skin.
+    carried : list of (n_fine, 3) float arrays
+        Per frame, the fine skin before the bulges.
+    compression : (F, n_wrinkles) float array
+        Each wrinkle's compression (1: at rest).
+    ages : (F,) float array
+    build_s : float
+        Seconds to refine and build the layer.
+    frame_s : float
+        Seconds a frame.
+    """
     skin: WrinkledSkin
     frames: np.ndarray            # (F, n_fine, 3) the wrinkled fine skin
     carried: list                 # per frame, the fine skin before the bulges
@@ -69,10 +93,28 @@ class WrinkledFrames:
 
 
 def wrinkle_frames(skin, mask: WrinkleMask, frames, ages, refine: bool = True, activations=None) -> WrinkledFrames:
-    """The wrinkle layer on simulated frames (V&Y §5.3): the skin refined along the mask, each
-    frame carried onto it and bulged at its age (ages: one a frame).  activations: per frame a
-    {muscle: activation} (the simulation's), each wrinkle then deepened by the muscles its mask
-    names (WrinkleLayer.muscle_emphasis)."""
+    """The wrinkle layer on simulated frames (V&Y §5.3): the skin refined along the mask, each frame
+    carried onto it and bulged at its age.
+
+    Parameters
+    ----------
+    skin : Mesh
+        The simulated skin.
+    mask : WrinkleMask
+        On it.
+    frames : (F, n, 3) float array
+    ages : (F,) float array
+        Years, one a frame.
+    refine : bool
+        Refine the skin along the mask's lines first.
+    activations : list of dict or None
+        Per frame a {muscle: activation} (the simulation's), each wrinkle then deepened by the
+        muscles its mask names (WrinkleLayer.muscle_emphasis).
+
+    Returns
+    -------
+    WrinkledFrames
+    """
     t0 = time.perf_counter()
     ws = WrinkledSkin.build(skin, mask, refine=refine)
     build_s = time.perf_counter() - t0

@@ -49,9 +49,17 @@ def _inverse(skew):
 
 
 class ProfileTable:
-    """The unit-chord section height y(q, t) for the length ratio q = d_real / d and the place
-    t across: alpha and a follow from q alone (a0 = d/3), so the whole bulge is a function of
-    two variables, tabulated once and read bilinearly per point and frame."""
+    """The unit-chord section height y(q, t) for the length ratio q = d_real / d and the place t
+    across: alpha and a follow from q alone (a0 = d/3), so the whole bulge is a function of two
+    variables, tabulated once and read bilinearly per point and frame.
+
+    Parameters
+    ----------
+    skew : float
+        The section's asymmetry (bulge.control_points).
+    nq, nt : int
+        The table's size along q and t.
+    """
 
     def __init__(self, skew: float, nq: int = 256, nt: int = 65):
         qq, al, rr = _inverse(skew)
@@ -113,7 +121,22 @@ def _profiles(skew):
 
 
 def profile(t, rho, alpha, skew, iterations=4):
-    """Height of the unit-chord section (eqs. 11-12, d = 1) at x = t across it, t in [0, 1]."""
+    """The height of the unit-chord section (V&Y eqs. 11-12, d = 1) at a place across it.
+
+    Parameters
+    ----------
+    t : float array
+        Across, in [0, 1].
+    rho, alpha : float array
+        The section's a / d and its tangents' angle.
+    skew : float or float array
+    iterations : int
+        Newton steps inverting x(u) = t.
+
+    Returns
+    -------
+    float array
+    """
     c0, s0 = rho * np.cos(alpha), rho * np.sin(alpha)
     if np.isscalar(skew) and skew == 1.0:
         c1, s1 = c0, s0
@@ -141,7 +164,28 @@ MUSCLE_EMPHASIS = 0.5
 
 @dataclass
 class Binding:
-    """Points tied to the wrinkle sections: which point, which two sections, where across."""
+    """Points tied to the wrinkle sections: which point, which two sections, where across.
+
+    Attributes
+    ----------
+    point : (m,) int array
+        Index into the bound point set.
+    k0, k1 : (m,) int arrays
+        The section before and after.
+    f : (m,) float array
+        The weight of the after.
+    t : (m,) float array
+        Across the line, 0 at P0 .. 1 at P1.
+    gain : (m,) float array
+        Emphasis x taper x fold sign.
+    rest : (m,) float array
+        The rest section's height at t (unit chord), subtracted.
+    kn : (m,) int array
+        The nearer of the two sections (its normal is used).
+    groups : list of tuple
+        (skew, slice): points sorted by section profile.
+    n_points : int
+    """
     point: np.ndarray         # (m,) index into the bound point set
     k0: np.ndarray            # (m,) section before, (m,) after, and the weight of the after
     k1: np.ndarray
@@ -170,7 +214,20 @@ class Binding:
 
 
 class WrinkleLayer:
-    """The mask's wrinkles on one skin mesh; `apply(X, age)` adds the bulges to positions X."""
+    """A mask's wrinkles on one skin mesh; `apply(X, age)` adds the bulges to positions X (V&Y §4-5:
+    each wrinkle's sections follow the skin's compression along it, their depth its age).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The skin.
+    mask : WrinkleMask
+        On it.
+    spacing : float
+        The spacing of the sections along a wrinkle, in its widths.
+    taper : float
+        The share of a wrinkle's length over which its ends fade.
+    """
 
     def __init__(self, mesh: Mesh, mask: WrinkleMask, spacing: float = 0.6, taper: float = 0.3):
         self.mesh = mesh

@@ -24,6 +24,15 @@ from .surface import cardinal_spline
 
 @dataclass
 class Refined:
+    """A mesh refined along wrinkle lines (refine_along).
+
+    Attributes
+    ----------
+    mesh : Mesh
+        The fine mesh.
+    W : (n_fine, n_coarse) sparse matrix
+        Each fine vertex as a combination of coarse ones (`carry`).
+    """
     mesh: Mesh
     W: sp.csr_matrix          # (n_fine, n_coarse)
 
@@ -70,8 +79,21 @@ def _split(tris, marked_edge_of, mid_of):
 
 def refine_along(mesh: Mesh, mask, edge_fraction: float = 0.3, reach: float = 1.0,
                  max_passes: int = 4) -> Refined:
-    """Split edges within `reach` widths of each wrinkle line longer than `edge_fraction` of
-    its width.  Polygons are triangulated first."""
+    """Split the edges within `reach` widths of each wrinkle line that are longer than `edge_fraction`
+    of its width.  Polygons are triangulated first.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    mask : WrinkleMask
+    edge_fraction : float
+    reach : float
+    max_passes : int
+
+    Returns
+    -------
+    Refined
+    """
     samples, radius, limit = [], [], []
     for w in mask.wrinkles:
         p = cardinal_spline(w.points, 24)

@@ -16,11 +16,38 @@ GROUP_COLORS = {"forehead": (220, 40, 40), "glabellar": (230, 120, 0), "procerus
 
 
 def color_of(name: str):
+    """A wrinkle's colour in pictures, by its group (its name's first word).
+
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    tuple of int
+        RGB 0-255.
+    """
     return GROUP_COLORS.get(name.split("_")[0], (40, 40, 40))
 
 
 def mask_image(mesh: Mesh, mask, vertices=None, size=480, yaw=0.0, anchors=True) -> np.ndarray:
-    """A shaded render of the face with the mask's wrinkles (and anchors) drawn on it."""
+    """A shaded render of the face with the mask's wrinkles (and anchors) drawn on it.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    mask : WrinkleMask
+    vertices : (n, 3) float array or None
+    size : int
+    yaw : float
+        Degrees.
+    anchors : bool
+        Draw the anchors too.
+
+    Returns
+    -------
+    (size, size, 3) uint8 array
+    """
     v = mesh.vertices if vertices is None else vertices
     frame = framing(v, yaw)
     img = Image.fromarray(render_mesh(mesh, v, size=(size, size), yaw=yaw, frame=frame))

@@ -11,9 +11,14 @@ from ..mesh.query import SurfaceMap
 
 
 class FaceFrame:
-    """The face's own frame from its 68 landmarks: x toward the subject's left, y up, z out of
-    the face, origin at the top of the nose bridge (landmark 27), unit = the distance between
-    the outer eye corners (36-45)."""
+    """The face's own frame from its 68 landmarks: x toward the subject's left, y up, z out of the
+    face, origin at the top of the nose bridge (landmark 27), unit = the distance between the outer
+    eye corners (36-45).
+
+    Parameters
+    ----------
+    landmarks : (68, 3) float array
+    """
 
     def __init__(self, landmarks: np.ndarray):
         lm = np.asarray(landmarks, float)
@@ -36,7 +41,19 @@ class FaceFrame:
 
 
 def cardinal_spline(points: np.ndarray, samples_per_segment: int = 8, tension: float = 0.0) -> np.ndarray:
-    """Points on the Cardinal spline through control points (k, d); ends are clamped."""
+    """Points on the Cardinal spline through control points; the ends are clamped.
+
+    Parameters
+    ----------
+    points : (k, d) float array
+    samples_per_segment : int
+    tension : float
+        0: Catmull-Rom.
+
+    Returns
+    -------
+    (m, d) float array
+    """
     p = np.asarray(points, float)
     if len(p) < 2:
         return p.copy()
@@ -54,7 +71,18 @@ def cardinal_spline(points: np.ndarray, samples_per_segment: int = 8, tension: f
 
 
 def resample_polyline(points: np.ndarray, spacing: float, min_points: int = 2) -> np.ndarray:
-    """Points at equal arc-length steps (about `spacing`) along a polyline, ends kept."""
+    """Points at equal arc-length steps (about `spacing`) along a polyline, its ends kept.
+
+    Parameters
+    ----------
+    points : (k, d) float array
+    spacing : float
+    min_points : int
+
+    Returns
+    -------
+    (m, d) float array
+    """
     p = np.asarray(points, float)
     seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
     s = np.r_[0.0, np.cumsum(seg)]

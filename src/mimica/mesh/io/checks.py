@@ -9,7 +9,21 @@ from ..core import Mesh
 
 
 def validate(mesh: Mesh, source="mesh", allow_degenerate=False) -> Mesh:
-    """Raise MimicaError (naming `source`) if the mesh cannot be used."""
+    """Check that a mesh can be used: 3D finite vertices, faces in range, no empty mesh, no
+    degenerate faces (unless allowed).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    source : str
+        How the message names it.
+    allow_degenerate : bool
+
+    Returns
+    -------
+    Mesh
+        The mesh; MimicaError naming `source` otherwise.
+    """
     v = mesh.vertices
     if v.ndim != 2 or v.shape[1] != 3:
         raise MimicaError(f"{source}: vertices must be 3D points, got shape {v.shape}")

@@ -21,17 +21,38 @@ import numpy as np
 
 
 def objects():
+    """The scene's mesh objects (in Blender).
+
+    Returns
+    -------
+    list of bpy.types.Object
+    """
     import bpy
     return [o for o in bpy.context.scene.objects if o.type == "MESH"]
 
 
 def import_fbx(path):
+    """Import an FBX into an empty scene (Blender's importer, its defaults).
+
+    Parameters
+    ----------
+    path : str
+    """
     import bpy
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.import_scene.fbx(filepath=path)
 
 
 def read(path, out):
+    """Read an FBX for mimica: the objects' arrays and facts (the module's `read`).
+
+    Parameters
+    ----------
+    path : str
+        The FBX.
+    out : str
+        Written: OUT.json and OUT.npz.
+    """
     import_fbx(path)
     report, arrays = [], {}
     for i, o in enumerate(objects()):
@@ -65,6 +86,17 @@ def read(path, out):
 
 
 def write(path, edits, out):
+    """Add shape keys and vertices to an FBX's objects and export it (the module's `write`).
+
+    Parameters
+    ----------
+    path : str
+        The FBX read.
+    edits : str
+        IN: IN.json and IN.npz.
+    out : str
+        The FBX written.
+    """
     import bpy
     import bmesh                                  # (bpy's package brings bmesh: bpy first)
     import_fbx(path)

@@ -11,6 +11,17 @@ from ..core import Mesh
 
 
 def read_ply(path: Path) -> Mesh:
+    """Read a PLY (plyfile): its vertices and polygons.
+
+    Parameters
+    ----------
+    path : Path
+
+    Returns
+    -------
+    Mesh
+        A broken file is one MimicaError naming it.
+    """
     from plyfile import PlyData
     try:
         ply = PlyData.read(str(path))
@@ -43,6 +54,13 @@ def read_ply(path: Path) -> Mesh:
 
 
 def write_ply(mesh: Mesh, path: Path) -> None:
+    """Write a mesh as a binary PLY (plyfile).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    path : Path
+    """
     from plyfile import PlyData, PlyElement
     v = np.empty(mesh.n_vertices, dtype=[("x", "f8"), ("y", "f8"), ("z", "f8")])
     v["x"], v["y"], v["z"] = mesh.vertices.T

@@ -11,9 +11,24 @@ from scipy.sparse.csgraph import connected_components
 def weld_seams(wpos, e, set_of, label) -> np.ndarray:
     """Across vertex sets: a boundary edge a -> b of one set that meets exactly one boundary edge
     b' -> a' of another at the same points (the two sides of a seam a writer split, one oriented
-    surface) has its ends made one.  wpos: (n, 3) positions of the labels; e: (k, 2) the faces'
-    half-edges in labels (Mesh.half_edges); set_of / label: (raw,) each raw vertex's set and label.
-    Returns the raw vertices' labels."""
+    surface) has its ends made one.
+
+    Parameters
+    ----------
+    wpos : (n, 3) float array
+        The labels' positions.
+    e : (k, 2) int array
+        The faces' half-edges in labels (Mesh.half_edges).
+    set_of : (raw,) int array
+        Each raw vertex's set.
+    label : (raw,) int array
+        Each raw vertex's label.
+
+    Returns
+    -------
+    (raw,) int array
+        The raw vertices' labels, seams welded.
+    """
     lab_set = np.zeros(len(wpos), np.int64)
     lab_set[label] = set_of
     _, inv, cnt = np.unique(np.sort(e, 1), axis=0, return_inverse=True, return_counts=True)
