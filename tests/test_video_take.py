@@ -122,3 +122,89 @@ def test_video_requests_that_cannot_be_met_say_one_line(head_glb, tmp_path, caps
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and said in err[0], (args, err)
         assert not out.exists() and not out.with_suffix(".csv").exists()
+
+
+def _frames(folder, jaw, blank=(), size=(320, 400)):
+    """Rendered frames of ICT's face opening its jaw by `jaw` (one a frame); frames in `blank`
+    show no face (the background alone)."""
+    from mimica.image.ictphotos import ICTPhotos
+    from mimica.image.io import write_image
+    photos = ICTPhotos(size=size)
+    folder.mkdir()
+    for f, a in enumerate(jaw):
+        img = np.full((size[1], size[0], 3), 0.8) if f in blank else \
+            photos.photo(np.zeros(20), "jawOpen" if a > 0 else None, amount=max(a, 1e-9))[0]
+        write_image(folder / f"f{f:03d}.png", img)
+    return folder
+
+
+def test_frames_without_a_face_are_found_said_and_previewed(head_glb, tmp_path, capsys):
+    """A take whose face leaves the picture for frames 7-10: exactly those frames are said to
+    show no face, fitted to points filled in from their neighbours (the jaw still follows the
+    rest), and the preview (the video beside the head) marks them with a red band."""
+    from mimica.image.video import frame_source
+    from mimica.pipeline import animate
+    jaw = _ramp(20, 2, 16, 1.0)
+    frames = _frames(tmp_path / "frames", jaw, blank=range(7, 11), size=(480, 600))    # checked at half size
+    r = animate(head_glb, tmp_path / "take.glb", video=frames, preview=tmp_path / "preview.mp4")
+    assert r.video["saw"]["no_face"] == [(7, 10)]
+    assert r.video["fit"].missing.sum() == 4 and np.isfinite(r.video["fit"].weights).all()
+    seen = np.r_[0:7, 11:20]
+    assert np.corrcoef(r.weights["jawOpen"][seen], jaw[seen])[0, 1] > 0.9
+    n, _, shown = frame_source(r.preview)
+    shown = list(shown)
+    assert len(shown) == 20 and shown[0].shape[:2] == (360, 288 + 360)    # the video and the head, side by side
+    red = [bool((img[:4, :, 0] > 0.7).all() and (img[:4, :, 1] < 0.35).all()) for img in shown]
+    assert red == [f in range(7, 11) for f in range(20)]
+    capsys.readouterr()
+    assert main(["animate", str(head_glb), "--video", str(frames), "--out", str(tmp_path / "again.glb")]) == 0
+    said = capsys.readouterr().err
+    assert "what it saw: no face in 4 frames (7-10)" in said, said
+
+
+def test_what_it_saw_turns_and_held_weights():
+    """The report's turns past what the fit trusts and weights held at 1 for a second or more."""
+    from scipy.spatial.transform import Rotation
+    from mimica.export.video import TURN_TRUSTED, VideoFit, what_it_saw
+    f = 100
+    w = np.zeros((f, 52))
+    w[10:40, ARKIT_52.index("jawOpen")] = 1.0                   # 30 frames at 25 fps: held
+    w[50:70, ARKIT_52.index("mouthPucker")] = 1.0               # 20 frames: not
+    yaw = np.zeros(f)
+    yaw[60:64] = np.radians(TURN_TRUSTED + 5)
+    rot = Rotation.from_euler("YXZ", np.stack([yaw, 0 * yaw, 0 * yaw], 1)).as_matrix()
+    saw = what_it_saw(VideoFit(w, rot, np.zeros(f), np.zeros(f, bool)), 25.0)
+    assert saw["held"] == {"jawOpen": [(10, 39)]}
+    assert saw["turned"] == [(60, 63)] and abs(saw["turn_max"] - TURN_TRUSTED - 5) < 1e-6
+    assert saw["no_face"] == []
+
+
+def test_takes_that_cannot_be_read_say_one_line(head_glb, tmp_path, capsys):
+    """A video with no face, a video cut short (its index first, so ffmpeg decodes what is
+    there), a preview without a video or not an MP4: one line each, nothing written."""
+    import subprocess
+    import imageio_ffmpeg
+    from mimica.image.io import read_image
+    from mimica.image.video import VideoWriter
+    blank = _frames(tmp_path / "blank", np.zeros(6), blank=range(6))
+    frames = _frames(tmp_path / "frames", _ramp(30, 2, 26, 1.0))
+    with VideoWriter(tmp_path / "v.mp4", 25) as w:
+        for f in sorted(frames.glob("*.png")):
+            w.write(read_image(f))
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error", "-i", str(tmp_path / "v.mp4"),
+                    "-c", "copy", "-movflags", "+faststart", str(tmp_path / "fast.mp4")], check=True)
+    whole = (tmp_path / "fast.mp4").read_bytes()
+    (tmp_path / "cut.mp4").write_bytes(whole[: len(whole) // 2])
+    (tmp_path / "w.csv").write_text(",".join(["time"] + ARKIT_52) + "\n0," + ",".join(["0"] * 52) + "\n")
+    cases = [(["--video", str(blank)], "no face in any of its 6 frames"),
+             (["--video", str(tmp_path / "cut.mp4")], "breaks off after"),
+             (["--arkit", str(tmp_path / "w.csv"), "--preview", str(tmp_path / "p.mp4")], "give --video"),
+             (["--video", str(frames), "--preview", str(tmp_path / "p.gif")], "written as .mp4")]
+    for args, said in cases:
+        out = tmp_path / "bad.glb"
+        capsys.readouterr()
+        assert main(["animate", str(head_glb), *args, "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and said in err[0], (args, err)
+        assert not out.exists() and not out.with_suffix(".csv").exists()
+        assert not any(tmp_path.glob("p.*")) and not any(tmp_path.glob(".p.*"))

@@ -18,13 +18,16 @@ def cmd_animate(a):
                           fps=a.fps, rest_frame=a.rest_frame)
     if (a.arkit is None) == (a.video is None):
         raise MimicaError("animate: give the take as --arkit take.csv or as --video take.mp4 (one of them)")
-    r = animate(a.head, a.out, a.arkit, a.video, opts, progress=_say)
+    if a.preview and a.video is None:
+        raise MimicaError("--preview shows the head beside the video it was fitted to: give --video")
+    r = animate(a.head, a.out, a.arkit, a.video, opts, progress=_say, preview=a.preview)
     if r.video:
         v = r.video
         _say(f"{a.video}: {v['frames']} frames tracked ({v['track_fps']:.0f} frames/s) and fitted "
              f"({v['fit_fps']:.0f} frames/s); frame {a.rest_frame} taken as the performer's rest; "
              f"points misfit median {v['misfit_median'] * 100:.1f} % of the face's width; "
              f"{v['unseen']} shapes the points cannot see (gaze, tongue) stay 0")
+        _say(f"{a.video}: what it saw: {_saw(v['saw'])}")
     w = r.weights
     if r.pivot is not None:
         turn = np.degrees(np.abs([w[n] for n in ("headYaw", "headPitch", "headRoll")]).max(1))
@@ -34,8 +37,28 @@ def cmd_animate(a):
     else:
         head_line = "; the head stays still (--head-rotation turns it)" if "headYaw" in w else ""
     _say(f"{a.video or a.arkit}: {len(r.times)} frames over {r.times[-1]:.2f}s ({r.rate:.3g} fps) drive {r.driven} "
-         f"morph targets of {Path(a.head).name}{head_line} -> {r.out}" + (f" (weights: {r.csv})" if r.csv else ""))
+         f"morph targets of {Path(a.head).name}{head_line} -> {r.out}" + (f" (weights: {r.csv})" if r.csv else "")
+         + (f"; preview: {r.preview}" if r.preview else ""))
     return 0
+
+
+def _frames(spans) -> str:
+    n = sum(b - a + 1 for a, b in spans)
+    shown = ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in spans[:6]) + (", ..." if len(spans) > 6 else "")
+    return f"{n} frame{'s' if n != 1 else ''} ({shown})"
+
+
+def _saw(saw: dict) -> str:
+    """export.video.what_it_saw's report in one line."""
+    from ..export.video import HELD_SECONDS, TURN_TRUSTED
+    said = [f"no face in {_frames(saw['no_face'])}, fitted to points filled in from their neighbours"
+            if saw["no_face"] else "a face in every frame"]
+    said.append(f"turned past {TURN_TRUSTED:g} degrees (the fit is measured within it) in {_frames(saw['turned'])}, "
+                f"at most {saw['turn_max']:.0f}" if saw["turned"] else f"turned at most {saw['turn_max']:.0f} degrees")
+    held = [f"{n} {_frames(s)}" for n, s in saw["held"].items()]
+    said.append(f"held at full weight for {HELD_SECONDS:g} s or more: {'; '.join(held)}" if held
+                else "no weight held at full")
+    return "; ".join(said)
 
 
 def add_args(sub) -> None:
@@ -61,6 +84,8 @@ def add_args(sub) -> None:
     an.add_argument("--pivot", help="x,y,z in metres, in the GLB's frame: the point the head turns about "
                                     "(default: the one `blendshapes` placed from the landmarks, with the neck "
                                     "bending below the chin)")
+    an.add_argument("--preview", help="with --video: preview.mp4, the video beside the head playing the fitted "
+                                      "weights, frame by frame")
     an.add_argument("--out", required=True, help="take.glb: the head with the take as an animation (or take.usd / "
                                                  ".usda / .usdc: its blend shapes and a SkelAnimation)")
     an.set_defaults(func=cmd_animate)

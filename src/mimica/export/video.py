@@ -45,6 +45,10 @@ RELAX_KEEP = 0.1           # a weight the L1 pull keeps above this is refitted w
 GAUSS_NEWTON_STEPS = 3     # per frame (and one to refit), from the last frame's pose and weights
 SMOOTH_POINTS = 1.5        # frames: the points' Gaussian over time
 POINT_WEIGHTS = np.r_[np.full(17, 0.3), np.ones(51)]   # the face's outline, where detectors err most, counts less
+CHECK_EVERY = 5            # frames: the face detector confirms the tracked face this often
+TURN_TRUSTED = 30.0        # degrees of yaw or pitch from the rest frame: the turns the fit was measured on
+HELD_WEIGHT = 0.99         # a weight at its bound (1) ...
+HELD_SECONDS = 1.0         # ... this long is said
 
 
 @dataclass
@@ -123,10 +127,29 @@ class VideoFit:
         The head's rotation relative to the rest frame.
     residual : (F,) float array
         RMS misfit of the 68 points, in face widths.
+    missing : (F,) bool array
+        Frames that showed no face: fitted to points interpolated from their neighbours.
     """
     weights: np.ndarray          # (F, 52) in ARKIT_52's order
     rotations: np.ndarray        # (F, 3, 3): the head's rotation relative to the rest frame
     residual: np.ndarray         # (F,) RMS misfit of the 68 points, in face widths
+    missing: np.ndarray = None   # (F,) frames without a face
+
+
+def _fill_missing(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tracked points (F, 68, 2) with NaN rows where a frame showed no face: those frames' points
+    interpolated linearly in time from the nearest frames with a face (held at the ends), and
+    which they were."""
+    missing = ~np.isfinite(pts).all(axis=(1, 2))
+    if missing.all():
+        raise MimicaError("tracked points: no frame has a face")
+    if not missing.any():
+        return pts, missing
+    have = np.nonzero(~missing)[0]
+    flat = pts.reshape(len(pts), -1).copy()
+    for c in range(flat.shape[1]):
+        flat[missing, c] = np.interp(np.nonzero(missing)[0], have, flat[have, c])
+    return flat.reshape(pts.shape), missing
 
 
 def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, rest_pull: float = REST_PULL,
@@ -140,7 +163,8 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
     Parameters
     ----------
     points : (F, 68, 2) float array
-        Pixels (y down).
+        Pixels (y down); NaN rows where a frame showed no face (fitted to points interpolated
+        from their neighbours; `missing` says which).
     basis : LandmarkBasis
     rest_frame : int
         The frame showing the performer's rest: what it shows of their own face is added to the
@@ -165,6 +189,10 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
         raise MimicaError(f"tracked points: expected (frames, 68, 2), got {pts.shape}")
     if not 0 <= rest_frame < len(pts):
         raise MimicaError(f"rest frame {rest_frame}: the take has frames 0 to {len(pts) - 1}")
+    pts, missing = _fill_missing(pts)
+    if missing[rest_frame]:
+        raise MimicaError(f"rest frame {rest_frame}: it shows no face; name a frame where the performer's face is "
+                          "at rest")
     width = float(np.linalg.norm(basis.rest[16] - basis.rest[0]))          # lengths in face widths
     L = basis.rest / width
     B = basis.motion / width
@@ -230,11 +258,15 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
         out[f, free] = w
         rots[f] = R @ R0.T
         res[f] = float(np.sqrt(np.mean((A @ z - b) ** 2)))
-    return VideoFit(out, rots, res)
+    return VideoFit(out, rots, res, missing)
 
 
 def track_video(path, progress=None, max_frames: int | None = None):
-    """The face's 68 points through a video or a folder of frames (dlib's tracker).
+    """The face's 68 points through a video or a folder of frames (dlib's detector and shape
+    predictor): each frame's points fitted inside the box of the last frame's; the detector
+    confirms the face every CHECK_EVERY frames, and where it finds none, the frames since the
+    last confirmation are checked one by one, so that the frames without a face are known
+    exactly; then it looks for the face again on every frame.
 
     Parameters
     ----------
@@ -248,22 +280,65 @@ def track_video(path, progress=None, max_frames: int | None = None):
     -------
     fps : float
     points : (F, 68, 2) float array
+        NaN rows where a frame shows no face.
     """
     from ..image.video import frame_source
-    from ..landmarks.detect2d import Tracker
+    from ..landmarks.detect2d import box_of, detect_faces, fit_points
     n, fps, frames = frame_source(path)
-    # dlib's tracker: the fit's figures (bench/export.py) were measured with it
-    tracker = Tracker(alpha=1.0, what=str(path), detector="dlib")   # no smoothing here: the fit smooths
-    out = []
-    for i, img in enumerate(frames):
-        if max_frames is not None and i >= max_frames:
-            break
-        out.append(tracker(img))
-        if progress and (i + 1) % 30 == 0:
-            progress(f"tracked {i + 1}" + (f" of {n}" if n else "") + " frames")
+    none = np.full((68, 2), np.nan)
+    out, raw, since = [], None, []          # since: (frame, image) tracked since the detector last saw the face
+
+    def nearest(boxes, c):
+        return min(boxes, key=lambda b: np.hypot((b[0] + b[2]) / 2 - c[0], (b[1] + b[3]) / 2 - c[1]))
+
+    def faces(img):
+        """The detector's boxes, on the frame at half size where it is 400 pixels or more (a
+        quarter of the cost; a tracked face is large), in the frame's pixels."""
+        if min(img.shape[:2]) < 400:
+            return detect_faces(img)
+        return [tuple(2 * c for c in b) for b in detect_faces(img[::2, ::2], upsample=0)]
+    try:
+        for i, img in enumerate(frames):
+            if max_frames is not None and i >= max_frames:
+                break
+            if progress and i and i % 30 == 0:
+                progress(f"tracked {i}" + (f" of {n}" if n else "") + " frames")
+            if raw is None:                                     # looking for a face
+                boxes = faces(img)
+                raw = fit_points(img, boxes[0]) if boxes else None
+                since = []
+                out.append(none if raw is None else raw)
+                continue
+            pts = fit_points(img, box_of(raw))
+            lost = np.abs(pts - raw).max() > 0.25 * np.ptp(raw[:, 0])
+            if lost or i % CHECK_EVERY == 0:
+                boxes = faces(img)
+                if not boxes:                                   # gone: since when
+                    gone = next((j for j, im in since if not faces(im)), i)
+                    out[gone:] = [none] * (len(out) - gone)
+                    out.append(none)
+                    raw, since = None, []
+                    continue
+                if lost:
+                    pts = fit_points(img, nearest(boxes, raw.mean(0)))
+                since = []
+            else:
+                since.append((i, img))
+            raw = pts
+            out.append(pts)
+    except (RuntimeError, OSError) as e:                        # ffmpeg stopping inside the stream
+        what = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise MimicaError(f"{path}: the video breaks off after {len(out)} frames ({what}); re-encode it "
+                          "(ffmpeg -i IN -c:v libx264 OUT.mp4) or cut it there") from None
     if not out:
         raise MimicaError(f"{path}: no frames")
-    return fps, np.stack(out)
+    if n and max_frames is None and len(out) < n - max(2, 0.1 * n):    # its header promised more
+        raise MimicaError(f"{path}: the video breaks off after {len(out)} of its {n} frames (the file is cut short); "
+                          "re-encode what is left (ffmpeg -i IN -c:v libx264 OUT.mp4)")
+    pts = np.stack(out)
+    if not np.isfinite(pts).any():
+        raise MimicaError(f"{path}: no face in any of its {len(pts)} frames")
+    return fps, pts
 
 
 def head_angles(rotations: np.ndarray) -> np.ndarray:
@@ -323,3 +398,105 @@ def write_live_link_csv(path, times: np.ndarray, weights: np.ndarray, fps: float
     with atomic_path(path) as tmp:
         Path(tmp).write_text("\n".join(lines) + "\n")
     return path
+
+
+def _spans(mask: np.ndarray) -> list[tuple[int, int]]:
+    """The runs of True in a (F,) bool array, as (first, last) frames."""
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    return list(zip(np.nonzero(d == 1)[0].tolist(), (np.nonzero(d == -1)[0] - 1).tolist()))
+
+
+def what_it_saw(fit: VideoFit, fps: float, names=ARKIT_52) -> dict:
+    """What a video's fit should tell its user: the frames without a face, the frames turned
+    further than the fit was measured on, and the weights held at their bound for long.
+
+    Parameters
+    ----------
+    fit : VideoFit
+    fps : float
+        The video's rate.
+    names : list of str
+        The weights' names (fit.weights' columns).
+
+    Returns
+    -------
+    dict
+        {"no_face": [(first, last), ...], "turned": [(first, last), ...] where |yaw| or |pitch|
+        from the rest frame passes TURN_TRUSTED degrees, "turn_max": the largest (degrees),
+        "held": {name: [(first, last), ...]} where a weight stays at or above HELD_WEIGHT for
+        HELD_SECONDS or longer}.
+    """
+    missing = np.zeros(len(fit.weights), bool) if fit.missing is None else fit.missing
+    ang = np.degrees(np.abs(head_angles(fit.rotations)[:, :2])).max(1)
+    ang[missing] = 0.0
+    long = max(1, int(round(HELD_SECONDS * fps)))
+    held = {}
+    for j, n in enumerate(names):
+        runs = [r for r in _spans((fit.weights[:, j] >= HELD_WEIGHT) & ~missing) if r[1] - r[0] + 1 >= long]
+        if runs:
+            held[n] = runs
+    return {"no_face": _spans(missing), "turned": _spans(ang > TURN_TRUSTED), "turn_max": float(ang.max()),
+            "held": held}
+
+
+def write_preview(path, video, head_glb, weights: np.ndarray, rotations: np.ndarray, fps: float,
+                  missing: np.ndarray | None = None, height: int = 360, progress=None) -> Path:
+    """An MP4 of the video beside the head playing the fitted weights, frame by frame (the head
+    turned as the fit found the performer's head; frames without a face marked red).
+
+    Parameters
+    ----------
+    path : str or Path
+        The MP4 to write (whole, or not at all).
+    video : str or Path
+        The video (or folder of frames) the weights were fitted to.
+    head_glb : str or Path
+        The head with its ARKit morph targets.
+    weights : (F, 52) float array
+        In ARKIT_52's order.
+    rotations : (F, 3, 3) float array
+        The head's rotation relative to the rest frame.
+    fps : float
+    missing : (F,) bool array or None
+        Frames without a face.
+    height : int
+        The preview's height, pixels.
+    progress : callable, optional
+        Called with a line of text every 30 frames.
+
+    Returns
+    -------
+    Path
+    """
+    from PIL import Image
+    from ..image.io import to_uint8
+    from ..image.raster import framing, render_mesh
+    from ..image.video import VideoWriter, frame_source
+    from ..mesh.io import read_morph_targets
+    mesh, targets, _ = read_morph_targets(head_glb)
+    rest = mesh.vertices
+    deltas = np.stack([targets[n] - rest for n in ARKIT_52])           # (52, n, 3)
+    centre = rest.mean(0)
+    frame = framing(rest)
+    frame = (frame[0], frame[1] * 1.15)                                  # room to turn
+    _, _, frames = frame_source(video)
+    with VideoWriter(path, fps) as out:
+        for f, img in enumerate(frames):
+            if f >= len(weights):
+                break
+            v = rest + np.tensordot(weights[f], deltas, 1)
+            v = (v - centre) @ rotations[f].T + centre
+            head = render_mesh(mesh, v, size=(height, height), frame=frame)
+            im = Image.fromarray(to_uint8(img))
+            im = im.resize((max(2, round(im.width * height / im.height)), height))
+            both = Image.new("RGB", (im.width + height, height), "white")
+            both.paste(im, (0, 0))
+            both.paste(Image.fromarray(head), (im.width, 0))
+            pic = np.asarray(both).copy()
+            if missing is not None and missing[f]:
+                pic[:6] = (220, 40, 40)                                  # no face: a red band
+            out.write(pic)
+            if progress and f and f % 30 == 0:
+                progress(f"preview: {f} of {len(weights)} frames")
+    return Path(path)
+

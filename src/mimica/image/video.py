@@ -46,7 +46,8 @@ def frame_source(path):
         reader = ff.read_frames(str(path))
         meta = next(reader)
     except (RuntimeError, OSError, StopIteration) as e:
-        raise MimicaError(f"{path}: not a video ffmpeg can read ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+        raise MimicaError(f"{path}: not a video ffmpeg can read, or cut short before its index "
+                          f"({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
     w, h = meta["size"]
     fps = float(meta.get("fps") or 25.0)
     n = int(round(meta.get("duration", 0) * fps)) or None

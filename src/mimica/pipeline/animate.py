@@ -60,7 +60,10 @@ class AnimateResult:
         A video's weights as a Live Link Face CSV, beside `out`.
     video : dict
         A video's figures: {"frames", "track_fps", "fit_fps", "misfit_median" (of the face's width),
-        "unseen" (shapes the points cannot see)}.
+        "unseen" (shapes the points cannot see), "saw" (export.video.what_it_saw: frames without a
+        face, turned past what the fit trusts, weights held at 1), "fit" (the VideoFit)}.
+    preview : Path or None
+        The video beside the head playing its weights, where asked for.
     """
     out: Path
     times: np.ndarray
@@ -71,6 +74,7 @@ class AnimateResult:
     bending: int
     csv: Path | None = None
     video: dict = field(default_factory=dict)
+    preview: Path | None = None
 
 
 def _check(head: Path, out: Path, take, video, o: AnimateOptions) -> bool:
@@ -113,10 +117,10 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None):
     fps : float
     figures : dict
         {"frames", "track_fps", "fit_fps", "misfit_median" (face widths), "unseen": shapes 68
-        points cannot see}.
+        points cannot see, "saw": export.video.what_it_saw's report, "fit": the VideoFit}.
     """
     from ..export import ARKIT_52
-    from ..export.video import UNSEEN, fit_weights, head_angles, landmark_basis, track_video
+    from ..export.video import UNSEEN, fit_weights, head_angles, landmark_basis, track_video, what_it_saw
     basis = landmark_basis(head)
     t0 = time.perf_counter()
     fps, pts = track_video(video, progress=progress)
@@ -127,7 +131,7 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None):
     weights.update(zip(HEAD_ANGLES, head_angles(fit.rotations).T))
     figures = {"frames": len(pts), "track_fps": len(pts) / max(t1 - t0, 1e-9),
                "fit_fps": len(pts) / max(t2 - t1, 1e-9), "misfit_median": float(np.median(fit.residual)),
-               "unseen": len(UNSEEN)}
+               "unseen": len(UNSEEN), "saw": what_it_saw(fit, fps), "fit": fit}
     return np.arange(len(pts)) / fps, weights, fps, figures
 
 
@@ -165,7 +169,8 @@ def take_usd(head: Path, out, times, weights: dict, rate: float) -> dict:
     return {"driven": len(names), "pivot": None, "bending": 0}
 
 
-def animate(head, out, take=None, video=None, options: AnimateOptions | None = None, progress=None) -> AnimateResult:
+def animate(head, out, take=None, video=None, options: AnimateOptions | None = None, progress=None,
+            preview=None) -> AnimateResult:
     """Play a take (a file) or a video's performance on a head's ARKit blendshapes.
 
     Parameters
@@ -182,6 +187,8 @@ def animate(head, out, take=None, video=None, options: AnimateOptions | None = N
     options : AnimateOptions, optional
     progress : callable, optional
         Called with one line of text while a video is read.
+    preview : str or Path, optional
+        With a video: an MP4 of the video beside the head playing its fitted weights.
 
     Returns
     -------
@@ -193,6 +200,12 @@ def animate(head, out, take=None, video=None, options: AnimateOptions | None = N
     o = options or AnimateOptions()
     head, out = Path(head), Path(out)
     usd = _check(head, out, take, video, o)
+    if preview is not None:
+        preview = Path(preview)
+        if video is None:
+            raise MimicaError(f"{preview}: a preview shows the head beside the video it was fitted to; give a video")
+        if preview.suffix.lower() != ".mp4":
+            raise MimicaError(f"{preview}: a preview is written as .mp4")
     csv_out, figures = None, {}
     if video is not None:
         times, weights, rate, figures = weights_from_video(head, video, o.rest_frame, progress)
@@ -200,15 +213,23 @@ def animate(head, out, take=None, video=None, options: AnimateOptions | None = N
     else:
         times, weights, rate = read_take(take, fps=o.fps)
 
-    def weights_csv():
+    def video_outputs():                        # the CSV and the preview, beside the animation
         if csv_out is not None:
-            from ..export.video import write_live_link_csv
+            from ..export.video import write_live_link_csv, write_preview
             write_live_link_csv(csv_out, times, np.stack([weights[n] for n in ARKIT_52], 1), rate,
                                 np.stack([weights[n] for n in HEAD_ANGLES], 1))
+            if preview is not None:
+                try:
+                    fit = figures["fit"]
+                    write_preview(preview, video, head, fit.weights, fit.rotations, rate, fit.missing,
+                                  progress=progress)
+                except BaseException:
+                    csv_out.unlink(missing_ok=True)
+                    raise
     if usd:                                     # write_usd is atomic by itself (its suffix names its format)
         info = take_usd(head, out, times, weights, rate)
         try:
-            weights_csv()
+            video_outputs()
         except BaseException:
             out.unlink(missing_ok=True)
             raise
@@ -216,5 +237,6 @@ def animate(head, out, take=None, video=None, options: AnimateOptions | None = N
         with atomic_path(out) as tmp:
             info = animate_glb(head, tmp, times, weights, head_rotation=o.head_rotation,
                                pivot=None if o.pivot is None else list(o.pivot))
-            weights_csv()                       # inside: a failure leaves neither file
-    return AnimateResult(out, times, rate, weights, info["driven"], info["pivot"], info["bending"], csv_out, figures)
+            video_outputs()                     # inside: a failure leaves none of them
+    return AnimateResult(out, times, rate, weights, info["driven"], info["pivot"], info["bending"], csv_out, figures,
+                         preview)
