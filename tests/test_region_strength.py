@@ -73,3 +73,19 @@ def test_the_head_stays_or_follows_the_source(pair):
     assert np.median(np.abs(follow.image - shifted)[40:-40, 40:-40]) * 255 < 2.0
     with pytest.raises(MimicaError, match="head 'nod'"):
         an.transfer(luminance(s), sp, luminance(moved), sp, head="nod")
+
+
+@pytest.mark.parametrize("method", ["shading", "warp"])
+def test_one_eye_at_zero_keeps_its_pixels_while_the_other_moves(pair, method):
+    """A side's own region: eye_left=0 (the subject's left, iBUG 42-47) keeps that eye's pixels
+    within one grey level of the target's while the right eye takes the surprise."""
+    from mimica.image.warp import polygon_mask
+    s, sp, x, xp, t, tp = pair
+    got = ImageAnalogy(t, tp).transfer(luminance(s), sp, luminance(x), xp, method=method,
+                                       strength={"eye_left": 0.0}).image
+
+    def change(region):
+        inside, (x0, y0, x1, y1) = polygon_mask(tp[REGIONS[region]], t.shape[:2])
+        return np.abs(got[y0:y1, x0:x1][inside] - t[y0:y1, x0:x1][inside]).max() * 255
+    assert change("eye_left") <= 1.0
+    assert change("eye_right") > 5

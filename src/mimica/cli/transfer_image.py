@@ -63,7 +63,8 @@ def add_args(sub) -> None:
                          "(Liu 2001); warp: feature-point warp only")
     ti.add_argument("--strength", default="1", metavar="A",
                     help="how much of the expression: 0 none, 1 the source's (default), up to 2 exaggerated; "
-                         "or per region, e.g. brows=0.5,mouth=1.2 (regions: brows, eyes, nose, mouth, jaw; "
+                         "or per region, e.g. brows=0.5,mouth=1.2 (regions: brows, eyes, nose, mouth, jaw, and "
+                         "brow_left/_right, eye_left/_right, lip_upper/_lower; "
                          "a leading number sets the others: 0,mouth=1)")
     ti.add_argument("--no-mouth", action="store_true", help="keep the target's own mouth when the source opens "
                     "its mouth (default: the source's teeth and mouth interior, Song's teeth template)")

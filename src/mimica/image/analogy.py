@@ -393,6 +393,8 @@ class ImageAnalogy:
         if self.mouth and mouth_a > 0 and self._mouth_closed and mouth_open(pts) and mouth_open(x_pts):
             gain = self._target_lightness / max(_lightness(source, s_pts), 1e-3)
             fill_mouth(out, pts, expressive, x_pts, gain)
+        if np.ndim(strength):
+            _hold_closed_regions(out, self.target, self.points, strength)
         if head == "follow":
             # the source's head motion (S -> S', on its stable points), carried into the target's
             # frame: M = a b^-1 a^-1, the whole picture resampled by it
@@ -419,9 +421,30 @@ class ImageAnalogy:
 # default), Song's eq. 4 (vtc, the paper's), expression ratio images (eri), none (warp)
 METHODS = ("shading", "vtc", "eri", "warp")
 
-# the face's regions by their feature points, for per-region strengths
+# the face's regions by their feature points, for per-region strengths; a side's or a lip's own
+# (the subject's left and right, as ARKit names them) after the regions they are part of, so that
+# "eyes=0.5,eye_left=0" holds the left eye (the lips' corners stay the mouth's)
 REGIONS = {"brows": np.arange(17, 27), "eyes": np.arange(36, 48), "nose": np.arange(27, 36),
-           "mouth": np.arange(48, 68), "jaw": np.arange(0, 17)}
+           "mouth": np.arange(48, 68), "jaw": np.arange(0, 17),
+           "brow_right": np.arange(17, 22), "brow_left": np.arange(22, 27),
+           "eye_right": np.arange(36, 42), "eye_left": np.arange(42, 48),
+           "lip_upper": np.r_[49:54, 61:64], "lip_lower": np.r_[55:60, 65:68]}
+
+
+# the regions that are closed outlines of feature points: one held at 0 keeps the target's own
+# pixels inside its outline exactly (the warp's triangulation runs across an eye's thin outline
+# to the points around it, which would otherwise carry their motion into it)
+OUTLINES = {"eye_right": np.arange(36, 42), "eye_left": np.arange(42, 48), "mouth": np.arange(48, 60),
+            "lip_upper": np.r_[48:55, 64, 63, 62, 61, 60], "lip_lower": np.r_[48, 60, 67, 66, 65, 64, 54:60]}
+
+
+def _hold_closed_regions(out, target, points, strength) -> None:
+    """Inside the outline of each closed region whose feature points are all at strength 0,
+    the target's own pixels (out changed in place; those points did not move)."""
+    for idx in OUTLINES.values():
+        if np.all(np.asarray(strength)[idx] == 0):
+            inside, (x0, y0, x1, y1) = polygon_mask(points[idx], out.shape[:2])
+            out[y0:y1, x0:x1][inside] = target[y0:y1, x0:x1][inside]
 
 
 def point_strengths(strength) -> np.ndarray:
