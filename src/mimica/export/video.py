@@ -145,11 +145,15 @@ def _fill_missing(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         raise MimicaError("tracked points: no frame has a face")
     if not missing.any():
         return pts, missing
-    have = np.nonzero(~missing)[0]
-    flat = pts.reshape(len(pts), -1).copy()
-    for c in range(flat.shape[1]):
-        flat[missing, c] = np.interp(np.nonzero(missing)[0], have, flat[have, c])
-    return flat.reshape(pts.shape), missing
+    have, gone = np.nonzero(~missing)[0], np.nonzero(missing)[0]
+    # each missing frame between its nearest seen frames (held at the ends), all coordinates at once
+    hi = np.clip(np.searchsorted(have, gone), 1, len(have) - 1) if len(have) > 1 else np.zeros(len(gone), int)
+    lo = np.maximum(hi - 1, 0)
+    span = np.maximum(have[hi] - have[lo], 1)
+    t = np.clip((gone - have[lo]) / span, 0.0, 1.0)[:, None, None]
+    out = pts.copy()
+    out[gone] = (1 - t) * pts[have[lo]] + t * pts[have[hi]]
+    return out, missing
 
 
 def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, rest_pull: float = REST_PULL,
@@ -406,7 +410,7 @@ def _spans(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.nonzero(d == 1)[0].tolist(), (np.nonzero(d == -1)[0] - 1).tolist()))
 
 
-def what_it_saw(fit: VideoFit, fps: float, names=ARKIT_52) -> dict:
+def what_it_saw(fit: VideoFit, fps: float, names=ARKIT_52, angles: np.ndarray | None = None) -> dict:
     """What a video's fit should tell its user: the frames without a face, the frames turned
     further than the fit was measured on, and the weights held at their bound for long.
 
@@ -417,6 +421,8 @@ def what_it_saw(fit: VideoFit, fps: float, names=ARKIT_52) -> dict:
         The video's rate.
     names : list of str
         The weights' names (fit.weights' columns).
+    angles : (F, 3) float array or None
+        head_angles(fit.rotations) where the caller has them already; None: computed here.
 
     Returns
     -------
@@ -427,7 +433,8 @@ def what_it_saw(fit: VideoFit, fps: float, names=ARKIT_52) -> dict:
         HELD_SECONDS or longer}.
     """
     missing = np.zeros(len(fit.weights), bool) if fit.missing is None else fit.missing
-    ang = np.degrees(np.abs(head_angles(fit.rotations)[:, :2])).max(1)
+    angles = head_angles(fit.rotations) if angles is None else angles
+    ang = np.degrees(np.abs(angles[:, :2])).max(1)
     ang[missing] = 0.0
     long = max(1, int(round(HELD_SECONDS * fps)))
     held = {}
@@ -479,6 +486,8 @@ def write_preview(path, video, head_glb, weights: np.ndarray, rotations: np.ndar
     centre = rest.mean(0)
     frame = framing(rest)
     frame = (frame[0], frame[1] * 1.15)                                  # room to turn
+    # the video is decoded a second time: keeping the tracking pass's frames would hold the whole
+    # take in memory (a 10 s 640x480 take is ~1.1 GB as float32); a decode costs less than that
     _, _, frames = frame_source(video)
     with VideoWriter(path, fps) as out:
         for f, img in enumerate(frames):

@@ -128,10 +128,11 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None):
     fit = fit_weights(pts, basis, rest_frame=rest_frame)
     t2 = time.perf_counter()
     weights = {n: fit.weights[:, j] for j, n in enumerate(ARKIT_52)}
-    weights.update(zip(HEAD_ANGLES, head_angles(fit.rotations).T))
+    angles = head_angles(fit.rotations)
+    weights.update(zip(HEAD_ANGLES, angles.T))
     figures = {"frames": len(pts), "track_fps": len(pts) / max(t1 - t0, 1e-9),
                "fit_fps": len(pts) / max(t2 - t1, 1e-9), "misfit_median": float(np.median(fit.residual)),
-               "unseen": len(UNSEEN), "saw": what_it_saw(fit, fps), "fit": fit}
+               "unseen": len(UNSEEN), "saw": what_it_saw(fit, fps, angles=angles), "fit": fit}
     return np.arange(len(pts)) / fps, weights, fps, figures
 
 
