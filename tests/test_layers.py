@@ -217,14 +217,17 @@ def test_no_user_calls_another_and_nothing_runs_mimica_in_a_child():
 
 
 def test_the_command_line_only_parses_calls_and_prints():
-    """Each command's module stays small (<= 120 lines, no function over 40): the work is the
-    pipeline's."""
+    """Each command's module stays small (<= 120 lines, no function over 40 lines of code, its
+    docstring not counted): the work is the pipeline's."""
     for path in sorted((PACKAGE / "cli").glob("*.py")):
         text = path.read_text(encoding="utf-8")
         assert text.count("\n") <= 120, f"{path.name}: {text.count(chr(10))} lines"
         for node in ast.walk(ast.parse(text)):
             if isinstance(node, ast.FunctionDef):
-                assert node.end_lineno - node.lineno + 1 <= 40, f"{path.name}: {node.name} is too long"
+                doc = node.body[0]
+                has_doc = isinstance(doc, ast.Expr) and isinstance(doc.value, ast.Constant) and len(node.body) > 1
+                length = node.end_lineno - node.lineno + 1 - ((doc.end_lineno - doc.lineno + 1) if has_doc else 0)
+                assert length <= 40, f"{path.name}: {node.name} is too long"
 
 
 def test_public_definitions_carry_numpydoc_sections():

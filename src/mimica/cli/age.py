@@ -10,6 +10,19 @@ from ..pipeline import AgeOptions as D
 
 
 def cmd_age(a):
+    """`mimica age`: a face with its wrinkles at several ages, neutral and with an expression
+    (pipeline.age_sheet).
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..mesh import read_mesh
     from ..pipeline import AgeOptions, age_sheet
     try:

@@ -13,6 +13,19 @@ from ..pipeline import AnimateOptions as D
 
 
 def cmd_animate(a):
+    """`mimica animate`: an ARKit take (a Live Link Face CSV, or one fitted to a video) played on a
+    head's ARKit blendshapes (pipeline.animate).
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..pipeline import AnimateOptions, animate
     opts = AnimateOptions(head_rotation=a.head_rotation, pivot=tuple(floats(a.pivot, 3, "--pivot")) if a.pivot else None,
                           fps=a.fps, rest_frame=a.rest_frame)

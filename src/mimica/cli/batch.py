@@ -23,6 +23,19 @@ def _print_status(out: Path) -> int:
 
 
 def cmd_batch(a):
+    """`mimica batch`: many heads x many performances from a manifest, resumable (batch.run_batch),
+    or its status.
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done; 1: a job failed).
+    """
     from ..batch import run_batch
     out = Path(a.out)
     if a.status:

@@ -7,6 +7,18 @@ from ._common import _say
 
 
 def cmd_blender_addon(a):
+    """`mimica blender-addon`: the Blender add-on written as a zip (pipeline.write_blender_addon).
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..pipeline import write_blender_addon
     dest = write_blender_addon(a.out)
     _say(f"{dest}: the add-on; in Blender: Edit > Preferences > Add-ons > Install from disk..., this file; its "

@@ -45,6 +45,19 @@ def _say_written(out: Path, r, units: str, name: str) -> None:
 
 
 def cmd_blendshapes(a):
+    """`mimica blendshapes`: the 52 ARKit blendshapes on any head mesh, as one GLB
+    (pipeline.make_blendshapes).
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..export import ARKIT_52
     from ..pipeline import BlendshapesOptions, make_blendshapes
     out = Path(a.out)

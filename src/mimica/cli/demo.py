@@ -6,6 +6,19 @@ from pathlib import Path
 
 
 def cmd_demo(a):
+    """`mimica demo`: ICT-FaceKit's bundled expressions transferred; meshes and a contact sheet
+    written.
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..demo import run_demo
     from ..outputs import staged_dir
     with staged_dir(a.out, {"command": "demo"}) as d:

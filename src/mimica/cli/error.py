@@ -11,6 +11,18 @@ from ._common import _say
 
 
 def cmd_error(a):
+    """`mimica error`: Song's per-vertex error of a result against a reference, as a PNG map.
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..mesh import read_mesh
     from ..render.errormap import error_map_png
     from ..transfer import relative_error, song_vertex_error

@@ -20,6 +20,19 @@ def _clip_line(info: dict, fps: float, units: str) -> str:
 
 
 def cmd_export(a):
+    """`mimica export`: a sequence of meshes as one glTF animation, or as OBJ/PLY files
+    (pipeline.export_sequence).
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..pipeline import ExportOptions, export_sequence
     paths = _expand_frames([Path(p) for p in a.frames])
     out = Path(a.out)

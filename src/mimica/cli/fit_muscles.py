@@ -11,6 +11,19 @@ from ._common import _say
 
 
 def cmd_fit_muscles(a):
+    """`mimica fit-muscles`: the muscle activations that best make target shapes or an ARKit take
+    (pipeline.fit_muscles).
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..pipeline import fit_muscles
     if bool(a.target) == bool(a.arkit):
         raise MimicaError("fit-muscles: give --target EXPR.obj ... or --arkit (a take CSV/JSON or a head's ARKit GLB)")

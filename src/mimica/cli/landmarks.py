@@ -31,6 +31,19 @@ def _mesh_landmarks(a, path: Path) -> int:
 
 
 def cmd_landmarks(a):
+    """`mimica landmarks`: the 68 feature points found on a photo or a mesh, written as JSON (and a
+    picture).
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..image import read_image, write_image
     from ..landmarks import detect2d
     from ..image.io import to_uint8

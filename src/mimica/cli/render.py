@@ -9,6 +9,18 @@ from ..pipeline.sequence import RenderOptions as D, VIEW_CHOICES
 
 
 def cmd_render(a):
+    """`mimica render`: pictures and videos of a face or a sequence (pipeline.render_sequence).
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..pipeline import RenderOptions, render_sequence
     src = Path(a.face)
     paths = _expand_frames([src]) if src.is_dir() else [src]

@@ -9,6 +9,18 @@ from ..pipeline import RigOptions as D
 
 
 def cmd_rig(a):
+    """`mimica rig`: muscles, springs and regions of interest placed on a face (pipeline.make_rig).
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..mesh import read_mesh
     from ..pipeline import RigOptions, make_rig
     t0 = time.perf_counter()

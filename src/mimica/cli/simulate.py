@@ -13,6 +13,18 @@ from ..pipeline.simulate import SimulateOptions as D, ENGINES, MAPS_SETS, SOLVER
 
 
 def cmd_simulate(a):
+    """`mimica simulate`: a rig animated by its muscles (pipeline.simulate).
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..pipeline import SimulateOptions, simulate
     opts = SimulateOptions(expression=a.expression, timeline=a.timeline, action=a.action, duration=a.duration,
                            fps=a.fps, gravity=a.gravity, pulls=tuple(pull(p, "--pull") for p in a.pull or []),

@@ -11,6 +11,19 @@ from ..pipeline import TransferOptions as D
 
 
 def cmd_transfer(a):
+    """`mimica transfer`: a source face's expressions moved onto a target face
+    (pipeline.transfer_sequence).
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..errors import NeedsLandmarks
     from ..mesh.io import GltfLayout
     from ..pipeline import TransferOptions, transfer_sequence

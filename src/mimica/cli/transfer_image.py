@@ -23,6 +23,19 @@ def _strength(text: str):
 
 
 def cmd_transfer_image(a):
+    """`mimica transfer-image`: a photo pair's expression moved onto other photos
+    (pipeline.transfer_photos).
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..pipeline import PhotoOptions, transfer_photos
     if a.driving and a.source_expr:
         raise MimicaError("give either source expression photos or --driving VIDEO, not both")

@@ -21,6 +21,18 @@ def _rig_of(a):
 
 
 def cmd_view(a):
+    """`mimica view`: the live viewer in the browser, served until interrupted.
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..wrinkles import mask_for
     import asyncio
     import webbrowser

@@ -8,6 +8,18 @@ from ._common import _landmarks, _say
 
 
 def cmd_wrinkle_mask(a):
+    """`mimica wrinkle-mask`: the reference wrinkle mask carried onto a face.
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+        The command's options (its add_args).
+
+    Returns
+    -------
+    int
+        The exit status (0: done).
+    """
     from ..wrinkles import mask_for
     from ..mesh import read_mesh
     face = read_mesh(a.face)
