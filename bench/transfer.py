@@ -31,11 +31,17 @@ from mimica.data import (EXPRESSIONS, ICT_FACE_AREA_FACES, ICT_FACE_AREA_VERTICE
 from mimica.landmarks import Landmarks, ict_landmarks  # noqa: E402
 from mimica.correspond.remesh import resample_face  # noqa: E402
 from mimica.transfer import ExpressionTransfer, relative_error, static_vertices  # noqa: E402
+from mimica.transfer.core import ANCHOR  # noqa: E402
 from mimica.solver import available, backend  # noqa: E402
 import mimica  # noqa: E402
 mimica.keep_memory()                   # as the command line does (mimica/_memory.py)
 
 FACE = slice(0, ICT_FACE_AREA_VERTICES)
+
+
+def paper(method):
+    """The baseline as its paper has it: Sumner and Popovic's DT without mimica's anchor."""
+    return {"anchor": 0.0} if method == "dt" else {}
 
 
 def best_of(fn, repeat):
@@ -101,11 +107,12 @@ def trimesh_registered(source, source_lm, target, target_lm, lookup, contours=Fa
 
 
 def remeshed_mixes(model, peer_cases: int):
-    """(ours per case, same topology per case, peer per case on the first peer_cases, seconds)."""
+    """(ours per case, same topology per case, peer per case on the first peer_cases, ours without
+    the anchor per case, seconds)."""
     import mimica.correspond as corr
     S = model.mesh
     ls = ict_landmarks(S)
-    ours, same, peer = [], [], []
+    ours, same, peer, song = [], [], [], []
     t0 = time.perf_counter()
     for k in range(20):
         seed = 300 + k
@@ -119,6 +126,8 @@ def remeshed_mixes(model, peer_cases: int):
         truth = [rs.carry(tv[FACE] + m[FACE] - S.vertices[FACE]) for m in mx]
         out = ExpressionTransfer(S, rs.mesh, ls, lt, method="vtc", static=static).apply(mx)
         ours.append(relative_error(out, np.stack(truth), rs.mesh.vertices))            # the case's mixes pooled
+        o0 = ExpressionTransfer(S, rs.mesh, ls, lt, method="vtc", static=static, anchor=0.0).apply(mx)
+        song.append(relative_error(o0, np.stack(truth), rs.mesh.vertices))           # without the anchor
         T = S.with_vertices(tv)
         o2 = ExpressionTransfer(S, T, ls, ict_landmarks(T), method="vtc", static=static).apply(mx)
         same.append(relative_error(o2, tv + mx - S.vertices, tv, FACE))
@@ -129,7 +138,7 @@ def remeshed_mixes(model, peer_cases: int):
             finally:
                 corr._registered = saved
             peer.append(relative_error(o3, np.stack(truth), rs.mesh.vertices))
-    return np.array(ours), np.array(same), np.array(peer), time.perf_counter() - t0
+    return np.array(ours), np.array(same), np.array(peer), np.array(song), time.perf_counter() - t0
 
 
 def main():
@@ -141,8 +150,8 @@ def main():
     ap.add_argument("--only-mixes", action="store_true", help="only the remeshed mixes")
     a = ap.parse_args()
     if a.only_mixes:
-        mix, mix_same, mix_peer, secs = remeshed_mixes(ICTModel(ICT_HEAD_VERTICES), a.peer)
-        _print_mixes(mix, mix_same, mix_peer, secs)
+        mix, mix_same, mix_peer, mix_song, secs = remeshed_mixes(ICTModel(ICT_HEAD_VERTICES), a.peer)
+        _print_mixes(mix, mix_same, mix_peer, mix_song, secs)
         return
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
           f"python {platform.python_version()}, sparse solver: {backend()}")
@@ -166,7 +175,8 @@ def main():
         for k in range(a.targets):
             tv = held_out_identity(model, k)
             T = S.with_vertices(tv)
-            tp, xf = best_of(lambda: ExpressionTransfer(S, T, ls, ict_landmarks(T), method=method, static=static), a.repeat)
+            tp, xf = best_of(lambda: ExpressionTransfer(S, T, ls, ict_landmarks(T), method=method, static=static,
+                                                        **paper(method)), a.repeat)
             ta, out = best_of(lambda: xf.apply(frames, basis=False), a.repeat)   # frame by frame
             pre.append(tp)
             fps.append(len(frames) / ta)
@@ -205,7 +215,7 @@ def main():
     Ta = T.with_vertices(sim.apply(T.vertices))
     tc, _ = best_of(lambda: correspond(S, ls.positions(S), Ta, sim.apply(lt.positions(T))), a.repeat)
     for method in ("vtc", "dt"):
-        xr = ExpressionTransfer(S, T, ls, lt, method=method, static=static)
+        xr = ExpressionTransfer(S, T, ls, lt, method=method, static=static, **paper(method))
         ob = xr.apply(basic)
         rem[method] = [relative_error(o, rs.carry(tv[FACE] + b[FACE] - S.vertices[FACE]), T.vertices)
                        for o, b in zip(ob, basic)]
@@ -213,15 +223,16 @@ def main():
               f"relative error {np.mean(rem[method]):.4f}; per expression: "
               + ", ".join(f"{e} {v:.3f}" for e, v in zip(EXPRESSIONS, rem[method])))
     print(f"correspondence for the remeshed target: {tc:.3f}s")
-    # across topologies VTC carries a small per-triangle term (transfer.core.DT_STABILIZER):
-    # Song's energy alone, and the sequence's speed with and without the term
-    for stabilize in (True, False):
-        tp, xr = best_of(lambda: ExpressionTransfer(S, T, ls, lt, method="vtc", static=static, stabilize=stabilize), a.repeat)
+    # across topologies VTC carries a small per-triangle term (transfer.core.DT_STABILIZER) and,
+    # on every target, the anchor (transfer.core.ANCHOR): each left out, and Song's energy alone
+    for stabilize, anchor, what in ((True, ANCHOR, ""), (False, ANCHOR, ", no per-triangle term"),
+                                    (True, 0.0, ", no anchor"), (False, 0.0, ", Song's energy alone")):
+        tp, xr = best_of(lambda: ExpressionTransfer(S, T, ls, lt, method="vtc", static=static, stabilize=stabilize,
+                                                    anchor=anchor), a.repeat)
         ta, _ = best_of(lambda: xr.apply(frames, basis=False), a.repeat)
         err = np.mean([relative_error(o, rs.carry(tv[FACE] + b[FACE] - S.vertices[FACE]), T.vertices)
                        for o, b in zip(xr.apply(basic), basic)])
-        print(f"[vtc{'' if stabilize else ', no per-triangle term'}] remeshed target: relative error {err:.4f}, "
-              f"precompute {tp:.3f}s, {a.frames / ta:.0f} frames/s")
+        print(f"[vtc{what}] remeshed target: relative error {err:.4f}, precompute {tp:.3f}s, {a.frames / ta:.0f} frames/s")
 
     # every installed sparse solver on the same system (scikit-sparse's CHOLMOD, cholespy's, SuperLU)
     T = S.with_vertices(held_out_identity(model, 0))
@@ -231,8 +242,8 @@ def main():
         ta, _ = best_of(lambda: xk.apply(frames, basis=False), a.repeat)
         print(f"solver {kind}: precompute {tp:.3f}s, {a.frames / ta:.0f} frames/s")
 
-    mix, mix_same, mix_peer, secs = remeshed_mixes(model, a.peer)
-    _print_mixes(mix, mix_same, mix_peer, secs)
+    mix, mix_same, mix_peer, mix_song, secs = remeshed_mixes(model, a.peer)
+    _print_mixes(mix, mix_same, mix_peer, mix_song, secs)
     v, d = res["vtc"], res["dt"]
     print(f"ours vs dt: speed x{v['fps'] / d['fps']:.2f}, error {v['err_seq']:.4f} vs {d['err_seq']:.4f} "
           f"(same topology), {np.mean(rem['vtc']):.4f} vs {np.mean(rem['dt']):.4f} (remeshed)")
@@ -241,10 +252,11 @@ def main():
           f"remeshed_mix_median={np.median(mix):.4f} remeshed_mix_worst={mix.max():.4f}")
 
 
-def _print_mixes(mix, same, peer, secs):
+def _print_mixes(mix, same, peer, song, secs):
     print(f"remeshed mixes, 20 held-out identities at 6k-15k vertices, 3 mixes each ({secs:.0f}s): relative "
           f"error median {np.median(mix):.4f} worst {mix.max():.4f} (case {int(np.argmax(mix))}); same topology "
-          f"on the same mixes: median {np.median(same):.4f} worst {same.max():.4f}")
+          f"on the same mixes: median {np.median(same):.4f} worst {same.max():.4f}; without the anchor "
+          f"(Song's energy): median {np.median(song):.4f} worst {song.max():.4f}")
     if len(peer):
         print(f"on the first {len(peer)} cases: mimica's registration {np.mean(mix[:len(peer)]):.4f} (mean), "
               f"trimesh's nricp_amberg {np.mean(peer):.4f}; per case ours "

@@ -37,8 +37,9 @@ def test_remeshed_scan_has_its_own_topology_and_holes(scans):
 
 def test_transfer_onto_remeshed_scans(head_model, scans):
     """The registration (the default) against Song's cylinder map on the same two held-out
-    scans: measured 0.092 / 0.123 against 0.160 / 0.124 (bench/transfer.py's own: 0.092 vs 0.132;
-    the exact correspondence the remesh was made with gives 0.090 there)."""
+    scans: measured 0.059 / 0.079 against 0.091 / 0.075 (with Song's energy alone, before the
+    anchor of transfer.core, 0.092 / 0.123 against 0.160 / 0.124: the anchor takes the long waves
+    of the motion from the source, which evens out much of what either map gets wrong)."""
     S = head_model.mesh
     frames = np.stack([S.vertices + head_model.delta(EXPRESSIONS[e]) for e in EXPRESSIONS])
     errs = {"nicp": [], "cylinder": []}
@@ -51,9 +52,9 @@ def test_transfer_onto_remeshed_scans(head_model, scans):
             assert x.correspondence.matched.mean() > 0.97
             errs[match].append(np.mean([relative_error(o, rs.carry(tv[FACE] + f[FACE] - S.vertices[FACE]),
                                                        rs.mesh.vertices) for o, f in zip(out, frames)]))
-    assert max(errs["cylinder"]) < 0.18 and np.mean(errs["cylinder"]) <= 0.15, errs
-    assert max(errs["nicp"]) < 0.13 and np.mean(errs["nicp"]) <= 0.115, errs
-    assert np.mean(errs["nicp"]) < np.mean(errs["cylinder"]) - 0.02, errs
+    assert max(errs["cylinder"]) < 0.11 and np.mean(errs["cylinder"]) <= 0.095, errs
+    assert max(errs["nicp"]) < 0.09 and np.mean(errs["nicp"]) <= 0.075, errs
+    assert np.mean(errs["nicp"]) < np.mean(errs["cylinder"]) - 0.01, errs
 
 
 def test_confidence_marks_where_the_surfaces_part(head_model, scans):

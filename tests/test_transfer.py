@@ -296,3 +296,30 @@ def test_settings_object_and_keywords_solve_alike(head_model, basic):
         TransferSettings(method="vt")
     with pytest.raises(MimicaError, match="'closest'"):
         ExpressionTransfer(S, T, match="closest")
+
+
+def test_anchor_carries_an_expression_to_other_proportions(head_model):
+    """A target whose mouth region is 1.35x the source's (a smooth warp W of ICT's generic
+    head): the truth is W applied to each expression, not the source's displacement copied.
+    The anchor (core.ANCHOR: long waves of the motion from the source) beats Song's energy
+    alone there, and a negative weight is refused."""
+    from mimica.data import ICT_LANDMARKS_68
+    from mimica.errors import MimicaError
+    from mimica.transfer import TransferSettings
+    S = head_model.mesh
+    lm = S.vertices[ICT_LANDMARKS_68]
+    centre, width = lm[48:68].mean(0), np.linalg.norm(lm[16] - lm[0])
+
+    def warp(p):
+        d = p - centre
+        return p + 0.35 * d * np.exp(-(np.linalg.norm(d, axis=-1, keepdims=True) / (0.3 * width)) ** 2)
+    frames = np.stack([head_model.neutral + head_model.delta({a: 0.8, b: 0.6})
+                       for a, b in zip(HELD_SHAPES, HELD_SHAPES[1:] + HELD_SHAPES[:1])])
+    T = S.with_vertices(warp(S.vertices))
+    truth = np.stack([warp(f) for f in frames])
+    static = static_vertices(S.vertices, frames)
+    err = {c: relative_error(ExpressionTransfer(S, T, static=static, anchor=c).apply(frames), truth, T.vertices, FACE)
+           for c in (0.0, TransferSettings().anchor)}
+    assert err[TransferSettings().anchor] < 0.85 * err[0.0], err
+    with pytest.raises(MimicaError, match="anchor"):
+        TransferSettings(anchor=-1.0)

@@ -23,7 +23,7 @@ from ..correspond import Correspondence, correspond
 from ..errors import MimicaError
 from ..landmarks import Landmarks
 from ..mesh import Mesh
-from .core import DT_STABILIZER, METHODS, TransferSolver, static_vertices
+from .core import ANCHOR, DT_STABILIZER, METHODS, TransferSolver, static_vertices
 from .metrics import relative_error, song_vertex_error
 
 BASIS_FRAMES = 128        # sequences this long go through their basis by default
@@ -78,6 +78,11 @@ class TransferSettings:
     stabilize : bool
         VTC's energy gets a small per-triangle (DT) term (core.DT_STABILIZER), which keeps
         vertices in sliver one-rings from drifting; off gives Song's energy alone.
+    anchor : float
+        How firmly each vertex is held to its rest position plus the source's displacement at its
+        partner (core.ANCHOR, weighed against the elements' energy at the face's scale): long
+        waves of the motion come from the source, short ones from the deformation; 0 gives Song's
+        energy alone (a vanishing weight that only pins the translation).
     """
     method: str = "vtc"
     match: str = "nicp"
@@ -90,6 +95,7 @@ class TransferSettings:
     lids: bool = True
     fill: bool = True
     stabilize: bool = True
+    anchor: float = ANCHOR
 
     def __post_init__(self):
         from ..correspond import METHODS as MATCHES
@@ -97,6 +103,8 @@ class TransferSettings:
             raise MimicaError(f"transfer method {self.method!r}: use one of {', '.join(METHODS)}")
         if self.match not in MATCHES:
             raise MimicaError(f"correspondence {self.match!r}: use one of {', '.join(MATCHES)}")
+        if not (np.isfinite(self.anchor) and self.anchor >= 0):
+            raise MimicaError(f"transfer anchor {self.anchor!r}: give a weight of 0 or more")
 
 
 SETTINGS = frozenset(f.name for f in fields(TransferSettings))
@@ -277,7 +285,8 @@ class ExpressionTransfer:
         # across topologies VTC is steadied by a small per-triangle term (core.DT_STABILIZER)
         self.solver = TransferSolver(source, aligned, s.method, vertex_map=vmap, matched=matched,
                                      fixed=fixed, solver_kind=s.solver_kind,
-                                     dt_weight=DT_STABILIZER if s.stabilize and not same else 0.0)
+                                     dt_weight=DT_STABILIZER if s.stabilize and not same else 0.0,
+                                     anchor=s.anchor)
         self._back = self.similarity.inverse()
         if s.fill and self.correspondence is not None and self.correspondence.confidence is not None:
             from .fill import LowConfidenceFill

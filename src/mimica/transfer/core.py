@@ -1,15 +1,24 @@
 """Expression transfer as one sparse least-squares system per target (Song §IV, eqs. 4-7).
 
-    min_x  sum_e || Q_t,e(x) - Q_s,e ||_F^2  +  eps * sum_i || x_i - a_i ||^2
+    min_x  sum_e || Q_t,e(x) - Q_s,e ||_F^2  +  sum_i w_i || x_i - a_i ||^2
 
 Q_s,e is the source deformation of element e (Song eq. 2), carried to the target's
 elements through a correspondence matrix P (identity on the same topology);
 Q_t,e(x) = A x is linear in the target unknowns (vertices and tips; Song eq. 5).  Vertices
 that never move in the source are fixed to the target's rest positions ("regions that do
-not move stay put").  The eps term (1e-6 of the mean stiffness) ties every vertex weakly to
-its rest position plus the source's displacement there; it only removes the translation of
-parts that have no fixed vertex, and since the source's own S' satisfies every term
-exactly, self-transfer stays exact.
+not move stay put").  The second term ties every vertex to a_i, its rest position plus the
+source's displacement at its partner.  Song's energy has only a vanishing weight there
+(1e-6 of the mean stiffness, which removes the translation of parts without a fixed vertex);
+mimica's default adds ANCHOR * (the vertex's share of the area) / size^2, the discrete form of
+ANCHOR / L^2 * integral |x - a|^2 dA, so that motion longer than about L / sqrt(ANCHOR)
+(~1 cm on a head) comes from the source and shorter motion from the deformations.  Departure,
+measured (docs/benchmarks.md): with the vanishing weight alone the gradients' small errors add
+up over the face -- on a remeshed face a still neck moved and a still forehead drifted by
+0.02 of the face's size when the jaw opened; on targets whose proportions were changed (the
+mouth 1.35x, the eyes 1.3x; the truth being the change applied to the expression, not the
+source's displacement copied) the same-topology error fell 0.213 -> 0.139 (mouth) and
+0.071 -> 0.041 (eyes) from ANCHOR 0 to 1000 and rose again beyond it.  Since the source's own
+S' satisfies every term exactly, self-transfer stays exact.
 
 Across topologies the VTC energy also holds each target triangle to the source deformation
 at its corners (Sumner & Popović's per-triangle term, weight DT_STABILIZER; see there).
@@ -34,6 +43,7 @@ from ..solver import SPDSolver
 
 METHODS = {"vtc": vtc_elements, "dt": dt_elements}
 EPS_ANCHOR = 1e-6
+ANCHOR = 1000.0
 # Across topologies, VTC's energy gets Sumner & Popović's per-triangle term at this weight
 # (area-weighted, both means 1).  A departure from Song et al.: a vertex whose one-ring is
 # made of slivers (a coarse lip rolling into the mouth) is barely held by its own tent and by
@@ -332,7 +342,7 @@ class TransferSolver:
     """
 
     def __init__(self, source: Mesh, target: Mesh, method="vtc", vertex_map=None,
-                 matched=None, fixed=None, solver_kind=None, weighting="area", dt_weight=0.0):
+                 matched=None, fixed=None, solver_kind=None, weighting="area", dt_weight=0.0, anchor=0.0):
         if method not in METHODS:
             raise MimicaError(f"unknown transfer method {method!r}; use one of {', '.join(METHODS)}")
         self.method = method
@@ -400,20 +410,27 @@ class TransferSolver:
         AtA = (AfW @ A_f).tocsr()
         eps = EPS_ANCHOR * float(AtA.diagonal().mean())
         vfree = self.free < nt                       # free unknowns that are vertices
-        anchor_sel = sp.csr_matrix((np.ones(vfree.sum()), (np.nonzero(vfree)[0], self.free[vfree])),
+        # the anchor's weight a vertex: eps everywhere, and where matched (anchor / L^2) times the
+        # vertex's share of the surface (L the target's size), the discrete form of
+        # anchor * integral |x - a|^2 dA / L^2 beside the elements' integral |Q_t - Q_s|^2 dA
+        w_anchor = np.full(nt, eps)
+        if anchor > 0:
+            size2 = float(np.sum(np.ptp(target.vertices, axis=0) ** 2))
+            w_anchor += np.where(matched, anchor * self._vertex_shares(target) / size2, 0.0)
+        anchor_sel = sp.csr_matrix((w_anchor[self.free[vfree]], (np.nonzero(vfree)[0], self.free[vfree])),
                                    shape=(len(self.free), nt))
-        M = (AtA + eps * sp.diags(vfree.astype(float))).tocsr()
+        M = (AtA + sp.diags(np.where(vfree, w_anchor[np.minimum(self.free, nt - 1)], 0.0))).tocsr()
 
         # rhs = R @ [S'; tips(S')] + k0, linear in the source frame (see module docstring)
         Vm = self.vertex_map
         fixed_v = self.fixed                                   # all fixed unknowns are vertices
         Vm_c = Vm[fixed_v]
-        right = (eps * anchor_sel @ Vm - AfW @ (A_c @ Vm_c)).tocsr()
+        right = (anchor_sel @ Vm - AfW @ (A_c @ Vm_c)).tocsr()
         right.resize((len(self.free), ns + es))
         self.R = (AfW @ (self.P3 @ self.A_s)).tocsr() + right
         S, T = source.vertices, target.vertices
         k0 = (-AfW @ (A_c @ (T[fixed_v] - Vm_c @ S)) + AfW @ c_id
-              + eps * (anchor_sel @ (T - Vm @ S)))
+              + anchor_sel @ (T - Vm @ S))
         # Each tip appears only in its own element's rows, so the tip block of M is diagonal
         # and the tips are eliminated exactly (Schur complement): the factored system has
         # the free vertices only, with the sparsity of the two-ring.
@@ -584,6 +601,13 @@ class TransferSolver:
     def _rest_solution(self) -> np.ndarray:
         """The target's result for the source at rest, (n_t, 3) (its own rest, up to the solve)."""
         return self.apply(self.source.vertices[None])[0]
+
+    @staticmethod
+    def _vertex_shares(mesh: Mesh) -> np.ndarray:
+        """Each vertex's share of the surface (a third of its triangles' areas), mean 1."""
+        a = np.bincount(mesh.triangles.reshape(-1), weights=np.repeat(mesh.triangle_areas() / 3, 3),
+                        minlength=mesh.n_vertices)
+        return a / max(a.mean(), 1e-300)
 
     @staticmethod
     def _element_areas(el: Elements, mesh: Mesh) -> np.ndarray:
