@@ -174,3 +174,24 @@ def test_the_validators_say_what_was_given_and_what_is_expected():
                         (lambda: strengths("brows=x", "--strength"), "regions as brows=0.5")):
         with pytest.raises(MimicaError, match=words.replace("(", r"\(")):
             call()
+
+
+def test_the_viewer_rigs_a_face_as_rig_does(monkeypatch):
+    """`mimica view` on a face without a rig rigs it through the pipeline with make_rig's own
+    defaults (the calibrated library, not a set of its own), wrinkles on as the CLI's default."""
+    import mimica.pipeline.view as view
+    from mimica.cli import build_parser
+    from mimica.pipeline import RigOptions, ViewOptions, prepare_view
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def fake(face, landmarks, options, progress=None):
+        seen["options"] = options
+        raise Stop
+    monkeypatch.setattr(view, "make_rig", fake)
+    with pytest.raises(Stop):
+        prepare_view("face.obj")
+    assert seen["options"] == RigOptions() and ViewOptions().rig == RigOptions()
+    assert (not build_parser().parse_args(["view", "f.obj"]).no_wrinkles) == ViewOptions().wrinkles

@@ -5,19 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import MimicaError
-from ._common import _landmarks, _say
-
-
-def _rig_of(a):
-    """The rig the page plays, and its name: --rig's, else one built here (Kim's muscles)."""
-    from ..rig import Rig, build_rig
-    if a.rig:
-        return Rig.load(a.rig), Path(a.rig).stem
-    from ..mesh import read_mesh
-    face = read_mesh(a.face)
-    lm = _landmarks(face, a.landmarks, "--landmarks", str(a.face))
-    _say(f"building a rig of {a.face} (Kim's muscles; `mimica rig` once and --rig to skip this)...")
-    return build_rig(face, lm.positions(face)), Path(a.face).stem
+from ._common import _landmarks, _muscle_bar, _say
 
 
 def cmd_view(a):
@@ -33,9 +21,10 @@ def cmd_view(a):
     int
         The exit status (0: done).
     """
-    from ..wrinkles import mask_for
     import asyncio
     import webbrowser
+    from ..mesh import read_mesh
+    from ..pipeline import ViewOptions, prepare_view
     from ..viewer import ViewerServer, ViewerSession, ensure_three, port_in_use
 
     if not 0 <= a.port <= 65535:
@@ -44,12 +33,15 @@ def cmd_view(a):
     if busy is not None:
         _busy(a.port, busy)
     vendor = ensure_three(progress=_say)
-    rig, name = _rig_of(a)
-    mask = None
-    if not a.no_wrinkles:
-        mask, _ = mask_for(rig.skin, rig.landmarks)
-    session = ViewerSession(rig, mask)
-    server = ViewerServer(session, vendor, title=f"mimica · {name}", port=a.port)
+    skin = lm = None
+    if not a.rig:
+        skin = read_mesh(a.face)
+        lm = _landmarks(skin, a.landmarks, "--landmarks", str(a.face))
+        _say(f"rigging {a.face} (`mimica rig` once and --rig to skip this)...")
+    with _muscle_bar("muscles") as progress:
+        face = prepare_view(skin, lm, a.rig, ViewOptions(wrinkles=not a.no_wrinkles), progress=progress)
+    session = ViewerSession(face.rig, face.mask)
+    server = ViewerServer(session, vendor, title=f"mimica · {Path(a.rig or a.face).stem}", port=a.port)
 
     def ready(srv):
         _say(f"viewer on {srv.url} (Ctrl-C to stop)")
@@ -83,7 +75,7 @@ def add_args(sub) -> None:
     vw = sub.add_parser("view", help="a live viewer in the browser: muscles, facial actions, age, presets, "
                                      "a timeline, a second face")
     vw.add_argument("face", help="face mesh (OBJ/PLY/glTF); with --rig, the rig's own face is shown")
-    vw.add_argument("--rig", help="a rig from `mimica rig` (else one is built, about 10 s)")
+    vw.add_argument("--rig", help="a rig from `mimica rig` (else one is made as `mimica rig` makes it)")
     vw.add_argument("--landmarks", help="68-point landmark JSON (built in for ICT-FaceKit, else found)")
     vw.add_argument("--no-wrinkles", action="store_true", help="no wrinkle layer (and no age slider)")
     vw.add_argument("--port", type=int, default=0, help="port on 127.0.0.1 (default: a free one)")

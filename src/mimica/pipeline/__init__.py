@@ -12,6 +12,7 @@ from .rig import RigOptions, make_rig
 from .sequence import (ExportOptions, RenderOptions, export_sequence, read_mesh_sequence, read_values,
                        render_sequence)
 from .simulate import SimulateOptions, SimulateResult, simulate
+from .view import ViewedFace, ViewOptions, prepare_view
 from .transfer import (TransferOptions, TransferResult, prepare_transfer, read_sequence, result_names,
                        transfer_sequence, write_results)
 
@@ -27,4 +28,5 @@ __all__ = [
     "SimulateOptions", "SimulateResult", "simulate",
     "TransferOptions", "TransferResult", "prepare_transfer", "read_sequence", "result_names", "transfer_sequence",
     "write_results",
+    "ViewedFace", "ViewOptions", "prepare_view",
 ]

@@ -1,0 +1,78 @@
+"""The viewer's face: its rig (loaded, or made as `rig` makes it, with the same defaults) and its
+wrinkle mask, built before the page opens."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..mesh import Mesh
+from .rig import RigOptions, make_rig
+
+
+@dataclass(frozen=True)
+class ViewOptions:
+    """What the viewer shows; each default is the one every user of it gets.
+
+    Attributes
+    ----------
+    rig : RigOptions
+        How a face without a rig is rigged (the same defaults as `make_rig`: the calibrated
+        library).
+    wrinkles : bool
+        The wrinkle layer and its age slider.
+    """
+    rig: RigOptions = field(default_factory=RigOptions)
+    wrinkles: bool = True
+
+
+@dataclass
+class ViewedFace:
+    """What the viewer's session is made from.
+
+    Attributes
+    ----------
+    rig : Rig
+        Its modal systems made.
+    mask : WrinkleMask or None
+        None without wrinkles.
+    name : str
+        The face's name, for the page's title.
+    """
+    rig: object
+    mask: object
+    name: str
+
+
+def prepare_view(face, landmarks=None, rig=None, options: ViewOptions | None = None, progress=None) -> ViewedFace:
+    """The rig and wrinkle mask the viewer plays: `rig`'s when given, else the face rigged.
+
+    Parameters
+    ----------
+    face : str or Path or Mesh
+        The face (any topology); unused when `rig` is given (the rig's own face is shown).
+    landmarks : str or Path or Landmarks or None
+        Its 68 landmarks (None: built in for ICT-FaceKit, else found on renders).
+    rig : str or Path or Rig or None
+        A rig made before (`make_rig`'s file, or a Rig).
+    options : ViewOptions, optional
+    progress : callable, optional
+        Called as progress(k, n, name) after each force's modal system (`make_rig`).
+
+    Returns
+    -------
+    ViewedFace
+    """
+    from ..rig import Rig
+    o = options or ViewOptions()
+    if rig is not None:
+        name = Path(rig).stem if isinstance(rig, (str, Path)) else "rig"
+        r = rig if isinstance(rig, Rig) else Rig.load(rig)
+    else:
+        name = "face" if isinstance(face, Mesh) else Path(face).stem
+        r = make_rig(face, landmarks, o.rig, progress=progress)
+    mask = None
+    if o.wrinkles:
+        from ..wrinkles import mask_for
+        mask, _ = mask_for(r.skin, r.landmarks)
+    return ViewedFace(r, mask, name)
