@@ -78,10 +78,11 @@ def take_weights(frames, seed):
     return w
 
 
-def render_take(model, w, seed, path, fps=30, size=(640, 480)):
+def render_take(model, w, seed, path, fps=30, size=(640, 480), turn=(8.0, 4.0), rates=(0.9, 0.6), zoom=1.4):
     """The take as an MP4: ICT's identity of `seed` (+1000: never tuned on) with the ARKit
     weights w (ICT's shapes summed as `blendshapes` maps them), lit from the right, the head
-    turning (yaw up to 8, pitch up to 4 degrees)."""
+    turning (yaw and pitch up to `turn` degrees, at `rates` radians a second), framed at `zoom`
+    times the face's half height."""
     from mimica.data import ICT_LANDMARKS_68
     from mimica.export.blendshapes import ict_sources
     from mimica.image.ictphotos import LIGHT_RIGHT
@@ -92,11 +93,11 @@ def render_take(model, w, seed, path, fps=30, size=(640, 480)):
                        for a in ARKIT_52])
     c, half = face_framing(model.neutral[ICT_LANDMARKS_68])
     tt = np.arange(len(w)) / fps
-    yaw, pitch = 8 * np.sin(tt * 0.9 + seed), 4 * np.sin(tt * 0.6 + 2 * seed)
+    yaw, pitch = turn[0] * np.sin(tt * rates[0] + seed), turn[1] * np.sin(tt * rates[1] + 2 * seed)
     out = VideoWriter(path, fps)
     for f in range(len(w)):
         v = ident + np.einsum("k,knd->nd", w[f], deltas)
-        out.write(render_mesh(model.mesh, v, size=size, frame=(c, 1.4 * half), light=LIGHT_RIGHT,
+        out.write(render_mesh(model.mesh, v, size=size, frame=(c, zoom * half), light=LIGHT_RIGHT,
                               background=(90, 90, 90), yaw=yaw[f], pitch=pitch[f]))
     out.close()
     return yaw - yaw[0]

@@ -36,8 +36,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT / "tools"))
+sys.path.insert(0, str(ROOT / "bench"))        # bench/export.py renders the takes
 
-from mimica.data import ICT_LANDMARKS_68, ICTModel  # noqa: E402
+from mimica.data import ICTModel  # noqa: E402
 from mimica.export import ARKIT_52  # noqa: E402
 
 GROUPS = {"jaw": ("jaw",), "mouth": ("mouth",), "brows": ("brow",), "eyes": ("eyeBlink", "eyeSquint", "eyeWide"),
@@ -60,24 +61,11 @@ def take_weights(frames: int, seed: int) -> np.ndarray:
     return w
 
 
-def render_take(model, w, seed, path, turn=True, size=(640, 480)):
-    """The take as an H.264 MP4; returns nothing (the truth is w)."""
-    from mimica.export.blendshapes import ict_sources
-    from mimica.image.ictphotos import LIGHT_RIGHT
-    from mimica.image.raster import face_framing, render_mesh
-    from mimica.image.video import VideoWriter
-    ident = model.identity(np.random.default_rng(1000 + seed).normal(0, 0.8, 20))
-    deltas = np.stack([model.delta({n: 1.0 for n in ict_sources(a)}) if ict_sources(a) else np.zeros_like(ident)
-                       for a in ARKIT_52])
-    c, half = face_framing(model.neutral[ICT_LANDMARKS_68])
-    tt = np.arange(len(w)) / FPS
-    yaw = 30 * np.sin(tt * 0.45 + seed) * turn
-    pitch = 10 * np.sin(tt * 0.3 + 2 * seed) * turn
-    with VideoWriter(path, FPS) as out:
-        for f in range(len(w)):
-            v = ident + np.einsum("k,knd->nd", w[f], deltas)
-            out.write(render_mesh(model.mesh, v, size=size, frame=(c, 1.5 * half), light=LIGHT_RIGHT,
-                                  background=(90, 90, 90), yaw=yaw[f], pitch=pitch[f]))
+def render_take(model, w, seed, path, turn=True):
+    """The take as an H.264 MP4 (bench/export.py's renderer): the head turning up to 30 degrees
+    of yaw and 10 of pitch, or still."""
+    from export import render_take as render
+    render(model, w, seed, path, fps=FPS, turn=(30.0, 10.0) if turn else (0.0, 0.0), rates=(0.45, 0.3), zoom=1.5)
 
 
 def ours(head_glb, video, out_csv):

@@ -4,9 +4,7 @@ wrinkle mask, built before the page opens."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
-from ..mesh import Mesh
 from .rig import RigOptions, make_rig
 
 
@@ -36,12 +34,9 @@ class ViewedFace:
         Its modal systems made.
     mask : WrinkleMask or None
         None without wrinkles.
-    name : str
-        The face's name, for the page's title.
     """
     rig: object
     mask: object
-    name: str
 
 
 def prepare_view(face, landmarks=None, rig=None, options: ViewOptions | None = None, progress=None) -> ViewedFace:
@@ -66,13 +61,11 @@ def prepare_view(face, landmarks=None, rig=None, options: ViewOptions | None = N
     from ..rig import Rig
     o = options or ViewOptions()
     if rig is not None:
-        name = Path(rig).stem if isinstance(rig, (str, Path)) else "rig"
         r = rig if isinstance(rig, Rig) else Rig.load(rig)
     else:
-        name = "face" if isinstance(face, Mesh) else Path(face).stem
         r = make_rig(face, landmarks, o.rig, progress=progress)
     mask = None
     if o.wrinkles:
         from ..wrinkles import mask_for
         mask, _ = mask_for(r.skin, r.landmarks)
-    return ViewedFace(r, mask, name)
+    return ViewedFace(r, mask)

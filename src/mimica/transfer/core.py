@@ -339,6 +339,10 @@ class TransferSolver:
     dt_weight : float
         The weight of a per-triangle (DT) term added to a VTC energy (DT_STABILIZER is what
         ExpressionTransfer uses across topologies); 0 for Song's energy alone.
+    anchor : float
+        The weight of each matched vertex's tie to its rest position plus the source's
+        displacement at its partner, at the face's scale (ANCHOR is ExpressionTransfer's
+        default; see the module docstring); 0 leaves only the vanishing EPS_ANCHOR tie.
     """
 
     def __init__(self, source: Mesh, target: Mesh, method="vtc", vertex_map=None,
@@ -417,9 +421,11 @@ class TransferSolver:
         if anchor > 0:
             size2 = float(np.sum(np.ptp(target.vertices, axis=0) ** 2))
             w_anchor += np.where(matched, anchor * self._vertex_shares(target) / size2, 0.0)
-        anchor_sel = sp.csr_matrix((w_anchor[self.free[vfree]], (np.nonzero(vfree)[0], self.free[vfree])),
+        w_free = np.zeros(len(self.free))                      # the free unknowns' weights (tips: 0)
+        w_free[vfree] = w_anchor[self.free[vfree]]
+        anchor_sel = sp.csr_matrix((w_free[vfree], (np.nonzero(vfree)[0], self.free[vfree])),
                                    shape=(len(self.free), nt))
-        M = (AtA + sp.diags(np.where(vfree, w_anchor[np.minimum(self.free, nt - 1)], 0.0))).tocsr()
+        M = (AtA + sp.diags(w_free)).tocsr()
 
         # rhs = R @ [S'; tips(S')] + k0, linear in the source frame (see module docstring)
         Vm = self.vertex_map
@@ -603,19 +609,21 @@ class TransferSolver:
         return self.apply(self.source.vertices[None])[0]
 
     @staticmethod
-    def _vertex_shares(mesh: Mesh) -> np.ndarray:
-        """Each vertex's share of the surface (a third of its triangles' areas), mean 1."""
-        a = np.bincount(mesh.triangles.reshape(-1), weights=np.repeat(mesh.triangle_areas() / 3, 3),
-                        minlength=mesh.n_vertices)
-        return a / max(a.mean(), 1e-300)
+    def _vertex_shares(mesh: Mesh, triangles=None, n_vertices=None) -> np.ndarray:
+        """Each vertex's share of the surface (a third of its triangles' areas), mean 1 (none
+        below 1e-6 of the mean)."""
+        t = mesh.triangles if triangles is None else triangles
+        a = np.bincount(t.reshape(-1), weights=np.repeat(mesh.triangle_areas() / 3, 3),
+                        minlength=mesh.n_vertices if n_vertices is None else n_vertices)
+        a = np.maximum(a, 1e-6 * a.mean())
+        return a / a.mean()
 
     @staticmethod
     def _element_areas(el: Elements, mesh: Mesh) -> np.ndarray:
         """Area carried by each element (a third of the adjacent triangles for a vertex), mean 1."""
-        t = el.triangles
-        a = mesh.triangle_areas()
         if el.kind == "vtc":
-            a = np.bincount(t.reshape(-1), weights=np.repeat(a / 3, 3), minlength=el.n_vertices)
+            return TransferSolver._vertex_shares(mesh, el.triangles, el.n_vertices)
+        a = mesh.triangle_areas()
         a = np.maximum(a, 1e-6 * a.mean())
         return a / a.mean()
 
