@@ -8,6 +8,16 @@ the faces inside take the copies.  (A shortest path through the landmarks along 
 the lid was tried first: on remeshed heads it ran below the upper lid's landmarks, which then
 rode with the eye; the blink closed 0.07-0.84 of the gap.)  That inside is then the eye, a rigid part the lids close
 over (correspond.parts: `eyes`).  The user's vertices keep their order; copies are appended.
+
+Landmarks found on renders sit off such an eye (dlib reads a sealed eye's shading, not its
+margin: 0.18-0.26 of the eye's width above it on held-out heads; on the dev heads the blink closed
+-0.08-0.15 of the gap), so where they were found, not given, each sealed eye's six points are
+first slid onto the margin (`on_margin`): the offset, in the eye's plane, at which the upper
+lid's arc runs deepest along the surface's valley between lid and eyeball; and the inside is
+cut along a loop of valley edges within BAND of the slid outline (`_loop_faces`), not at the
+polygon, since a tenth of the width off the margin puts the lid's last ring on the eye.  Given
+landmarks are kept: the valley search slid a dev head's true ones 0.17-0.22 of the width up, onto
+the fold above the lid, where its margin shows no valley at 20k vertices.
 """
 
 from __future__ import annotations
@@ -27,6 +37,13 @@ INSIDE = 3                # ... and resolved: at least this many vertices inside
 # (ICT's identities remeshed at 20k vertices: gap 0.27-0.31 of the width, 4-9 vertices inside;
 # the shared 468-vertex head's sealed eyes: one vertex inside, a fan in front of the lids which,
 # cut loose, stood out of every blink with the void behind it showing)
+SLIDE_UP = 0.35           # on_margin searches this far (of the eye's width) across the eye ...
+SLIDE_ALONG = 0.06        # ... and this far along it (the margin's valley runs along the eye)
+TRUSTED = 0.1             # found landmarks within this (across) of the margin found are kept
+REFINE = np.arange(-0.1, 0.1001, 0.02)   # then the upper lid's middle points, each this far
+BAND = 0.1                # the margin's loop runs within this (of the width) of the slid outline
+# (dev heads 13-16, landmarks found on renders: blink 0.51-0.72 at 0.1, 0.16-0.77 at 0.25; the
+# loop's crease weight, the mouth's CREASE or twice it, made no difference)
 
 
 @dataclass
@@ -45,12 +62,15 @@ class EyeCut:
         Side -> the lid margin's loop (the lids' vertices).
     why : dict
         Side -> why a sealed eye was left whole.
+    landmarks : (68, 3) float array or None
+        The landmarks given, those of each cut eye slid onto its margin where they were found.
     """
     mesh: Mesh                         # the cut mesh: the input's vertices first, then the copies
     copies_of: np.ndarray              # (k,) for each appended vertex, the vertex it copies
     eyes: dict = field(default_factory=dict)      # side -> vertices of its eye (the copies included)
     rims: dict = field(default_factory=dict)      # side -> the lid margin's loop (the lids' vertices)
     why: dict = field(default_factory=dict)       # side -> why a sealed eye was left whole
+    landmarks: np.ndarray | None = None           # (68, 3) as given, found ones slid onto the margins
 
     @property
     def cut(self) -> bool:
@@ -127,6 +147,148 @@ def _eye_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | Non
     return faces[comp == comp[middle]]
 
 
+def valley(mesh: Mesh) -> np.ndarray:
+    """How deep each vertex lies in a valley of the surface.
+
+    Parameters
+    ----------
+    mesh : Mesh
+
+    Returns
+    -------
+    (n,) float array
+        Its neighbours' mean minus itself along its normal, over the mean edge length (> 0 in a
+        valley, < 0 on a ridge).
+    """
+    deg = np.maximum(np.asarray(mesh.adjacency.sum(1)).ravel(), 1)
+    lap = (mesh.adjacency @ mesh.vertices) / deg[:, None] - mesh.vertices
+    return np.einsum("ij,ij->i", lap, mesh.vertex_normals()) / max(mesh.mean_edge_length(), 1e-300)
+
+
+def on_margin(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray, depth: np.ndarray | None = None,
+              step: float = 0.02) -> np.ndarray:
+    """An eye's six landmarks slid onto the lids' margin of a one-surface eye: together, to the
+    offset in the eye's plane (up to SLIDE_UP of its width across, SLIDE_ALONG along) at which
+    the upper lid's arc, seen from the front, runs deepest along the valley between lid and
+    eyeball; then the upper lid's two middle points each on its own (REFINE).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    pts : (6, 3) float array
+        The eye's landmarks (iBUG 36-41 or 42-47).
+    fwd : (3,) float array
+        The face's forward direction.
+    depth : (n,) float array or None
+        valley(mesh), where already computed.
+    step : float
+        The search's step, of the eye's width.
+
+    Returns
+    -------
+    (6, 3) float array
+        The slid landmarks on the surface; `pts` itself where they lie within TRUSTED of where
+        the search would put them.
+    """
+    from ..mesh.query import TriangleLocator
+    depth = valley(mesh) if depth is None else depth
+    centre = pts.mean(0)
+    width = float(np.linalg.norm(pts[3] - pts[0]))
+    ex = (pts[3] - pts[0]) / width
+    ey = np.cross(fwd, ex)
+    rel = mesh.vertices - centre
+    near = np.nonzero((np.linalg.norm(rel, axis=1) < 1.2 * width) & (mesh.vertex_normals() @ fwd > 0.3))[0]
+    if len(near) < 3:
+        return pts
+    tree = cKDTree(np.stack([rel[near] @ ex, rel[near] @ ey], 1) / width)
+
+    def depth_at(q):                                   # (..., 2) -> the valley's depth there
+        d, j = tree.query(q.reshape(-1, 2), k=3)
+        w = 1.0 / np.maximum(d, 1e-9)
+        return ((depth[near[j]] * w).sum(1) / w.sum(1)).reshape(q.shape[:-1])
+
+    poly = np.stack([(pts - centre) @ ex, (pts - centre) @ ey], 1) / width
+    t = np.linspace(0, 1, 8, endpoint=False)[None, :, None]
+    # the upper lid's arc (36-37-38-39): it overhangs the eyeball, a deep valley; the whole
+    # outline slid a dev head's true landmarks 0.23 of the width up (the upper arc: 0-0.1 down)
+    arc = (poly[:3, None] * (1 - t) + poly[1:4, None] * t).reshape(-1, 2)
+    along = np.arange(-SLIDE_ALONG, SLIDE_ALONG + 1e-9, step)
+    across = np.arange(-SLIDE_UP, SLIDE_UP + 1e-9, step)
+    shifts = np.stack(np.meshgrid(along, across, indexing="ij"), -1).reshape(-1, 2)
+    score = depth_at(arc[None] + shifts[:, None]).mean(1)
+    best = shifts[np.lexsort((np.linalg.norm(shifts, axis=1), -np.round(score, 9)))[0]]   # ties: the least move
+    if abs(best[1]) < TRUSTED:
+        return pts
+    poly0, poly = poly, poly + best
+    for k in (1, 2):
+        cand = np.repeat(poly[None], len(REFINE), 0)
+        cand[:, k, 1] += REFINE
+        part = (cand[:, k - 1:k + 1, None] * (1 - t[None]) + cand[:, k:k + 2, None] * t[None]).reshape(len(REFINE), -1, 2)
+        poly[k, 1] += REFINE[np.argmax(depth_at(part).mean(1) - 1e-9 * np.abs(REFINE))]
+    moved = pts + width * ((poly - poly0)[:, :1] * ex + (poly - poly0)[:, 1:] * ey)
+    return TriangleLocator(mesh.vertices, mesh.triangles).closest(moved)[2]
+
+
+def _polyline_distance(q: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """(m,) distance of 2D points q (m, 2) to a 2D polyline (k, 2)."""
+    a, b = line[:-1], line[1:]
+    ab = b - a
+    t = np.clip(np.einsum("mkj,kj->mk", q[:, None] - a[None], ab) / np.maximum((ab * ab).sum(1), 1e-300), 0, 1)
+    return np.linalg.norm(q[:, None] - (a[None] + t[..., None] * ab[None]), axis=2).min(1)
+
+
+def _loop_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | None:
+    """The faces of the eye inside the lids' margin, found as a loop of valley edges near the
+    landmarks' outline: corner to corner over the upper lid and back under the lower, each by
+    Dijkstra within BAND of its arc, an edge costing exp(-CREASE x its concave angle) of its
+    length (correspond.mouth's seam).  None where no loop closes."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+    from ..mesh.query import concave_angles
+    from .mouth import CREASE
+    centre = pts.mean(0)
+    width = float(np.linalg.norm(pts[3] - pts[0]))
+    ex = (pts[3] - pts[0]) / width
+    ey = np.cross(fwd, ex)
+    v = mesh.vertices
+    rel = v - centre
+    q = np.stack([rel @ ex, rel @ ey], 1) / width
+    front = (np.linalg.norm(rel, axis=1) < 1.2 * width) & (mesh.vertex_normals() @ fwd > 0.0)
+    poly = np.stack([(pts - centre) @ ex, (pts - centre) @ ey], 1) / width
+    e = mesh.edges
+    cost = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1) * np.exp(-CREASE * concave_angles(mesh, e))
+    cand = np.nonzero(front)[0]
+    c0 = int(cand[np.argmin(np.linalg.norm(v[cand] - pts[0], axis=1))])
+    c3 = int(cand[np.argmin(np.linalg.norm(v[cand] - pts[3], axis=1))])
+    loop = []
+    for a, b, arc in ((c0, c3, poly[[0, 1, 2, 3]]), (c3, c0, poly[[3, 4, 5, 0]])):
+        ok = front & (_polyline_distance(q, arc) < BAND)
+        ok[[c0, c3]] = True
+        keep = ok[e].all(1)
+        g = coo_matrix((np.r_[cost[keep], cost[keep]], (np.r_[e[keep, 0], e[keep, 1]], np.r_[e[keep, 1], e[keep, 0]])),
+                       shape=(mesh.n_vertices,) * 2).tocsr()
+        _, pred = dijkstra(g, indices=a, return_predecessors=True)
+        seg, x = [], b
+        while x != a and x >= 0:
+            seg.append(x)
+            x = pred[x]
+        if x < 0:
+            return None
+        loop += seg[::-1]
+    cent = mesh.face_centroids()
+    relc = cent - centre
+    nrm = np.zeros((mesh.n_faces, 3))
+    np.add.at(nrm, mesh.tri_face, mesh.face_normals())
+    near = (np.linalg.norm(relc, axis=1) < 0.8 * width) & (nrm @ fwd > 0)
+    inside = near & inside_polygon(np.stack([relc @ ex, relc @ ey], 1) / width, q[np.array(loop)])
+    if not inside.any():
+        return None
+    faces = np.nonzero(inside)[0]
+    comp = _pieces(mesh.submesh(faces)[0])
+    middle = int(np.argmin(np.linalg.norm(cent[faces] - centre, axis=1)))
+    return faces[comp == comp[middle]]
+
+
 def _pieces(mesh: Mesh) -> np.ndarray:
     """(n_faces,) the connected piece of the surface each face is in."""
     _, comp = connected_components(mesh.adjacency, directed=False)
@@ -150,7 +312,7 @@ def _closed_over(mesh: Mesh, lm: np.ndarray) -> list[str]:
     return out
 
 
-def cut_eyes(mesh: Mesh, landmarks) -> EyeCut:
+def cut_eyes(mesh: Mesh, landmarks, found: bool = False) -> EyeCut:
     """A head with each sealed eye's inside cut loose from its lids along their margin; unchanged
     where the eyes open already (a boundary at the lids) or the landmarks are missing.
 
@@ -158,6 +320,8 @@ def cut_eyes(mesh: Mesh, landmarks) -> EyeCut:
     ----------
     mesh : Mesh
     landmarks : (68, 3) float array
+    found : bool
+        Found on renders, not given: each sealed eye's slid onto its margin first (on_margin).
 
     Returns
     -------
@@ -165,11 +329,13 @@ def cut_eyes(mesh: Mesh, landmarks) -> EyeCut:
     """
     from ..align import face_cylinder
     lm = np.asarray(landmarks, float)
-    out = EyeCut(mesh, np.zeros(0, np.int64))
+    out = EyeCut(mesh, np.zeros(0, np.int64), landmarks=lm)
     shut = _closed_over(mesh, lm)
     if not shut:
         return out
     fwd = face_cylinder(lm).axes[2]
+    depth = valley(mesh) if found else None
+    slid = lm.copy()
     fi, st = mesh.face_indices.copy(), mesh.face_starts
     face_of = np.repeat(np.arange(mesh.n_faces), np.diff(st))
     verts = [mesh.vertices]
@@ -179,7 +345,12 @@ def cut_eyes(mesh: Mesh, landmarks) -> EyeCut:
         gap = 0.5 * (np.linalg.norm(pts[1] - pts[5]) + np.linalg.norm(pts[2] - pts[4]))
         if gap < OPEN * np.linalg.norm(pts[3] - pts[0]):
             continue                               # a shut eye: nothing to open
-        inside = _eye_faces(Mesh(np.vstack(verts), fi, st), pts, fwd)
+        moved = on_margin(mesh, pts, fwd, depth) if found else pts
+        if moved is not pts:                       # along the margin's valley near them
+            inside = _loop_faces(Mesh(np.vstack(verts), fi, st), moved, fwd)
+        else:
+            inside = _eye_faces(Mesh(np.vstack(verts), fi, st), pts, fwd)
+        pts = moved
         if inside is None or len(inside) > CAP_SHARE * mesh.n_faces:
             out.why[side] = "no piece of the surface inside the eye's landmarks"
             continue
@@ -201,6 +372,7 @@ def cut_eyes(mesh: Mesh, landmarks) -> EyeCut:
         copies.append(on_both)
         out.eyes[side] = np.unique(fi[corner_in])
         out.rims[side] = on_both
+        slid[RIMS[side]] = pts
         n += len(on_both)
     if not copies:
         return out
@@ -208,5 +380,5 @@ def cut_eyes(mesh: Mesh, landmarks) -> EyeCut:
                layout=mesh.layout)
     if mesh.uv is not None and mesh.face_uv_indices is not None:
         cut.uv, cut.face_uv_indices = mesh.uv, mesh.face_uv_indices
-    out.mesh, out.copies_of = cut, np.concatenate(copies)
+    out.mesh, out.copies_of, out.landmarks = cut, np.concatenate(copies), slid
     return out

@@ -36,7 +36,9 @@ def landmarks_for(mesh: Mesh, path=None, what="mesh") -> Landmarks:
     _models()                                    # dlib missing from a broken install: said as such
     try:
         pts, _ = detect_mesh(mesh, what=what)    # render, find the 68 points, cast them back
-        return Landmarks.snap(mesh, pts)
+        found = Landmarks.snap(mesh, pts)
+        found.found = True
+        return found
     except MimicaError:
         pass
     raise NeedsLandmarks(f"{what}: not an ICT-FaceKit topology and no face was found in its renders; give its "

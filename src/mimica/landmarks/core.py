@@ -72,11 +72,15 @@ class Landmarks:
         Its barycentric coordinates in that triangle.
     scheme : str
         "ibug68".
+    found : bool
+        Found on renders (landmarks_for's detector), not given: where they sit off a sealed eye's
+        margin, correspond.eyes may slide them onto it.
     """
 
     triangle: np.ndarray      # (68,) int, -1 = missing
     bary: np.ndarray          # (68, 3)
     scheme: str = SCHEME
+    found: bool = False
 
     @property
     def present(self) -> np.ndarray:

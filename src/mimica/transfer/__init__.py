@@ -240,7 +240,7 @@ class ExpressionTransfer:
                 target = mc.mesh
         if self.settings.cut_eyes:
             from ..correspond.eyes import cut_eyes as cut_e
-            ec = cut_e(target, target_landmarks.positions(target))
+            ec = cut_e(target, target_landmarks.positions(target), found=target_landmarks.found)
             self.eyes_uncut = ec.why
             if ec.cut:
                 self.eye_cut = ec
@@ -248,7 +248,7 @@ class ExpressionTransfer:
                 self.output_mesh = _user_cut(self.output_mesh, target, ec)
                 if inward is not None:
                     inward = np.vstack([inward, np.zeros((len(ec.copies_of), 3))])
-                target_landmarks = _off_the_eyes(ec, target_landmarks.positions(target))
+                target_landmarks = _off_the_eyes(ec, ec.landmarks)   # found ones slid onto the margins
                 target = ec.mesh
         return target, target_landmarks, inward
 
