@@ -78,11 +78,61 @@ def take_weights(frames, seed):
     return w
 
 
-def render_take(model, w, seed, path, fps=30, size=(640, 480), turn=(8.0, 4.0), rates=(0.9, 0.6), zoom=1.4):
+PAINT = {"skin": (0.82, 0.64, 0.54), "lips": (0.70, 0.36, 0.36), "brows": (0.28, 0.20, 0.15),
+         "sclera": (0.93, 0.91, 0.88), "iris": (0.36, 0.25, 0.16), "pupil": (0.04, 0.04, 0.04),
+         "lashes": (0.10, 0.08, 0.07), "mouth": (0.50, 0.24, 0.24), "teeth": (0.95, 0.93, 0.88)}
+
+
+def painted(model, rest):
+    """(the mesh without ICT's tear and occlusion shells, per-vertex colours): skin, lips inside
+    the outer lip line, brows along their landmarks, eyeballs with an iris and a pupil about
+    their forward axis, dark lashes, mouth and teeth -- what a tracker trained on photographs
+    looks for, which a grey render lacks."""
+    from mimica.correspond.parts import ICT_PARTS
+    from mimica.correspond.eyes import inside_polygon
+    from mimica.data import ICT_LANDMARKS_68
+    part = {name: (a, b) for name, a, b in ICT_PARTS}
+    col = np.tile(np.asarray(PAINT["skin"]), (len(rest), 1))
+    lm = rest[ICT_LANDMARKS_68]
+    width = float(np.linalg.norm(lm[16] - lm[0]))
+    a, b = part["skin"]
+    xy = rest[a:b, :2]
+    lips = inside_polygon(xy, lm[48:60, :2]) & (rest[a:b, 2] > lm[48:60, 2].min() - 0.05 * width)
+    col[a:b][lips] = PAINT["lips"]
+    for brow in (lm[17:22], lm[22:27]):
+        seg_a, seg_b = brow[:-1, :2], brow[1:, :2]
+        ab = seg_b - seg_a
+        t = np.clip(np.einsum("mkj,kj->mk", xy[:, None] - seg_a[None], ab) / (ab * ab).sum(1), 0, 1)
+        d = np.linalg.norm(xy[:, None] - (seg_a[None] + t[..., None] * ab[None]), axis=2).min(1)
+        near = (d < 0.035 * width) & (rest[a:b, 2] > brow[:, 2].min() - 0.1 * width)
+        col[a:b][near] = PAINT["brows"]
+    for eye in ("eyeball.left", "eyeball.right"):
+        a, b = part[eye]
+        c = rest[a:b].mean(0)
+        d = rest[a:b] - c
+        cos = d[:, 2] / np.linalg.norm(d, axis=1)            # the head looks along +z
+        col[a:b] = PAINT["sclera"]
+        col[a:b][cos > np.cos(np.radians(38))] = PAINT["iris"]
+        col[a:b][cos > np.cos(np.radians(16))] = PAINT["pupil"]
+    for name, key in (("lashes", "lashes"), ("mouth socket", "mouth"), ("gums and tongue", "mouth"),
+                      ("teeth", "teeth"), ("eye socket", "mouth")):
+        a, b = part[name]
+        col[a:b] = PAINT[key]
+    keep = np.ones(len(rest), bool)
+    for name in ("tear shells", "occlusion shells"):
+        a, b = part[name]
+        keep[a:b] = False
+    faces = np.nonzero(np.add.reduceat(~keep[model.mesh.face_indices], model.mesh.face_starts[:-1]) == 0)[0]
+    mesh, old = model.mesh.submesh(faces)
+    return mesh, old, col[old]
+
+
+def render_take(model, w, seed, path, fps=30, size=(640, 480), turn=(8.0, 4.0), rates=(0.9, 0.6), zoom=1.4,
+                paint=False):
     """The take as an MP4: ICT's identity of `seed` (+1000: never tuned on) with the ARKit
     weights w (ICT's shapes summed as `blendshapes` maps them), lit from the right, the head
     turning (yaw and pitch up to `turn` degrees, at `rates` radians a second), framed at `zoom`
-    times the face's half height."""
+    times the face's half height; grey, or `paint`ed (painted())."""
     from mimica.data import ICT_LANDMARKS_68
     from mimica.export.blendshapes import ict_sources
     from mimica.image.ictphotos import LIGHT_RIGHT
@@ -91,13 +141,14 @@ def render_take(model, w, seed, path, fps=30, size=(640, 480), turn=(8.0, 4.0), 
     ident = model.identity(np.random.default_rng(1000 + seed).normal(0, 0.8, 20))
     deltas = np.stack([model.delta({n: 1.0 for n in ict_sources(a)}) if ict_sources(a) else np.zeros_like(ident)
                        for a in ARKIT_52])
+    mesh, keep, colors = painted(model, ident) if paint else (model.mesh, slice(None), None)
     c, half = face_framing(model.neutral[ICT_LANDMARKS_68])
     tt = np.arange(len(w)) / fps
     yaw, pitch = turn[0] * np.sin(tt * rates[0] + seed), turn[1] * np.sin(tt * rates[1] + 2 * seed)
     out = VideoWriter(path, fps)
     for f in range(len(w)):
-        v = ident + np.einsum("k,knd->nd", w[f], deltas)
-        out.write(render_mesh(model.mesh, v, size=size, frame=(c, zoom * half), light=LIGHT_RIGHT,
+        v = (ident + np.einsum("k,knd->nd", w[f], deltas))[keep]
+        out.write(render_mesh(mesh, v, size=size, frame=(c, zoom * half), light=LIGHT_RIGHT, colors=colors,
                               background=(90, 90, 90), yaw=yaw[f], pitch=pitch[f]))
     out.close()
     return yaw - yaw[0]

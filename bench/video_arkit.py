@@ -8,10 +8,11 @@ into mimica's cache by tools/blendshape_model.py (never committed), run through 
 FaceLandmarker with its blendshapes, frame by frame.
 
 Takes: ICT's whole head (eyes, teeth) with held-out identities (seeds 1041, 1042: never tuned
-on), lit from the right, the head turning up to 30 degrees of yaw and 10 of pitch, 600 frames
-each at 30 frames/s written as H.264; each take plays every ARKit shape but the tongue once (in
-a shuffled order, a smooth rise and fall of 0.5-1, overlapping its neighbours), so the truth is
-known frame by frame.  A still take (seed 1043, 150 frames, no expression, the head still).
+on), painted (skin, lips, brows, irises: bench/export.py's painted()), lit from the right,
+the head turning up to 30 degrees of yaw and 10 of pitch, 600 frames each at 30 frames/s
+written as H.264; each take plays every ARKit shape but the tongue once (in a shuffled order,
+a smooth rise and fall of 0.5-1, overlapping its neighbours), so the truth is known frame by
+frame.  A still take (seed 1043, 150 frames, no expression, the head still).
 mimica fits through ICT's own ARKit GLB (`blendshapes` on ICT's generic mesh).
 
 Figures: active_mae (mean |fit - truth| over the (frame, shape) pairs where the truth is >= 0.1),
@@ -19,7 +20,8 @@ the same for MediaPipe's scores, groups_beaten (the groups -- jaw, mouth, brows,
 squints and widening, gaze, cheeks, nose -- where mimica's active error is below MediaPipe's),
 corr_median and corr_worst (mimica's per-shape correlation with the truth over the 51 shapes),
 still_max (mimica's largest weight on the still take, its first second left out), fps (decode,
-track, fit and the CSV written, frames per second of the whole).  MediaPipe's left and right are
+track, fit and the CSV written, frames per second of the whole); mimica's active error tracking
+with MediaPipe's face mesh (the `tracker` option) on a line of its own.  MediaPipe's left and right are
 the image's: its scores are compared with the truth's mirror where that reads better (said).
 """
 
@@ -62,18 +64,19 @@ def take_weights(frames: int, seed: int) -> np.ndarray:
 
 
 def render_take(model, w, seed, path, turn=True):
-    """The take as an H.264 MP4 (bench/export.py's renderer): the head turning up to 30 degrees
-    of yaw and 10 of pitch, or still."""
+    """The take as an H.264 MP4 (bench/export.py's renderer, painted: skin, lips, brows, irises):
+    the head turning up to 30 degrees of yaw and 10 of pitch, or still."""
     from export import render_take as render
-    render(model, w, seed, path, fps=FPS, turn=(30.0, 10.0) if turn else (0.0, 0.0), rates=(0.45, 0.3), zoom=1.5)
+    render(model, w, seed, path, fps=FPS, turn=(30.0, 10.0) if turn else (0.0, 0.0), rates=(0.45, 0.3), zoom=1.5,
+           paint=True)
 
 
-def ours(head_glb, video, out_csv):
+def ours(head_glb, video, out_csv, tracker=None):
     """(F, 52) weights and frames/s of the whole: decode, track, fit, the CSV written."""
     from mimica.export.video import write_live_link_csv
     from mimica.pipeline.animate import weights_from_video
     t = time.perf_counter()
-    times, weights, fps, _ = weights_from_video(head_glb, video)
+    times, weights, fps, _ = weights_from_video(head_glb, video, tracker=tracker)
     w = np.stack([weights[n] for n in ARKIT_52], 1)
     write_live_link_csv(out_csv, times, w, fps, np.stack([weights[n] for n in ("headYaw", "headPitch", "headRoll")], 1))
     return w, len(w) / (time.perf_counter() - t)
@@ -126,16 +129,18 @@ def main():
     write_mesh(tmp / "ict.obj", model.mesh)
     make_blendshapes(tmp / "ict.obj", tmp / "arkit.glb", options=BlendshapesOptions())
     task = blendshape_model()
-    truth, fit, peer, rates, peer_rates = [], [], [], [], []
+    truth, fit, peer, rates, peer_rates, fit_mp, rates_mp = [], [], [], [], [], [], []
     for seed in (41, 42):
         w = take_weights(args.frames, seed)
         render_take(model, w, seed, tmp / f"take{seed}.mp4")
         f, rate = ours(tmp / "arkit.glb", tmp / f"take{seed}.mp4", tmp / f"take{seed}.csv")
+        f2, rate2 = ours(tmp / "arkit.glb", tmp / f"take{seed}.mp4", tmp / f"take{seed}_mp.csv", tracker="mediapipe")
+        fit_mp.append(f2), rates_mp.append(rate2)
         p, prate = mediapipe_scores(tmp / f"take{seed}.mp4", task)
         truth.append(w), fit.append(f), peer.append(p), rates.append(rate), peer_rates.append(prate)
         print(f"take {seed}: {len(w)} frames; mimica {rate:.0f} frames/s end to end; MediaPipe {prate:.0f} frames/s "
               f"(its face found on {np.isfinite(p).all(1).mean():.0%} of frames)")
-    truth, fit, peer = np.concatenate(truth), np.concatenate(fit), np.concatenate(peer)
+    truth, fit, peer, fit_mp = np.concatenate(truth), np.concatenate(fit), np.concatenate(peer), np.concatenate(fit_mp)
     seen = np.isfinite(peer).all(1)
     straight = {n: j for j, n in enumerate(ARKIT_52)}
     cols = [straight[n] for n in SHAPES]
@@ -147,6 +152,8 @@ def main():
     print(f"MediaPipe's left and right read {'mirrored' if e_flip < e_straight else 'as the subject'}'s "
           f"(active error {min(e_straight, e_flip):.3f} against {max(e_straight, e_flip):.3f} the other way)")
     ours_mae, mp_mae = active_mae(fit[seen], truth[seen], cols), active_mae(peer[seen], truth[seen], cols)
+    print(f"mimica tracking with MediaPipe's face mesh instead of dlib: active error {active_mae(fit_mp, truth, cols):.3f} "
+          f"(dlib {active_mae(fit, truth, cols):.3f}), {min(rates_mp):.0f} frames/s end to end")
     beaten, lines = 0, []
     for g, prefixes in GROUPS.items():
         gc = [straight[n] for n in SHAPES if n.startswith(prefixes)]

@@ -162,6 +162,26 @@ def test_frames_without_a_face_are_found_said_and_previewed(head_glb, tmp_path, 
     assert "what it saw: no face in 4 frames (7-10)" in said, said
 
 
+def test_both_trackers_find_the_same_points(tmp_path):
+    """dlib (the default) and MediaPipe's face mesh track the same 68 points on a take: within a
+    few hundredths of the face's width of each other, and a faceless last frame alike (dlib's
+    frames since its detector last looked are checked at the end too); a tracker not known is
+    one line."""
+    import pytest
+    from mimica.errors import MimicaError
+    from mimica.export.video import track_video, trackers
+    assert trackers() == ["dlib", "mediapipe"]         # CI installs the photo extra
+    frames = _frames(tmp_path / "frames", _ramp(8, 1, 6, 1.0), blank=(7,))
+    _, a = track_video(frames, tracker="mediapipe")
+    _, b = track_video(frames)
+    assert np.isnan(a[7]).all() and np.isnan(b[7]).all() and np.isfinite(a[:7]).all()
+    width = np.ptp(b[:7, :, 0], axis=1).mean()
+    gap = np.linalg.norm(a[:7] - b[:7], axis=2)
+    assert np.median(gap) < 0.04 * width, np.median(gap) / width
+    with pytest.raises(MimicaError, match="unknown face tracker 'x'"):
+        track_video(frames, tracker="x")
+
+
 def test_what_it_saw_turns_and_held_weights():
     """The report's turns past what the fit trusts and weights held at 1 for a second or more."""
     from scipy.spatial.transform import Rotation

@@ -1,6 +1,6 @@
 """ARKit weights from a video, without an iPhone: the face's 68 points are
-tracked frame by frame (the photo pipeline's detector, landmarks.detect2d), and the 52 weights
-fitted to them through the head's own blendshapes.
+tracked frame by frame (dlib's detector, or MediaPipe's face mesh in its tracking mode:
+track_video), and the 52 weights fitted to them through the head's own blendshapes.
 
 The model of a frame is a scaled orthographic camera looking at the head's landmarks moved by
 its blendshapes:  x = s P R (L + sum_k w_k B_k) + t,  with L the performer's rest landmarks,
@@ -265,12 +265,33 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
     return VideoFit(out, rots, res, missing)
 
 
-def track_video(path, progress=None, max_frames: int | None = None):
-    """The face's 68 points through a video or a folder of frames (dlib's detector and shape
-    predictor): each frame's points fitted inside the box of the last frame's; the detector
-    confirms the face every CHECK_EVERY frames, and where it finds none, the frames since the
-    last confirmation are checked one by one, so that the frames without a face are known
-    exactly; then it looks for the face again on every frame.
+def trackers() -> list[str]:
+    """The face trackers installed here, the default first.
+
+    Returns
+    -------
+    list of str
+        "dlib" (always), then "mediapipe" where the photo extra is installed.
+    """
+    import importlib.util
+    return ["dlib"] + (["mediapipe"] if importlib.util.find_spec("mediapipe") else [])
+
+
+def track_video(path, progress=None, max_frames: int | None = None, tracker: str | None = None):
+    """The face's 68 points through a video or a folder of frames.
+
+    "dlib" (the default): dlib's detector and shape predictor, each frame's points fitted inside
+    the box of the last frame's; the detector confirms the face every CHECK_EVERY frames, and
+    where it finds none, the frames since the last confirmation (the last frames too) are checked
+    one by one, so that the frames without a face are known exactly; then it looks for the face
+    again on every frame.
+    "mediapipe" (the photo extra): MediaPipe's face mesh in its tracking mode, the 68 of its
+    points that read as the iBUG points (detect2d.mediapipe_68).  On rendered takes turning up
+    to 30 degrees (dev identities 1007, 1008, painted) its points' motion is off by 2.0-6.8
+    pixels against dlib's 6.5-78 (dlib's box loses the face on the turn) and it runs at 102
+    frames/s against 78, but the fit -- its pulls tuned on dlib's points -- reads the weights no
+    better from it (where they act: 0.361 / 0.390 against 0.393 / 0.407; on bench/export.py's
+    grey takes turning 8 degrees 0.327 / 0.332 against 0.256 / 0.275), so it is not the default.
 
     Parameters
     ----------
@@ -279,6 +300,8 @@ def track_video(path, progress=None, max_frames: int | None = None):
         Called with a line of text every 30 frames tracked.
     max_frames : int or None
         Stop after this many.
+    tracker : str or None
+        "mediapipe" or "dlib" (None: the first of trackers()).
 
     Returns
     -------
@@ -288,8 +311,13 @@ def track_video(path, progress=None, max_frames: int | None = None):
     """
     from ..image.video import frame_source
     from ..landmarks.detect2d import box_of, detect_faces, fit_points
+    tracker = tracker or trackers()[0]
+    if tracker not in ("mediapipe", "dlib"):
+        raise MimicaError(f"unknown face tracker {tracker!r}; use one of mediapipe, dlib")
     n, fps, frames = frame_source(path)
     none = np.full((68, 2), np.nan)
+    if tracker == "mediapipe":
+        return fps, _checked(path, n, max_frames, _tracked_mediapipe(frames, n, progress, max_frames, path))
     out, raw, since = [], None, []          # since: (frame, image) tracked since the detector last saw the face
 
     def nearest(boxes, c):
@@ -330,10 +358,42 @@ def track_video(path, progress=None, max_frames: int | None = None):
                 since.append((i, img))
             raw = pts
             out.append(pts)
+        # the last frames since the detector's last look: checked too (a face gone at the end)
+        gone = next((j for j, im in since if not faces(im)), None)
+        if gone is not None:
+            out[gone:] = [none] * (len(out) - gone)
     except (RuntimeError, OSError) as e:                        # ffmpeg stopping inside the stream
-        what = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise MimicaError(f"{path}: the video breaks off after {len(out)} frames ({what}); re-encode it "
-                          "(ffmpeg -i IN -c:v libx264 OUT.mp4) or cut it there") from None
+        raise _broken_off(path, len(out), e) from None
+    return fps, _checked(path, n, max_frames, out)
+
+
+def _tracked_mediapipe(frames, n, progress, max_frames, path) -> list:
+    """The 68 points of each frame by MediaPipe's face mesh in its tracking mode (track_video)."""
+    from ..landmarks.detect2d import mediapipe_68, mediapipe_tracker
+    track, pick, out = mediapipe_tracker(), mediapipe_68(), []
+    try:
+        for i, img in enumerate(frames):
+            if max_frames is not None and i >= max_frames:
+                break
+            if progress and i and i % 30 == 0:
+                progress(f"tracked {i}" + (f" of {n}" if n else "") + " frames")
+            pts = track(img)
+            out.append(np.full((68, 2), np.nan) if pts is None else pts[pick])
+    except (RuntimeError, OSError) as e:                        # ffmpeg stopping inside the stream
+        raise _broken_off(path, len(out), e) from None
+    return out
+
+
+def _broken_off(path, done: int, e: Exception) -> MimicaError:
+    """The one line for a video whose decoder stopped after `done` frames."""
+    what = str(e).splitlines()[0] if str(e) else type(e).__name__
+    return MimicaError(f"{path}: the video breaks off after {done} frames ({what}); re-encode it "
+                       "(ffmpeg -i IN -c:v libx264 OUT.mp4) or cut it there")
+
+
+def _checked(path, n, max_frames, out: list) -> np.ndarray:
+    """The tracked frames' points (F, 68, 2), or one line where the video held fewer frames than
+    its header said, or no face at all."""
     if not out:
         raise MimicaError(f"{path}: no frames")
     if n and max_frames is None and len(out) < n - max(2, 0.1 * n):    # its header promised more
@@ -342,7 +402,7 @@ def track_video(path, progress=None, max_frames: int | None = None):
     pts = np.stack(out)
     if not np.isfinite(pts).any():
         raise MimicaError(f"{path}: no face in any of its {len(pts)} frames")
-    return fps, pts
+    return pts
 
 
 def head_angles(rotations: np.ndarray) -> np.ndarray:

@@ -145,6 +145,35 @@ def _face_mesh():
         return mp.solutions.face_mesh.FaceMesh(static_image_mode=True, max_num_faces=8, refine_landmarks=False)
 
 
+def mediapipe_tracker():
+    """MediaPipe's face mesh in its tracking mode (each frame's face found from the last one's,
+    the detector run only where it is lost), for the frames of one video (the photo extra).
+
+    Returns
+    -------
+    callable
+        img ((h, w, 3) array) -> the face's (468, 2) points in pixels, or None where it shows none.
+    """
+    from .._extras import require
+    from ..image.io import to_uint8
+    with _quiet():
+        mp = require("mediapipe", "photo", "MediaPipe's face tracker")
+        fm = mp.solutions.face_mesh.FaceMesh(static_image_mode=False, max_num_faces=1, refine_landmarks=False)
+
+    def points(img):
+        a = np.asarray(img)
+        a = to_uint8(a) if a.dtype != np.uint8 else a
+        a = np.repeat(a[..., None], 3, axis=2) if a.ndim == 2 else a
+        a = np.ascontiguousarray(a[..., :3])
+        h, w = a.shape[:2]
+        with _quiet():
+            r = fm.process(a)
+        if not r.multi_face_landmarks:
+            return None
+        return np.array([(q.x * w - 0.5, q.y * h - 0.5) for q in r.multi_face_landmarks[0].landmark])
+    return points
+
+
 @lru_cache(maxsize=1)
 def mediapipe_68() -> np.ndarray:
     """The 68 of MediaPipe's 468 face-mesh points read as the iBUG points.

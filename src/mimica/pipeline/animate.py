@@ -94,9 +94,10 @@ def _check(head: Path, out: Path, take, video, o: AnimateOptions) -> bool:
     return usd
 
 
-def weights_from_video(head, video, rest_frame: int = 0, progress=None):
-    """A video fitted through the head's blendshapes (export.video): dlib's 68 points tracked, the
-    ARKit weights and the head's angles fitted a frame.
+def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker: str | None = None):
+    """A video fitted through the head's blendshapes (export.video): the face's 68 points tracked
+    (export.video.track_video: dlib's, or MediaPipe's face mesh), the ARKit weights and the
+    head's angles fitted a frame.
 
     Parameters
     ----------
@@ -108,6 +109,8 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None):
         The frame showing the performer at rest.
     progress : callable, optional
         Called with a line of text as frames are tracked.
+    tracker : str or None
+        "dlib" or "mediapipe" (None: the default, export.video.trackers()).
 
     Returns
     -------
@@ -123,7 +126,7 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None):
     from ..export.video import UNSEEN, fit_weights, head_angles, landmark_basis, track_video, what_it_saw
     basis = landmark_basis(head)
     t0 = time.perf_counter()
-    fps, pts = track_video(video, progress=progress)
+    fps, pts = track_video(video, progress=progress, tracker=tracker)
     t1 = time.perf_counter()
     fit = fit_weights(pts, basis, rest_frame=rest_frame)
     t2 = time.perf_counter()
