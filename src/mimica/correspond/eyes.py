@@ -138,13 +138,7 @@ def _eye_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | Non
     if (inside & ~own).any():
         return None
     inside &= own
-    if not inside.any():
-        return None
-    # the one piece: faces inside that share edges with each other, around the centre
-    faces = np.nonzero(inside)[0]
-    comp = _pieces(mesh.submesh(faces)[0])
-    middle = int(np.argmin(np.linalg.norm(cent[faces] - centre, axis=1)))
-    return faces[comp == comp[middle]]
+    return _piece_around(mesh, inside, cent, centre)     # the one piece around the centre
 
 
 def valley(mesh: Mesh) -> np.ndarray:
@@ -243,9 +237,8 @@ def _loop_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | No
     Dijkstra within BAND of its arc, an edge costing exp(-CREASE x its concave angle) of its
     length (correspond.mouth's seam).  None where no loop closes."""
     from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import dijkstra
     from ..mesh.query import concave_angles
-    from .mouth import CREASE
+    from .mouth import CREASE, shortest_path
     centre = pts.mean(0)
     width = float(np.linalg.norm(pts[3] - pts[0]))
     ex = (pts[3] - pts[0]) / width
@@ -267,20 +260,22 @@ def _loop_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | No
         keep = ok[e].all(1)
         g = coo_matrix((np.r_[cost[keep], cost[keep]], (np.r_[e[keep, 0], e[keep, 1]], np.r_[e[keep, 1], e[keep, 0]])),
                        shape=(mesh.n_vertices,) * 2).tocsr()
-        _, pred = dijkstra(g, indices=a, return_predecessors=True)
-        seg, x = [], b
-        while x != a and x >= 0:
-            seg.append(x)
-            x = pred[x]
-        if x < 0:
+        seg = shortest_path(g, a, b)
+        if seg is None:
             return None
-        loop += seg[::-1]
+        loop += seg[1:]
     cent = mesh.face_centroids()
     relc = cent - centre
     nrm = np.zeros((mesh.n_faces, 3))
     np.add.at(nrm, mesh.tri_face, mesh.face_normals())
     near = (np.linalg.norm(relc, axis=1) < 0.8 * width) & (nrm @ fwd > 0)
     inside = near & inside_polygon(np.stack([relc @ ex, relc @ ey], 1) / width, q[np.array(loop)])
+    return _piece_around(mesh, inside, cent, centre)
+
+
+def _piece_around(mesh: Mesh, inside: np.ndarray, cent: np.ndarray, centre: np.ndarray) -> np.ndarray | None:
+    """Of the faces `inside` (n_faces,) bool, the one piece that shares edges around the face
+    nearest `centre` (cent: the faces' centroids); None where none is inside."""
     if not inside.any():
         return None
     faces = np.nonzero(inside)[0]

@@ -139,19 +139,38 @@ def _seam(mesh: Mesh, lm, crease: float = CREASE, valley_corners: bool = False, 
     for a, b in zip(stops[:-1], stops[1:]):
         if a == b:
             continue
-        _, pred = dijkstra(g, indices=a, return_predecessors=True)
-        seg, x = [], b
-        while x != a and x >= 0:
-            seg.append(x)
-            x = pred[x]
-        if x < 0:
+        seg = shortest_path(g, a, b)
+        if seg is None:
             return np.zeros(0, np.int64)
-        path += seg[::-1]
+        path += seg[1:]
     out = [path[0]]
     for x in path[1:]:                       # no vertex twice (waypoints can coincide)
         if x != out[-1]:
             out.append(x)
     return np.array(out, np.int64)
+
+
+def shortest_path(graph, a: int, b: int) -> list | None:
+    """The shortest path from a to b over a weighted graph, by Dijkstra.
+
+    Parameters
+    ----------
+    graph : (n, n) sparse matrix
+        Edge weights (CSR), symmetric.
+    a, b : int
+        The ends.
+
+    Returns
+    -------
+    list of int or None
+        The path's vertices, a and b included; None where b cannot be reached.
+    """
+    _, pred = dijkstra(graph, indices=a, return_predecessors=True)
+    seg, x = [], b
+    while x != a and x >= 0:
+        seg.append(x)
+        x = pred[x]
+    return None if x < 0 else [a] + seg[::-1]
 
 
 def cut_mouth(mesh: Mesh, landmarks) -> MouthCut:

@@ -330,11 +330,7 @@ def track_video(path, progress=None, max_frames: int | None = None, tracker: str
             return detect_faces(img)
         return [tuple(2 * c for c in b) for b in detect_faces(img[::2, ::2], upsample=0)]
     try:
-        for i, img in enumerate(frames):
-            if max_frames is not None and i >= max_frames:
-                break
-            if progress and i and i % 30 == 0:
-                progress(f"tracked {i}" + (f" of {n}" if n else "") + " frames")
+        for i, img in _counted(frames, n, progress, max_frames):
             if raw is None:                                     # looking for a face
                 boxes = faces(img)
                 raw = fit_points(img, boxes[0]) if boxes else None
@@ -372,16 +368,22 @@ def _tracked_mediapipe(frames, n, progress, max_frames, path) -> list:
     from ..landmarks.detect2d import mediapipe_68, mediapipe_tracker
     track, pick, out = mediapipe_tracker(), mediapipe_68(), []
     try:
-        for i, img in enumerate(frames):
-            if max_frames is not None and i >= max_frames:
-                break
-            if progress and i and i % 30 == 0:
-                progress(f"tracked {i}" + (f" of {n}" if n else "") + " frames")
+        for _, img in _counted(frames, n, progress, max_frames):
             pts = track(img)
             out.append(np.full((68, 2), np.nan) if pts is None else pts[pick])
     except (RuntimeError, OSError) as e:                        # ffmpeg stopping inside the stream
         raise _broken_off(path, len(out), e) from None
     return out
+
+
+def _counted(frames, n, progress, max_frames):
+    """(index, frame) of the first max_frames frames, a line to `progress` every 30."""
+    for i, img in enumerate(frames):
+        if max_frames is not None and i >= max_frames:
+            return
+        if progress and i and i % 30 == 0:
+            progress(f"tracked {i}" + (f" of {n}" if n else "") + " frames")
+        yield i, img
 
 
 def _broken_off(path, done: int, e: Exception) -> MimicaError:
