@@ -53,12 +53,14 @@ def test_eyes_that_are_one_surface_are_cut_loose_and_blink(eyes_head):
     assert np.abs(d1 - d0).max() < 1e-6 * np.ptp(mesh.vertices)
 
 
-def test_found_landmarks_are_slid_onto_a_sealed_eyes_margin():
+@pytest.mark.parametrize("seed, closes", [(14, 0.6), (42, 0.4)])
+def test_found_landmarks_are_slid_onto_a_sealed_eyes_margin(seed, closes):
     """Landmarks found on renders sit above a sealed eye's margin (the detector reads its
     shading): they are slid onto the valley between lid and eyeball before the eye is cut, so
-    the lids close over it (a dev head of the eyes' cut, seed 14)."""
+    the lids close over it -- on seed 42 past the deeper fold above the lid (heads the eyes' cut
+    was developed on)."""
     from mimica.landmarks.auto import landmarks_for
-    mesh, truth, _ = one_surface_eyes(14)
+    mesh, truth, _ = one_surface_eyes(seed)
     found = landmarks_for(mesh)
     assert found.found and not truth.found
     shapes = arkit_blendshapes(mesh, found)
@@ -70,7 +72,7 @@ def test_found_landmarks_are_slid_onto_a_sealed_eyes_margin():
     after = np.linalg.norm(cut.landmarks[eyes] - rest[eyes], axis=1).mean()
     assert after < 0.6 * before, (before, after)
     for side, key in (("left", "eyeBlinkLeft"), ("right", "eyeBlinkRight")):
-        assert closure(rest, truth.positions(shapes.mesh, shapes[key]), side) >= 0.6, side
+        assert closure(rest, truth.positions(shapes.mesh, shapes[key]), side) >= closes, side
 
 
 def test_cut_eyes_off_keeps_the_surface(eyes_head):

@@ -13,10 +13,11 @@ Landmarks found on renders sit off such an eye (dlib reads a sealed eye's shadin
 margin: 0.18-0.26 of the eye's width above it on held-out heads; on the dev heads the blink closed
 -0.08-0.15 of the gap), so where they were found, not given, each sealed eye's six points are
 first slid onto the margin (`on_margin`): the offset, in the eye's plane, at which the upper
-lid's arc runs deepest along the surface's valley between lid and eyeball; and the inside is
+lid's arc runs along the surface's valley between lid and eyeball (the lowest such valley, the
+fold above the lid running deeper on some heads); and the inside is
 cut along a loop of valley edges within BAND of the slid outline (`_loop_faces`), not at the
 polygon, since a tenth of the width off the margin puts the lid's last ring on the eye.  Given
-landmarks are kept: the valley search slid a dev head's true ones 0.17-0.22 of the width up, onto
+landmarks are kept: the deepest-valley search slid a dev head's true ones 0.17-0.22 of the width up, onto
 the fold above the lid, where its margin shows no valley at 20k vertices.
 """
 
@@ -37,9 +38,10 @@ INSIDE = 3                # ... and resolved: at least this many vertices inside
 # (ICT's identities remeshed at 20k vertices: gap 0.27-0.31 of the width, 4-9 vertices inside;
 # the shared 468-vertex head's sealed eyes: one vertex inside, a fan in front of the lids which,
 # cut loose, stood out of every blink with the void behind it showing)
-SLIDE_UP = 0.35           # on_margin searches this far (of the eye's width) across the eye ...
+SLIDE_UP = 0.45           # on_margin searches this far (of the eye's width) across the eye ...
 SLIDE_ALONG = 0.06        # ... and this far along it (the margin's valley runs along the eye)
 TRUSTED = 0.1             # found landmarks within this (across) of the margin found are kept
+PEAK_SHARE = 0.4          # a valley this deep (of the deepest) below the deepest is taken as the margin
 REFINE = np.arange(-0.1, 0.1001, 0.02)   # then the upper lid's middle points, each this far
 BAND = 0.1                # the margin's loop runs within this (of the width) of the slid outline
 # (dev heads 13-16, landmarks found on renders: blink 0.51-0.72 at 0.1, 0.16-0.77 at 0.25; the
@@ -163,8 +165,9 @@ def on_margin(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray, depth: np.ndarray | 
               step: float = 0.02) -> np.ndarray:
     """An eye's six landmarks slid onto the lids' margin of a one-surface eye: together, to the
     offset in the eye's plane (up to SLIDE_UP of its width across, SLIDE_ALONG along) at which
-    the upper lid's arc, seen from the front, runs deepest along the valley between lid and
-    eyeball; then the upper lid's two middle points each on its own (REFINE).
+    the upper lid's arc, seen from the front, runs along the valley between lid and eyeball
+    (of the valleys it meets going across, the lowest at least PEAK_SHARE as deep as the
+    deepest); then the upper lid's two middle points each on its own (REFINE).
 
     Parameters
     ----------
@@ -211,6 +214,15 @@ def on_margin(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray, depth: np.ndarray | 
     shifts = np.stack(np.meshgrid(along, across, indexing="ij"), -1).reshape(-1, 2)
     score = depth_at(arc[None] + shifts[:, None]).mean(1)
     best = shifts[np.lexsort((np.linalg.norm(shifts, axis=1), -np.round(score, 9)))[0]]   # ties: the least move
+    # the lid's fold above the margin can run deeper than the margin itself: of the valleys the
+    # arc meets going across, the lowest that is at least PEAK_SHARE as deep as the deepest
+    prof = score.reshape(len(along), len(across))
+    col = prof.argmax(0)
+    top = prof[col, np.arange(len(across))]
+    peak = np.r_[False, (top[1:-1] > top[:-2]) & (top[1:-1] >= top[2:]), False] & (top >= PEAK_SHARE * top.max()) & (top > 0)
+    if peak.any():
+        k = int(np.nonzero(peak)[0][0])
+        best = np.array([along[col[k]], across[k]])
     if abs(best[1]) < TRUSTED:
         return pts
     poly0, poly = poly, poly + best
