@@ -99,23 +99,34 @@ def inside_polygon(q: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return (cross & (x < xt)).sum(1) % 2 == 1
 
 
-def _eye_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | None:
-    """The faces of the eye: those whose centre, seen from the front, lies inside the polygon of
-    the eye's six landmarks, on the front of the face near them (the one piece around the
-    eye's centre).  None when they are not one piece of the surface."""
+def _eye_frame(pts: np.ndarray, fwd: np.ndarray):
+    """An eye's frame from its six landmarks (6, 3): (centre (3,), width, ex (3,) along the eye
+    from its first corner to its second, ey (3,) across it, up)."""
     centre = pts.mean(0)
-    across = pts[3] - pts[0]
-    width = float(np.linalg.norm(across))
-    ex = across / width
-    ey = np.cross(fwd, ex)
+    width = float(np.linalg.norm(pts[3] - pts[0]))
+    ex = (pts[3] - pts[0]) / width
+    return centre, width, ex, np.cross(fwd, ex)
+
+
+def _front_faces(mesh: Mesh, centre: np.ndarray, width: float, fwd: np.ndarray):
+    """(face centroids (n_faces, 3), their offsets from the eye's centre, whether each is near
+    the eye (within 0.8 of its width) and faces the front)."""
     cent = mesh.face_centroids()
     rel = cent - centre
     nrm = np.zeros((mesh.n_faces, 3))
     np.add.at(nrm, mesh.tri_face, mesh.face_normals())
+    return cent, rel, (np.linalg.norm(rel, axis=1) < 0.8 * width) & (nrm @ fwd > 0)
+
+
+def _eye_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | None:
+    """The faces of the eye: those whose centre, seen from the front, lies inside the polygon of
+    the eye's six landmarks, on the front of the face near them (the one piece around the
+    eye's centre).  None when they are not one piece of the surface."""
+    centre, width, ex, ey = _eye_frame(pts, fwd)
+    cent, rel, near = _front_faces(mesh, centre, width, fwd)
     depth = rel @ fwd
     # on the front near the landmarks: not a socket behind an eyeball, nor the back of the head
-    near = (np.linalg.norm(rel, axis=1) < 0.8 * width) & (nrm @ fwd > 0) & (depth > -0.15 * width) \
-        & (depth < 0.4 * width)
+    near &= (depth > -0.15 * width) & (depth < 0.4 * width)
     q = np.stack([rel @ ex, rel @ ey], 1)
     poly = np.stack([(pts - centre) @ ex, (pts - centre) @ ey], 1)
     inside = near & inside_polygon(q, poly)
@@ -189,10 +200,7 @@ def on_margin(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray, depth: np.ndarray | 
     """
     from ..mesh.query import TriangleLocator
     depth = valley(mesh) if depth is None else depth
-    centre = pts.mean(0)
-    width = float(np.linalg.norm(pts[3] - pts[0]))
-    ex = (pts[3] - pts[0]) / width
-    ey = np.cross(fwd, ex)
+    centre, width, ex, ey = _eye_frame(pts, fwd)
     rel = mesh.vertices - centre
     near = np.nonzero((np.linalg.norm(rel, axis=1) < 1.2 * width) & (mesh.vertex_normals() @ fwd > 0.3))[0]
     if len(near) < 3:
@@ -251,10 +259,7 @@ def _loop_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | No
     from scipy.sparse import coo_matrix
     from ..mesh.query import concave_angles
     from .mouth import CREASE, shortest_path
-    centre = pts.mean(0)
-    width = float(np.linalg.norm(pts[3] - pts[0]))
-    ex = (pts[3] - pts[0]) / width
-    ey = np.cross(fwd, ex)
+    centre, width, ex, ey = _eye_frame(pts, fwd)
     v = mesh.vertices
     rel = v - centre
     q = np.stack([rel @ ex, rel @ ey], 1) / width
@@ -276,11 +281,7 @@ def _loop_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | No
         if seg is None:
             return None
         loop += seg[1:]
-    cent = mesh.face_centroids()
-    relc = cent - centre
-    nrm = np.zeros((mesh.n_faces, 3))
-    np.add.at(nrm, mesh.tri_face, mesh.face_normals())
-    near = (np.linalg.norm(relc, axis=1) < 0.8 * width) & (nrm @ fwd > 0)
+    cent, relc, near = _front_faces(mesh, centre, width, fwd)
     inside = near & inside_polygon(np.stack([relc @ ex, relc @ ey], 1) / width, q[np.array(loop)])
     return _piece_around(mesh, inside, cent, centre)
 

@@ -155,23 +155,28 @@ def mediapipe_tracker():
         img ((h, w, 3) array) -> the face's (468, 2) points in pixels, or None where it shows none.
     """
     from .._extras import require
-    from ..image.io import to_uint8
     with _quiet():
         mp = require("mediapipe", "photo", "MediaPipe's face tracker")
         fm = mp.solutions.face_mesh.FaceMesh(static_image_mode=False, max_num_faces=1, refine_landmarks=False)
 
     def points(img):
-        a = np.asarray(img)
-        a = to_uint8(a) if a.dtype != np.uint8 else a
-        a = np.repeat(a[..., None], 3, axis=2) if a.ndim == 2 else a
-        a = np.ascontiguousarray(a[..., :3])
-        h, w = a.shape[:2]
-        with _quiet():
-            r = fm.process(a)
-        if not r.multi_face_landmarks:
-            return None
-        return np.array([(q.x * w - 0.5, q.y * h - 0.5) for q in r.multi_face_landmarks[0].landmark])
+        faces = _mediapipe_run(fm, img)
+        return faces[0] if faces else None
     return points
+
+
+def _mediapipe_run(fm, img) -> list:
+    """A MediaPipe face mesh run on a picture (grey or RGB, any dtype): each face's (468, 2)
+    points in pixels (pixel centres at integers)."""
+    from ..image.io import to_uint8
+    a = np.asarray(img)
+    a = to_uint8(a) if a.dtype != np.uint8 else a
+    a = np.repeat(a[..., None], 3, axis=2) if a.ndim == 2 else a
+    a = np.ascontiguousarray(a[..., :3])
+    h, w = a.shape[:2]
+    with _quiet():
+        r = fm.process(a)
+    return [np.array([(q.x * w - 0.5, q.y * h - 0.5) for q in f.landmark]) for f in (r.multi_face_landmarks or [])]
 
 
 @lru_cache(maxsize=1)
@@ -198,18 +203,7 @@ def mediapipe_faces(img) -> list:
     list of (468, 2) float arrays
         Every face's points in pixels (pixel centres at integers), largest first.
     """
-    from ..image.io import to_uint8
-    a = np.asarray(img)
-    if a.dtype != np.uint8:
-        a = to_uint8(a)
-    if a.ndim == 2:
-        a = np.repeat(a[..., None], 3, axis=2)
-    a = np.ascontiguousarray(a[..., :3])
-    h, w = a.shape[:2]
-    fm = _face_mesh()
-    with _quiet():
-        r = fm.process(a)
-    faces = [np.array([(p.x * w - 0.5, p.y * h - 0.5) for p in f.landmark]) for f in (r.multi_face_landmarks or [])]
+    faces = _mediapipe_run(_face_mesh(), img)
     return sorted(faces, key=lambda f: -float(np.prod(np.ptp(f, axis=0))))
 
 
