@@ -14,7 +14,7 @@ margin: 0.18-0.26 of the eye's width above it on held-out heads; on the dev head
 -0.08-0.15 of the gap), so where they were found, not given, each sealed eye's six points are
 first slid onto the margin (`on_margin`): the offset, in the eye's plane, at which the upper
 lid's arc runs along the surface's valley between lid and eyeball (the lowest such valley, the
-fold above the lid running deeper on some heads); and the inside is
+fold above the lid running deeper on some heads, but not the lower lid's); and the inside is
 cut along a loop of valley edges within BAND of the slid outline (`_loop_faces`), not at the
 polygon, since a tenth of the width off the margin puts the lid's last ring on the eye.  Given
 landmarks are kept: the deepest-valley search slid a dev head's true ones 0.17-0.22 of the width up, onto
@@ -42,6 +42,10 @@ SLIDE_UP = 0.45           # on_margin searches this far (of the eye's width) acr
 SLIDE_ALONG = 0.06        # ... and this far along it (the margin's valley runs along the eye)
 TRUSTED = 0.1             # found landmarks within this (across) of the margin found are kept
 PEAK_SHARE = 0.4          # a valley this deep (of the deepest) below the deepest is taken as the margin
+# ... but not where a valley this far above it (of the width) runs this much deeper: the upper
+# arc caught on the lower lid's valley (dev heads 13-30 and 42, 38 eyes: 3 such, the slide's
+# error max 0.17 -> 0.09 of the width, no other eye moved)
+LOWER_LID = (0.1, 0.2, 1.1)
 REFINE = np.arange(-0.1, 0.1001, 0.02)   # then the upper lid's middle points, each this far
 BAND = 0.1                # the margin's loop runs within this (of the width) of the slid outline
 # (dev heads 13-16, landmarks found on renders: blink 0.51-0.72 at 0.1, 0.16-0.77 at 0.25; the
@@ -178,7 +182,8 @@ def on_margin(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray, depth: np.ndarray | 
     offset in the eye's plane (up to SLIDE_UP of its width across, SLIDE_ALONG along) at which
     the upper lid's arc, seen from the front, runs along the valley between lid and eyeball
     (of the valleys it meets going across, the lowest at least PEAK_SHARE as deep as the
-    deepest); then the upper lid's two middle points each on its own (REFINE).
+    deepest, unless a deeper one lies just above it: LOWER_LID); then the upper lid's two
+    middle points each on its own (REFINE).
 
     Parameters
     ----------
@@ -229,7 +234,13 @@ def on_margin(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray, depth: np.ndarray | 
     top = prof[col, np.arange(len(across))]
     peak = np.r_[False, (top[1:-1] > top[:-2]) & (top[1:-1] >= top[2:]), False] & (top >= PEAK_SHARE * top.max()) & (top > 0)
     if peak.any():
-        k = int(np.nonzero(peak)[0][0])
+        ks = np.nonzero(peak)[0]
+        k = int(ks[0])
+        # ... unless that is the lower lid's valley, caught by the arc's ends: a deeper valley
+        # lies above it by less than the lids' gap (LOWER_LID)
+        up = ks[(across[ks] - across[k] >= LOWER_LID[0] - 1e-9) & (across[ks] - across[k] <= LOWER_LID[1] + 1e-9)
+                & (top[ks] >= LOWER_LID[2] * top[k])]
+        k = int(up[0]) if len(up) else k
         best = np.array([along[col[k]], across[k]])
     if abs(best[1]) < TRUSTED:
         return pts
