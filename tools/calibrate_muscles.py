@@ -94,7 +94,7 @@ DRIVE_TARGETS = [
 
 def drive_field(face, name):
     from mimica.rig import _drive_muscle
-    return static_field(face.rig, _drive_muscle(name, face.skin, face.lm, face.near[2], 40.0), face.K)
+    return static_field(face.rig, _drive_muscle(name, face.skin, face.lm, 40.0), face.K)
 
 
 def calibrate_drives(faces, model, evals=60):

@@ -66,7 +66,7 @@ def closest_point_on_triangles(p, a, b, c):
 class TriangleLocator:
     """Exact closest point on a triangle mesh, for many query points (`closest`).
 
-    With libigl installed (a dependency), its AABB tree answers (point_mesh_squared_distance);
+    With libigl installed (a dependency), its AABB tree answers (igl.AABB, built at the first query);
     without it (or with use_igl=False), candidates come from k-d trees over triangle centroids, one
     tree per band of triangle sizes (a few large triangles, e.g. at the back of a head, would
     otherwise make every query unsure); a point whose k-th candidate could still hide a closer
@@ -83,6 +83,7 @@ class TriangleLocator:
         self.v = np.ascontiguousarray(vertices, dtype=np.float64)
         self.t = np.ascontiguousarray(triangles, dtype=np.int64)
         self.use_igl = use_igl and _igl is not None and len(self.t) > 0
+        self._aabb = None
         tri = self.v[self.t]
         self.centroids = tri.mean(axis=1)
         self.radius = np.linalg.norm(tri - self.centroids[:, None], axis=2).max(axis=1)
@@ -118,7 +119,10 @@ class TriangleLocator:
         p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         m = len(p)
         if self.use_igl and m:
-            _, tri, _ = _igl.point_mesh_squared_distance(p, self.v, self.t)[:3]
+            if self._aabb is None:                 # built once: igl's free function builds one a call
+                self._aabb = _igl.AABB()           # (0.05 s on a 26,719-vertex head; a query of 36 points 0.3 ms)
+                self._aabb.init(self.v, self.t)
+            tri = self._aabb.squared_distance(self.v, self.t, p)[1]
             tri = np.asarray(tri, dtype=np.int64).reshape(-1)
             tt = self.t[tri]
             qq, bary = closest_point_on_triangles(p, self.v[tt[:, 0]], self.v[tt[:, 1]], self.v[tt[:, 2]])

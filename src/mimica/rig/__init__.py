@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
+from scipy.spatial.distance import cdist
 
 from ..align import face_cylinder
 from ..errors import MimicaError
@@ -320,9 +321,12 @@ def strip_muscle(mdef: MuscleDef, skin: Mesh, lm: np.ndarray, near, alpha: float
     s_init = np.maximum(dist, 1e-9)
     fan = spring_fan(skin.vertices, nodes, attach, tree)
     # Kim eq. 19: skin node j is in the ROI when alpha |S_init^i| > |m_i - s_j| for some i
+    # (every node against every skin node, vectorized: the k-d tree's ball lists took seconds
+    # on a whole head, where deep strips reach all of it)
+    reach = (mdef.alpha or alpha) * s_init
     roi = np.zeros(skin.n_vertices, bool)
-    for js in tree.query_ball_point(nodes, (mdef.alpha or alpha) * s_init):
-        roi[js] = True
+    for c in range(0, len(nodes), 8):
+        roi |= (cdist(skin.vertices, nodes[c:c + 8]) <= reach[None, c:c + 8]).any(1)
     roi[fan[0]] = True
     # a calibrated muscle's own contraction, scaled as the rig's knob is (0.25 by default)
     c = contraction if mdef.contraction is None else mdef.contraction * contraction / 0.25
@@ -375,16 +379,17 @@ def spring_fan(vertices: np.ndarray, nodes: np.ndarray, attach: np.ndarray, tree
 DRIVE_REACH = 0.25               # a drive's region of interest: its attached skin and this many eye widths
 
 
-def _drive_muscle(name, skin, lm, tree, omega) -> Muscle:
+def _drive_muscle(name, skin, lm, omega) -> Muscle:
     """A drive (rig.drives: the jaw, a lid) as one more force type of the rig: its anchors at the
     attached skin nodes, their motion at full activation as the stretch."""
     d = place_drive(name, skin.vertices, lm)
     if len(d.attach) == 0:
         raise MimicaError(f"rig: {name} finds no skin to move (is the face's {d.info['part']} in the mesh?)")
     ew = float(np.linalg.norm(lm[45] - lm[36]))
-    roi = np.zeros(skin.n_vertices, bool)
-    for js in tree.query_ball_point(skin.vertices[d.attach], DRIVE_REACH * ew):
-        roi[js] = True
+    # the skin within the reach of any attached node (its distance to the nearest of them: the
+    # k-d tree's ball lists took seconds on a whole head's thousands of cheek nodes)
+    r = DRIVE_REACH * ew
+    roi = cKDTree(skin.vertices[d.attach]).query(skin.vertices, distance_upper_bound=r * (1 + 1e-9))[0] <= r
     return Muscle(name, skin.vertices[d.attach].copy(), d.motion, omega, d.attach, roi, kind="drive",
                   weight=d.weight, info=d.info)
 
@@ -448,7 +453,7 @@ def build_rig(skin: Mesh, landmarks: np.ndarray, muscles=None, alpha: float = 10
         if progress:
             progress(k, len(names), n)
         if n in DRIVES:
-            out.append(_drive_muscle(n, skin, lm, tree, muscle_omega))
+            out.append(_drive_muscle(n, skin, lm, muscle_omega))
             continue
         out.append(strip_muscle(MUSCLES[n], skin, lm, (loc, normals, tree), alpha, contraction, muscle_omega))
     params = {"alpha": alpha, "modes": modes, "contraction": contraction, "tether": tether,
