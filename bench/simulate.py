@@ -192,6 +192,7 @@ def main():
     # issue 18: the whole library with the jaw and the lids
     lib_steps = library_steps(whole)
     lib_pre = library_precompute()
+    view_first, view_base = viewer_first_frame()
     warp_dev, lin_dev = smile_deviations(skin, lm)
     spring_laws(face, skin, lm)
     stretch_modes(face)
@@ -199,7 +200,8 @@ def main():
     print(f"steps_per_s={lib_steps:.0f} precompute_s={lib_pre:.2f} full_solver_steps_per_s={full_steps:.2f} "
           f"modal_deviation={dev:.3f} anatomy_cosine_min={min(cos_all):.3f} "
           f"coverage_cosine_min={min(cov.values()):.3f} coverage_cosine_median={np.median(list(cov.values())):.3f} "
-          f"fit_frames_per_s={fit_fps:.0f} warp_deviation={warp_dev:.3f} linear_deviation={lin_dev:.3f}")
+          f"fit_frames_per_s={fit_fps:.0f} warp_deviation={warp_dev:.3f} linear_deviation={lin_dev:.3f} "
+          f"viewer_first_frame_s={view_first:.1f} viewer_first_frame_all_made_first_s={view_base:.1f}")
     print(f"(Kim's 8 muscles alone: {steps:.0f} steps/s, rig precompute {pre:.2f} s on the face area)")
 
 
@@ -296,6 +298,72 @@ def library_precompute():
     print(f"whole library on the {head.mesh.n_vertices}-vertex head: {len(r.muscles)} systems + gravity, "
           f"placed and precomputed in {min(times):.1f} s (runs: {', '.join(f'{x:.1f}' for x in times)})")
     return min(times)
+
+
+def viewer_first_frame(seed=1044):
+    """`mimica view` on a new whole head (ICT's 26,719-vertex mesh, a held-out identity) with
+    no rig file, as a user types it: seconds from the command's start to the face's first frame
+    on the page's socket, to the happiness preset's muscles moving it (set as soon as the page
+    connects), and to the last force system made beside the page; the baseline, in the same run:
+    the same head with every system made before the page opens (ViewOptions(systems="first")),
+    to its first frame."""
+    import asyncio
+    import json
+    import os
+    import re
+    import subprocess
+    import tempfile
+    from websockets.asyncio.client import connect
+    from mimica.mesh import write_mesh
+    from mimica.pipeline import ViewOptions, prepare_view
+    from mimica.viewer import ViewerSession
+    full = ICTModel()
+    tv = full.identity(np.random.default_rng(seed).normal(0, 0.8, 20))
+    with tempfile.TemporaryDirectory() as tmp:
+        obj = Path(tmp) / "head.obj"
+        write_mesh(obj, full.mesh.with_vertices(tv))
+        t0 = time.perf_counter()
+        env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1] / "src"))
+        proc = subprocess.Popen([sys.executable, "-m", "mimica.cli", "view", str(obj), "--no-browser"],
+                                stderr=subprocess.PIPE, text=True, env=env)
+        try:
+            for line in proc.stderr:
+                m = re.search(r"http://(127\.0\.0\.1:\d+)/\?token=([\w-]+)", line)
+                if m:
+                    break
+
+            async def page():
+                out = {}
+                async with connect(f"ws://{m.group(1)}/ws?token={m.group(2)}", max_size=1 << 28) as ws:
+                    init = json.loads(await ws.recv())
+                    await ws.send(json.dumps({"type": "preset", "name": "happiness"}))
+                    rest, made = None, init["made"]
+                    while "all" not in out or "moving" not in out:
+                        r = await asyncio.wait_for(ws.recv(), 600)
+                        if isinstance(r, str):
+                            made = json.loads(r).get("made", made)
+                            if made == init["of"]:
+                                out.setdefault("all", time.perf_counter() - t0)
+                        elif r[:4] == b"\0\0\0\0":
+                            await ws.send(json.dumps({"type": "ack"}))
+                            x = np.frombuffer(r[4:], np.float32)
+                            if rest is None:
+                                rest, out["first"] = x, time.perf_counter() - t0
+                            if np.abs(x - rest).max() > 0.05:
+                                out.setdefault("moving", time.perf_counter() - t0)
+                return out
+            out = asyncio.run(page())
+        finally:
+            proc.terminate()
+            proc.wait(30)
+        t = time.perf_counter()
+        face = prepare_view(obj, None, None, ViewOptions(systems="first"))
+        ViewerSession(face.rig, face.mask).positions()
+        base = time.perf_counter() - t
+    print(f"mimica view on a new {full.mesh.n_vertices}-vertex head, no rig file: first frame at {out['first']:.1f} s, "
+          f"happiness moving it at {out['moving']:.1f} s, every system made at {out['all']:.1f} s (every system "
+          f"made before the page opens: first frame at {base:.1f} s)")
+    return out["first"], base
 
 
 def smile_deviations(skin, lm, duration=0.6):

@@ -178,7 +178,8 @@ def test_the_validators_say_what_was_given_and_what_is_expected():
 
 def test_the_viewer_rigs_a_face_as_rig_does(monkeypatch):
     """`mimica view` on a face without a rig rigs it through the pipeline with make_rig's own
-    defaults (the calibrated library, not a set of its own), wrinkles on as the CLI's default."""
+    defaults (the calibrated library, not a set of its own), wrinkles on as the CLI's default,
+    its force systems left to the viewer's session (made as the page moves them)."""
     import mimica.pipeline.view as view
     from mimica.cli import build_parser
     from mimica.pipeline import RigOptions, ViewOptions, prepare_view
@@ -187,11 +188,15 @@ def test_the_viewer_rigs_a_face_as_rig_does(monkeypatch):
     class Stop(Exception):
         pass
 
-    def fake(face, landmarks, options, progress=None):
-        seen["options"] = options
+    def fake(face, landmarks, options, progress=None, systems=True):
+        seen["options"], seen["systems"] = options, systems
         raise Stop
     monkeypatch.setattr(view, "make_rig", fake)
     with pytest.raises(Stop):
         prepare_view("face.obj")
     assert seen["options"] == RigOptions() and ViewOptions().rig == RigOptions()
+    # the page opens on the placed muscles; the session makes their systems beside it
+    assert seen["systems"] is False and ViewOptions().systems == "as needed"
+    with pytest.raises(MimicaError, match="'as needed' or 'first'"):
+        prepare_view("face.obj", options=ViewOptions(systems="later"))
     assert (not build_parser().parse_args(["view", "f.obj"]).no_wrinkles) == ViewOptions().wrinkles

@@ -29,10 +29,12 @@ def server(tmp_path_factory):
     from mimica.rig import build_rig
     from viewer_probe import viewer_process
     face = ICTModel(ICT_FACE_AREA_VERTICES)
+    from mimica.physics import precompute
     rig = build_rig(face.mesh, face.neutral[ICT_LANDMARKS_68],
                     muscles=["zygomaticus_major_L", "zygomaticus_major_R", "frontalis_L", "frontalis_R"])
     d = tmp_path_factory.mktemp("viewer")
-    rig.save(d / "face.rig")
+    rig.save(d / "bare.rig")                       # its systems made by the viewer, beside the page
+    precompute(rig).save(d / "face.rig")           # as `mimica rig` writes it
     with viewer_process("face.obj", d / "face.rig") as (url, log):
         yield url, d, face
 
@@ -53,6 +55,39 @@ def _get(url):
             return r.status, r.read()
     except urllib.error.HTTPError as e:
         return e.code, b""
+
+
+def test_a_rig_without_systems_opens_at_rest_and_moves_once_they_are_made(server):
+    """A rig whose force systems are not made yet: the page gets the face at once, told how
+    many systems are left; a muscle set meanwhile moves the face once its system is made, and
+    the page hears when the last one is."""
+    from websockets.asyncio.client import connect
+    from viewer_probe import viewer_process
+    _, d, face = server
+
+    async def run(url):
+        async with connect(ws_url(url), max_size=1 << 26) as ws:
+            init = json.loads(await ws.recv())
+            assert init["type"] == "init" and init["of"] == 5 and not init["ready"]
+            await ws.send(json.dumps({"type": "set", "name": "frontalis_R", "value": 1.0}))
+            rest = last = None
+            made = init["made"]
+            t0 = time.time()
+            while time.time() - t0 < 120 and (made < 5 or last is None or np.abs(last - rest).max() < 0.05):
+                r = await asyncio.wait_for(ws.recv(), 60)
+                if isinstance(r, str):
+                    m = json.loads(r)
+                    assert m["type"] == "made", m
+                    made = m["made"]
+                elif r[:4] == b"\0\0\0\0":
+                    await ws.send(json.dumps({"type": "ack"}))
+                    x = np.frombuffer(r[4:], np.float32)
+                    rest = x if rest is None else rest
+                    last = x
+            assert rest is not None and np.abs(rest - face.mesh.vertices.ravel()).max() < 1e-5    # at rest at first
+            assert made == 5 and np.abs(last - rest).max() > 0.05
+    with viewer_process("face.obj", d / "bare.rig") as (url, log):
+        asyncio.run(run(url))
 
 
 def test_serves_only_its_own_files(server):

@@ -265,6 +265,13 @@ class _MuscleSystem:
         reach; the output u = Phi q then lives, up to a relative RMS error tol, in the span
         of the leading left singular vectors of Phi L (W_qq = L L^T).  Returns (U (3n_free, k)
         in the output's rows, R (r, k)) with U^T Phi = R^T Phi^T Phi."""
+        memo = self.__dict__.setdefault("_memo", {})
+        if ("sub", tol) not in memo:
+            memo[("sub", tol)] = self._output_subspace(tol)[1]           # R, small; U = Phi R
+        R = memo[("sub", tol)]
+        return self.solver.b.phi @ R, R
+
+    def _output_subspace(self, tol: float):
         A, B = self.transition()
         W = _dlyap(A, np.outer(B, B))
         r = len(self.solver.q)
@@ -296,7 +303,25 @@ class _MuscleSystem:
         coordinates): the Gramians P (reachability) and Q (observability) from discrete
         Lyapunov equations, the square-root method, the states whose Hankel singular values
         carry the response kept (2 * the dropped sum <= tol * the largest, the H-infinity
-        error bound).  Returns (Ar, Br, Cr, T, Ti): xr = T x, x ~ Ti xr, T Ti = I."""
+        error bound).  Returns (Ar, Br, Cr, T, Ti): xr = T x, x ~ Ti xr, T Ti = I (kept for
+        the next simulator that takes this system over: `proj` is then the same)."""
+        memo = self.__dict__.setdefault("_memo", {})
+        if ("frame", substeps, tol) not in memo:
+            memo[("frame", substeps, tol)] = self._frame_model(substeps, proj, tol)
+        return memo[("frame", substeps, tol)]
+
+    def reduced_output(self, tol: float):
+        """output_subspace(tol)'s shapes padded to every node (float32; made again each call,
+        not kept: a whole head's are hundreds of MB), and the block R^T Phi^T Phi that takes
+        modal coordinates to them (kept)."""
+        U, R = self.output_subspace(tol)
+        b = self.solver.b
+        memo = self.__dict__.setdefault("_memo", {})
+        if ("proj", tol) not in memo:
+            memo[("proj", tol)] = R.T @ (b.phi.T @ b.phi)
+        return b.padded32(U), memo[("proj", tol)]
+
+    def _frame_model(self, substeps: int, proj: np.ndarray, tol: float):
         Af, Bf = self.frame_transition(substeps)
         r = len(self.solver.q)
         C = np.zeros((proj.shape[0], len(Bf)))
@@ -648,7 +673,7 @@ def skin_system(rig, rotation: bool = True):
     return energy, mass, K, W
 
 
-def precompute(rig, progress=None):
+def precompute(rig, progress=None, only=None):
     """One modal system per force type on the rig (Kim §VI): each muscle's over its ROI (eq. 19),
     loaded at its spring nodes, and gravity's over the skin the skull does not hold; systems the
     rig already carries are kept (those loaded from a file are read back).
@@ -659,6 +684,10 @@ def precompute(rig, progress=None):
         Changed in place: each muscle's `basis` and the rig's `gravity_basis` made.
     progress : callable, optional
         Called as progress(k, n, name) before each muscle's system.
+    only : collection of str, optional
+        Make only these systems now (muscle names, "gravity"): a viewer makes each as it is
+        first moved.  The skin's shared matrices (skin_system, seconds on a whole head) are
+        then kept with the rig until its last system is made.
 
     Returns
     -------
@@ -669,10 +698,16 @@ def precompute(rig, progress=None):
         raise MimicaError("rig: built by an older mimica; rebuild it with `mimica rig`")
     p = rig.params
     gravity = p.get("gravity", True) or rig.gravity_basis is not None
-    todo = [m for m in rig.muscles if not isinstance(m.basis, ModalBasis)]
-    if not todo and (isinstance(rig.gravity_basis, ModalBasis) or not gravity) and "k_length" in p:
+    left = [m for m in rig.muscles if not isinstance(m.basis, ModalBasis)]
+    grav_left = gravity and not isinstance(rig.gravity_basis, ModalBasis)
+    todo = left if only is None else [m for m in left if m.name in only]
+    grav = grav_left and (only is None or "gravity" in only)
+    if not todo and not grav and "k_length" in p:
         return rig
-    energy, mass, K, W = skin_system(rig)
+    kept = rig.__dict__.pop("_skin_system", None)
+    energy, mass, K, W = kept if kept is not None else skin_system(rig)
+    if len(todo) < len(left) or grav < grav_left:              # more to make later: keep the matrices
+        rig.__dict__["_skin_system"] = (energy, mass, K, W)
     p.update(k_area=energy.k_area, k_length=energy.k_length, k_bend=energy.k_bend)
     modes = int(p.get("modes", 8))
     def system(m):
@@ -694,7 +729,7 @@ def precompute(rig, progress=None):
         m.basis = system(m)
     if isinstance(rig.gravity_basis, dict):
         rig.gravity_basis = ModalBasis.from_arrays(rig.gravity_basis, W)
-    elif gravity and rig.gravity_basis is None:
+    elif grav and rig.gravity_basis is None:
         rig.gravity_basis = ModalBasis.compute(energy, mass, rig.held(), r=modes, stiffness=K, rotation=W)
     return rig
 
@@ -883,11 +918,13 @@ class FaceSimulator:
         A relative RMS tolerance for the reduced output model (see __init__).
     springs : str
         "linear" or "kim" (Kim's eq. 15, kim_spring).
+    reuse : FaceSimulator or None
+        Its muscles' systems taken over where this rig shares them (see __init__).
     """
 
     def __init__(self, rig, fps: float = 60.0, substeps: int = 4, spring: float = 4.0,
                  frequency: float = 4.0, damping: float = 1.6, zeta: float = 0.0005, warp: bool | None = None,
-                 reduced: float | None = None, springs: str = "linear"):
+                 reduced: float | None = None, springs: str = "linear", reuse=None):
         """warp: modal warping (Kim eq. 10, Choi & Ko's integrated rotation), on by default
         (None: on unless `reduced`).  Each node's frame turns with the tangent rotation of its
         system's displacement (rotation_operator(tangent=True): the spin of a muscle sliding the
@@ -906,7 +943,12 @@ class FaceSimulator:
 
         springs: "linear" (default), k (u_m - u_s) in the system's stiffness; "kim", Kim's eq.
         15 along the spring's deformation (kim_spring), linearized at each step: no linear model
-        then (no `reduced`, no fit), every frame stepped."""
+        then (no `reduced`, no fit), every frame stepped.
+
+        reuse: a simulator made before at the same settings and density on a rig sharing
+        Muscle objects with this one (a viewer's, growing as systems are made): those muscles'
+        systems are taken over, their states and reduced models with them; the simulator
+        handed over must no longer be stepped once this one is (call its `_sync` first)."""
         if springs not in SPRING_LAWS:
             raise MimicaError(f"springs {springs!r}: one of {', '.join(SPRING_LAWS)}")
         if springs == "kim" and reduced:
@@ -925,7 +967,11 @@ class FaceSimulator:
         self.pulls = []
         self.pull_scale = 1.0          # scales every user pull (a timeline's "pull" channel)
         self.gravity_scale = 1.0       # scales gravity (a timeline's "gravity" channel)
-        self.systems = [_MuscleSystem(rig, m, self.h, spring, xi, zeta, rho, warp, springs) for m in rig.muscles]
+        key = (self.h, spring, xi, zeta, rho, warp, springs)
+        made = {} if reuse is None or reuse._key != key else {id(m): sm for m, sm in zip(reuse.rig.muscles, reuse.systems)}
+        self._key = key
+        self.systems = [made.get(id(m)) or _MuscleSystem(rig, m, self.h, spring, xi, zeta, rho, warp, springs)
+                        for m in rig.muscles]
         self.names = [m.name for m in rig.muscles]
         self.inputs = ActivationMap(rig.muscles, lid_room=False)      # the lids: lid_contact
         self.gravity = None
@@ -1078,10 +1124,9 @@ class FaceSimulator:
         if self._joint is None:
             cols, proj = [], []
             for sm in self.systems:
-                U, R = sm.output_subspace(self.reduced)
-                b = sm.solver.b
-                cols.append(b.padded32(U))
-                proj.append(R.T @ (b.phi.T @ b.phi))
+                U, p = sm.reduced_output(self.reduced)
+                cols.append(U)
+                proj.append(p)
             self._joint = (np.ascontiguousarray(np.concatenate(cols, 1)), proj)
         return self._joint
 

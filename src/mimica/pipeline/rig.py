@@ -34,7 +34,7 @@ class RigOptions:
     stretch: str = "bar"
 
 
-def make_rig(face, landmarks=None, options: RigOptions | None = None, out=None, progress=None):
+def make_rig(face, landmarks=None, options: RigOptions | None = None, out=None, progress=None, systems=True):
     """A face's rig, its modal systems made.
 
     Parameters
@@ -49,6 +49,9 @@ def make_rig(face, landmarks=None, options: RigOptions | None = None, out=None, 
         Where to save the rig (`Rig.load` reads it back).
     progress : callable, optional
         Called as progress(k, n, name) after each force's modal system.
+    systems : bool
+        Make the modal systems now (False: the muscles placed only; physics.precompute, or the
+        first simulation, or a viewer's session makes them).
 
     Returns
     -------
@@ -67,7 +70,8 @@ def make_rig(face, landmarks=None, options: RigOptions | None = None, out=None, 
     if o.stretch == "shell":
         from ..physics.face import shell_stretch_modes
         shell_stretch_modes(rig)
-    precompute(rig, progress=progress)
+    if systems:
+        precompute(rig, progress=progress)
     if out is not None:
         rig.save(Path(out))
     return rig

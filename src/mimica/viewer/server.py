@@ -7,7 +7,8 @@ Messages from the page (JSON text):
   {"type": "preset", "name": "happiness"}                (or "neutral")
   {"type": "load", "name": "face.obj", "obj": "<OBJ text>"}   (a second face)
   {"type": "ack"}                                        (a frame was shown: send the next)
-Replies: JSON {"type": "init" | "error" | "loaded", ...}; binary frames: a uint32 kind then
+Replies: JSON {"type": "init" | "error" | "loaded" | "made", ...} ("made": {"made": k, "of": n,
+"name": ...} as the force systems are made beside the page); binary frames: a uint32 kind then
 data (0: positions float32 of the face, 1: of the second face, 2: triangles uint32 of the
 face, 3: of the second face).  A bad message gets an error reply; the server keeps going.
 
@@ -153,7 +154,7 @@ class ViewerServer:
         self._post(ws, "init", json.dumps({"type": "init", "title": self.title, **s.controls(),
                                            "timeline_format": _timeline_format()}))
         self._post(ws, 2, _frame(2, s.rig.skin.triangles.astype(np.uint32)))
-        self._post(ws, 0, _frame(0, (s._last if s._last is not None else s.rest).astype(np.float32)))
+        self._post(ws, 0, _frame(0, (s._last if s._last is not None else s.positions()).astype(np.float32)))
         writer = asyncio.create_task(self._writer(ws))
         self.clients.add(ws)
         try:
@@ -294,7 +295,17 @@ class ViewerServer:
             self._post(ws, 0, data)
         self.frames_sent += 1
 
-    async def run(self, ready=None):
+    async def run(self, ready=None, progress=None):
+        """Serve until cancelled; the session's missing force systems are made beside it
+        (ViewerSession.make_systems), each page told how far ("made" messages).
+
+        Parameters
+        ----------
+        ready : callable, optional
+            Called with the server once it listens (its `url` set).
+        progress : callable, optional
+            Also called as progress(k, n, name) after each system is made.
+        """
         from websockets.asyncio.server import serve
         async with serve(self._client, self.host, self.port, process_request=self._http,
                          max_size=MAX_MESSAGE, compression=None) as server:
@@ -302,7 +313,30 @@ class ViewerServer:
             self.url = f"http://{self.host}:{self.port}/?token={self.token}"
             if ready:
                 ready(self)
-            await self._simulate()
+            sim = asyncio.create_task(self._simulate())
+            if self.session.pending():
+                await self._make_systems(progress)
+            await sim
+
+    async def _make_systems(self, progress):
+        """The session's make_systems in a worker thread; each step posted to every page."""
+        loop = asyncio.get_running_loop()
+
+        def tell(k, n, name):
+            if progress:
+                progress(k, n, name)
+            msg = json.dumps({"type": "made", "made": k, "of": n, "name": name})
+            loop.call_soon_threadsafe(self._tell_all, msg)
+        try:
+            await loop.run_in_executor(None, self.session.make_systems, tell)
+        except Exception as e:                      # the page says it; the face stays at rest
+            self.log(f"viewer: the force systems could not be made: {type(e).__name__}: {e}")
+            msg = json.dumps({"type": "error", "message": f"the muscles could not be made: {e}"[:300]})
+            self._tell_all(msg)
+
+    def _tell_all(self, msg):
+        for ws in list(self.clients):
+            self._post(ws, f"reply{time.monotonic_ns()}", msg)
 
 
 def _timeline_format():

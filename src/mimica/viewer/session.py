@@ -1,7 +1,14 @@
 """The viewer's state: a rig's muscles (and facial actions, and age when wrinkles are on),
-simulated live; a second face the current expression is transferred onto."""
+simulated live; a second face the current expression is transferred onto.
+
+A rig whose force systems are not made yet is shown at rest at once; `make_systems` (run beside
+the page) then makes them, the ones the page moves first, and the simulation takes in each batch
+as it is made: the page opens in the seconds the rig's placement takes, not after the minute the
+whole library's systems take on a whole head."""
 
 from __future__ import annotations
+
+import threading
 
 import numpy as np
 
@@ -21,12 +28,14 @@ class ViewerSession:
     """
     def __init__(self, rig, mask=None, fps: float = 60.0):
         from ..anim import PRESETS
-        from ..physics.face import FaceSimulator
         from ..rig.muscles import FACIAL_ACTIONS
         self.rig, self.fps = rig, fps
-        # display: reduced output and frame model (0.007% off), built now, not inside the first frames
-        self.sim = FaceSimulator(rig, fps=fps, reduced=1e-4).prepare()
-        self.muscles = list(self.sim.names)
+        self.muscles = [m.name for m in rig.muscles]
+        self._lock = threading.Lock()          # the simulation: stepped here, replaced by make_systems
+        self.sim, self._order = None, np.zeros(0, int)
+        self.made = (0, len(self.pending()))   # (systems made, of) as make_systems goes
+        if not self.made[1]:
+            self._take_in()
         self.base = np.array([n.rsplit("_", 1)[0] if n.endswith(("_L", "_R")) else n for n in self.muscles])
         # facial actions that reach at least one muscle of this rig
         from ..rig.muscles import weights_on
@@ -49,7 +58,8 @@ class ViewerSession:
     # -- controls ------------------------------------------------------------------------------
     def controls(self) -> dict:
         return {"muscles": self.muscles, "actions": list(self.actions), "presets": list(self.presets),
-                "age": self.layer is not None, "age_value": self.age}
+                "age": self.layer is not None, "age_value": self.age,
+                "made": self.made[0], "of": self.made[1], "ready": self.sim is not None and not self.pending()}
 
     def set(self, name: str, value) -> None:
         if not isinstance(name, str):
@@ -84,15 +94,85 @@ class ViewerSession:
                 a += w * self.actions[k]
         return np.clip(a, -1.0, 1.0)
 
+    # -- the force systems -------------------------------------------------------------------------
+    def pending(self) -> list[str]:
+        """The force systems not made yet (muscle names, "gravity")."""
+        from ..physics.modal import ModalBasis
+        out = [m.name for m in self.rig.muscles if not isinstance(m.basis, (ModalBasis, dict))]
+        if self.rig.params.get("gravity", True) and self.rig.gravity_basis is None:
+            out.insert(0, "gravity")
+        return out
+
+    def _take_in(self):
+        """Simulate every muscle whose system is made, taking over the running simulation's
+        systems and states (FaceSimulator's `reuse`)."""
+        from ..physics.face import FaceSimulator
+        from ..physics.modal import ModalBasis
+        from ..rig import Rig
+        rig = self.rig
+        idx = np.array([i for i, m in enumerate(rig.muscles) if isinstance(m.basis, (ModalBasis, dict))], int)
+        part = rig if len(idx) == len(rig.muscles) else Rig(rig.skin, rig.landmarks, [rig.muscles[i] for i in idx],
+                                                              rig.params, rig.gravity_basis)
+        old = self.sim
+        # display: reduced output and frame model (0.007% off), built now, not inside the first frames
+        sim = FaceSimulator(part, fps=self.fps, reduced=1e-4, reuse=old).prepare()
+        with self._lock:
+            if old is not None:
+                old._sync()                    # its states into the systems the new one shares
+            self.sim, self._order = sim, idx
+            self.moved = True                  # a new simulation: its next frame is worth drawing
+
+    def make_systems(self, progress=None) -> None:
+        """Make the rig's missing force systems, gravity first (the softest: the skin's density
+        is set by it), then those the controls move now before the others; the simulation takes
+        them in whenever all those moved are made, and at the end.  Run beside the page (a
+        thread); controls set meanwhile are kept.
+
+        Parameters
+        ----------
+        progress : callable, optional
+            Called as progress(k, n, name) after each system is made.
+        """
+        from ..physics import precompute
+        left = self.pending()
+        n, k = len(left), 0
+        fresh = False                          # made since the simulation last took systems in
+        while left:
+            moved = set(self._moved())
+            name = "gravity" if "gravity" in left else next((x for x in left if x in moved), left[0])
+            precompute(self.rig, only=[name])
+            left.remove(name)
+            k += 1
+            self.made = (k, n)
+            fresh = fresh or name in moved
+            if progress:
+                progress(k, n, name)
+            if not left or (fresh and not moved & set(left)):
+                self._take_in()
+                fresh = False
+
+    def _moved(self) -> list[str]:
+        """The muscles the controls move now."""
+        a = self.activations()
+        return [n for n, v in zip(self.muscles, a) if v != 0.0]
+
     # -- simulation -----------------------------------------------------------------------------
     def step(self) -> None:
         """Advance the simulation by one displayed frame (its substeps); cheap."""
-        self.sim.advance(self.activations())
+        if self.sim is None:
+            return
+        a = self.activations()
+        with self._lock:
+            self.sim.advance(a[self._order])
 
     def positions(self, tol=1e-4) -> np.ndarray:
         """The skin now (with wrinkles), float32: the summed fields, the costly part.  Sets
         `moved`: whether any node moved more than tol since the last call."""
-        x = self.rest + self.sim.displacement()
+        if self.sim is None:
+            x = self.rest.copy()
+        else:
+            with self._lock:
+                x = self.rest + self.sim.displacement()
         if self.layer is not None:
             x = self.layer.apply(x, self.age, inplace=True)      # x is this frame's own array
         self.moved = self._last is None or float(np.abs(x - self._last).max()) > tol

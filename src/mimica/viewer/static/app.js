@@ -191,6 +191,7 @@ ws.onmessage = (ev) => {
     if (m.type === 'init') init(m);
     else if (m.type === 'error') say(m.message, true);
     else if (m.type === 'loaded') { say(`second face: ${m.name} (${m.n_vertices} vertices)`); }
+    else if (m.type === 'made') making(m.made, m.of);
     return;
   }
   const kind = new Uint32Array(ev.data, 0, 1)[0];
@@ -272,7 +273,13 @@ function init(m) {
   timeline.format = m.timeline_format;
   drawCurve();
   state.ready = true;
-  say('ready');
+  if (m.of > 0 && m.made < m.of) making(m.made, m.of); else say('ready');
+}
+// the face's force systems made beside the page: the ones moved first; it plays as they come
+function making(k, n) {
+  state.made = [k, n];
+  if (k >= n) say('ready');
+  else say(`making the muscles: ${k} of ${n} (those you move come first)`);
 }
 
 document.getElementById('second').addEventListener('change', async (ev) => {
