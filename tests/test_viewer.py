@@ -73,7 +73,7 @@ def test_a_rig_without_systems_opens_at_rest_and_moves_once_they_are_made(server
             rest = last = None
             made = init["made"]
             t0 = time.time()
-            while time.time() - t0 < 120 and (made < 5 or last is None or np.abs(last - rest).max() < 0.05):
+            while time.time() - t0 < 120 and (made < 5 or last is None or np.abs(last - rest).max() < 0.3):
                 r = await asyncio.wait_for(ws.recv(), 60)
                 if isinstance(r, str):
                     m = json.loads(r)
@@ -84,8 +84,9 @@ def test_a_rig_without_systems_opens_at_rest_and_moves_once_they_are_made(server
                     x = np.frombuffer(r[4:], np.float32)
                     rest = x if rest is None else rest
                     last = x
-            assert rest is not None and np.abs(rest - face.mesh.vertices.ravel()).max() < 1e-5    # at rest at first
-            assert made == 5 and np.abs(last - rest).max() > 0.05
+            # at rest at first (with the wrinkle layer at the default age: 0.075 at most)
+            assert rest is not None and np.abs(rest - face.mesh.vertices.ravel()).max() < 0.1
+            assert made == 5 and np.abs(last - rest).max() > 0.3
     with viewer_process("face.obj", d / "bare.rig") as (url, log):
         asyncio.run(run(url))
 

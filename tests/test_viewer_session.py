@@ -65,9 +65,14 @@ def test_a_session_opens_at_rest_and_makes_the_moved_systems_first(face):
 
     def progress(k, n, name):
         seen.append((name, [s.muscles[i] for i in s._order] if s.sim is not None else None))
+        if k == 4:
+            s.set("zygomaticus_major_L", 0.5)             # made (third), not simulated: moved now
     s.make_systems(progress)
-    assert [x[0] for x in seen[:2]] == ["gravity", "frontalis_R"] and len(seen) == 5
+    assert [x[0] for x in seen] == ["gravity", "frontalis_R", "zygomaticus_major_L", "zygomaticus_major_R",
+                                    "frontalis_L"]
     assert seen[2][1] == ["frontalis_R"]                  # taken in once the moved one was made
+    assert seen[4][1] == ["zygomaticus_major_L", "zygomaticus_major_R", "frontalis_R"]   # ... and the one moved later
+    s.set("zygomaticus_major_L", 0.0)
     assert not s.pending() and s.controls()["ready"] and len(s._order) == 4
     # the same frames as a session on the rig made whole beforehand
     ref = ViewerSession(precompute(_rig(face)))

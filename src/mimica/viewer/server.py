@@ -319,20 +319,34 @@ class ViewerServer:
             await sim
 
     async def _make_systems(self, progress):
-        """The session's make_systems in a worker thread; each step posted to every page."""
+        """The session's make_systems in a thread of its own, each step posted to every page; a
+        daemon thread, so that stopping the server does not wait for the last system."""
+        import threading
         loop = asyncio.get_running_loop()
+        done = loop.create_future()
+
+        def post(f, *args):
+            try:
+                loop.call_soon_threadsafe(f, *args)
+            except RuntimeError:                    # the server stopped meanwhile
+                pass
 
         def tell(k, n, name):
             if progress:
                 progress(k, n, name)
-            msg = json.dumps({"type": "made", "made": k, "of": n, "name": name})
-            loop.call_soon_threadsafe(self._tell_all, msg)
-        try:
-            await loop.run_in_executor(None, self.session.make_systems, tell)
-        except Exception as e:                      # the page says it; the face stays at rest
+            post(self._tell_all, json.dumps({"type": "made", "made": k, "of": n, "name": name}))
+
+        def work():
+            try:
+                self.session.make_systems(tell)
+                post(done.set_result, None)
+            except Exception as e:                  # the page says it; the face stays as it is
+                post(done.set_result, e)
+        threading.Thread(target=work, daemon=True, name="mimica-systems").start()
+        e = await done
+        if e is not None:
             self.log(f"viewer: the force systems could not be made: {type(e).__name__}: {e}")
-            msg = json.dumps({"type": "error", "message": f"the muscles could not be made: {e}"[:300]})
-            self._tell_all(msg)
+            self._tell_all(json.dumps({"type": "error", "message": f"the muscles could not be made: {e}"[:300]}))
 
     def _tell_all(self, msg):
         for ws in list(self.clients):

@@ -136,7 +136,7 @@ class ViewerSession:
         from ..physics import precompute
         left = self.pending()
         n, k = len(left), 0
-        fresh = False                          # made since the simulation last took systems in
+        taken = {self.muscles[i] for i in self._order} if self.sim is not None else set()
         while left:
             moved = set(self._moved())
             name = "gravity" if "gravity" in left else next((x for x in left if x in moved), left[0])
@@ -144,12 +144,13 @@ class ViewerSession:
             left.remove(name)
             k += 1
             self.made = (k, n)
-            fresh = fresh or name in moved
             if progress:
                 progress(k, n, name)
-            if not left or (fresh and not moved & set(left)):
+            moved = set(self._moved())
+            # every moved muscle made, and one of them not simulated yet: take them in
+            if not left or (moved - taken - set(left) and not moved & set(left)):
                 self._take_in()
-                fresh = False
+                taken = {self.muscles[i] for i in self._order}
 
     def _moved(self) -> list[str]:
         """The muscles the controls move now."""
