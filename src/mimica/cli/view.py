@@ -41,7 +41,7 @@ def cmd_view(a):
              "they are moved (`mimica rig` once and --rig to skip this)")
     face = prepare_view(skin, lm, a.rig, ViewOptions(wrinkles=not a.no_wrinkles))
     session = ViewerSession(face.rig, face.mask)
-    server = ViewerServer(session, vendor, title=f"mimica · {Path(a.rig or a.face).stem}", port=a.port)
+    server = ViewerServer(session, vendor, title=f"mimica · {Path(a.rig or a.face).stem}", port=a.port, log=_say)
 
     def ready(srv):
         _say(f"viewer on {srv.url} (Ctrl-C to stop)")
