@@ -89,7 +89,7 @@ def painted(model, rest):
     their forward axis, dark lashes, mouth and teeth -- what a tracker trained on photographs
     looks for, which a grey render lacks."""
     from mimica.correspond.parts import ICT_PARTS
-    from mimica.correspond.eyes import inside_polygon
+    from mimica.correspond.eyes import inside_polygon, polyline_distance
     from mimica.data import ICT_LANDMARKS_68
     part = {name: (a, b) for name, a, b in ICT_PARTS}
     col = np.tile(np.asarray(PAINT["skin"]), (len(rest), 1))
@@ -100,11 +100,7 @@ def painted(model, rest):
     lips = inside_polygon(xy, lm[48:60, :2]) & (rest[a:b, 2] > lm[48:60, 2].min() - 0.05 * width)
     col[a:b][lips] = PAINT["lips"]
     for brow in (lm[17:22], lm[22:27]):
-        seg_a, seg_b = brow[:-1, :2], brow[1:, :2]
-        ab = seg_b - seg_a
-        t = np.clip(np.einsum("mkj,kj->mk", xy[:, None] - seg_a[None], ab) / (ab * ab).sum(1), 0, 1)
-        d = np.linalg.norm(xy[:, None] - (seg_a[None] + t[..., None] * ab[None]), axis=2).min(1)
-        near = (d < 0.035 * width) & (rest[a:b, 2] > brow[:, 2].min() - 0.1 * width)
+        near = (polyline_distance(xy, brow[:, :2]) < 0.035 * width) & (rest[a:b, 2] > brow[:, 2].min() - 0.1 * width)
         col[a:b][near] = PAINT["brows"]
     for eye in ("eyeball.left", "eyeball.right"):
         a, b = part[eye]

@@ -309,53 +309,42 @@ def viewer_first_frame(seed=1044):
     to its first frame."""
     import asyncio
     import json
-    import os
-    import re
-    import subprocess
     import tempfile
     from websockets.asyncio.client import connect
     from mimica.mesh import write_mesh
     from mimica.pipeline import ViewOptions, prepare_view
     from mimica.viewer import ViewerSession
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+    from viewer_probe import viewer_process, ws_url         # the browser tests' launcher
     full = ICTModel()
     tv = full.identity(np.random.default_rng(seed).normal(0, 0.8, 20))
+
+    async def page(url, t0):
+        out = {}
+        async with connect(ws_url(url), max_size=1 << 28) as ws:
+            init = json.loads(await ws.recv())
+            await ws.send(json.dumps({"type": "preset", "name": "happiness"}))
+            rest, made = None, init["made"]
+            while "all" not in out or "moving" not in out:
+                r = await asyncio.wait_for(ws.recv(), 600)
+                if isinstance(r, str):
+                    made = json.loads(r).get("made", made)
+                    if made == init["of"]:
+                        out.setdefault("all", time.perf_counter() - t0)
+                elif r[:4] == b"\0\0\0\0":
+                    await ws.send(json.dumps({"type": "ack"}))
+                    x = np.frombuffer(r[4:], np.float32)
+                    if rest is None:
+                        rest, out["first"] = x, time.perf_counter() - t0
+                    elif np.abs(x - rest).max() > 0.05:
+                        out.setdefault("moving", time.perf_counter() - t0)
+        return out
     with tempfile.TemporaryDirectory() as tmp:
         obj = Path(tmp) / "head.obj"
         write_mesh(obj, full.mesh.with_vertices(tv))
         t0 = time.perf_counter()
-        env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1] / "src"))
-        proc = subprocess.Popen([sys.executable, "-m", "mimica.cli", "view", str(obj), "--no-browser"],
-                                stderr=subprocess.PIPE, text=True, env=env)
-        try:
-            for line in proc.stderr:
-                m = re.search(r"http://(127\.0\.0\.1:\d+)/\?token=([\w-]+)", line)
-                if m:
-                    break
-
-            async def page():
-                out = {}
-                async with connect(f"ws://{m.group(1)}/ws?token={m.group(2)}", max_size=1 << 28) as ws:
-                    init = json.loads(await ws.recv())
-                    await ws.send(json.dumps({"type": "preset", "name": "happiness"}))
-                    rest, made = None, init["made"]
-                    while "all" not in out or "moving" not in out:
-                        r = await asyncio.wait_for(ws.recv(), 600)
-                        if isinstance(r, str):
-                            made = json.loads(r).get("made", made)
-                            if made == init["of"]:
-                                out.setdefault("all", time.perf_counter() - t0)
-                        elif r[:4] == b"\0\0\0\0":
-                            await ws.send(json.dumps({"type": "ack"}))
-                            x = np.frombuffer(r[4:], np.float32)
-                            if rest is None:
-                                rest, out["first"] = x, time.perf_counter() - t0
-                            if np.abs(x - rest).max() > 0.05:
-                                out.setdefault("moving", time.perf_counter() - t0)
-                return out
-            out = asyncio.run(page())
-        finally:
-            proc.terminate()
-            proc.wait(30)
+        with viewer_process(obj, None) as (url, _):
+            out = asyncio.run(page(url, t0))
         t = time.perf_counter()
         face = prepare_view(obj, None, None, ViewOptions(systems="first"))
         ViewerSession(face.rig, face.mask).positions()

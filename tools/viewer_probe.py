@@ -22,9 +22,9 @@ def chromium_path():
 
 @contextmanager
 def viewer_process(face, rig, extra=(), timeout=180):
-    """`mimica view FACE --rig RIG --no-browser` in its own process; yields (url, log lines).
-    The child runs the same mimica as this process (a checkout's src/ or the installed one)
-    with the same data directory."""
+    """`mimica view FACE --rig RIG --no-browser` in its own process (rig None: no --rig, the face
+    rigged by the command); yields (url, log lines).  The child runs the same mimica as this
+    process (a checkout's src/ or the installed one) with the same data directory."""
     import os
     from pathlib import Path
     import mimica
@@ -33,8 +33,9 @@ def viewer_process(face, rig, extra=(), timeout=180):
         [str(Path(mimica.__file__).resolve().parents[1])] + os.environ.get("PYTHONPATH", "").split(os.pathsep)))
     if data_dir() is not None:
         env["MIMICA_DATA"] = str(data_dir())
-    proc = subprocess.Popen([sys.executable, "-m", "mimica.cli", "view", str(face), "--rig", str(rig),
-                             "--no-browser", *extra], stderr=subprocess.PIPE, text=True, env=env)
+    rig_args = [] if rig is None else ["--rig", str(rig)]
+    proc = subprocess.Popen([sys.executable, "-m", "mimica.cli", "view", str(face), *rig_args, "--no-browser", *extra],
+                            stderr=subprocess.PIPE, text=True, env=env)
     url, log, t0 = None, [], time.time()
     for line in proc.stderr:
         log.append(line)

@@ -29,6 +29,7 @@ import numpy as np
 from scipy.sparse.csgraph import connected_components
 
 from ..mesh import Mesh
+from ..mesh.query import TriangleLocator
 from scipy.spatial import cKDTree
 
 RIMS = {"right": list(range(36, 42)), "left": list(range(42, 48))}
@@ -42,10 +43,11 @@ SLIDE_UP = 0.45           # on_margin searches this far (of the eye's width) acr
 SLIDE_ALONG = 0.06        # ... and this far along it (the margin's valley runs along the eye)
 TRUSTED = 0.1             # found landmarks within this (across) of the margin found are kept
 PEAK_SHARE = 0.4          # a valley this deep (of the deepest) below the deepest is taken as the margin
-# ... but not where a valley this far above it (of the width) runs this much deeper: the upper
-# arc caught on the lower lid's valley (dev heads 13-30 and 42, 38 eyes: 3 such, the slide's
-# error max 0.17 -> 0.09 of the width, no other eye moved)
-LOWER_LID = (0.1, 0.2, 1.1)
+# ... but not where a valley this far above it (of the width) runs LOWER_LID_DEEPER times deeper:
+# the upper arc caught on the lower lid's valley (dev heads 13-30 and 42, 38 eyes: 3 such, the
+# slide's error max 0.17 -> 0.09 of the width, no other eye moved)
+LOWER_LID_GAP = (0.1, 0.2)
+LOWER_LID_DEEPER = 1.1
 REFINE = np.arange(-0.1, 0.1001, 0.02)   # then the upper lid's middle points, each this far
 BAND = 0.1                # the margin's loop runs within this (of the width) of the slid outline
 # (dev heads 13-16, landmarks found on renders: blink 0.51-0.72 at 0.1, 0.16-0.77 at 0.25; the
@@ -135,7 +137,6 @@ def _eye_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | Non
     poly = np.stack([(pts - centre) @ ex, (pts - centre) @ ey], 1)
     inside = near & inside_polygon(q, poly)
     # the landmarks mark the lids' margin: the faces under them are the lids'
-    from ..mesh.query import TriangleLocator
     under, _, _, _ = TriangleLocator(mesh.vertices, mesh.triangles).closest(pts)
     lid_faces = mesh.tri_face[under]
     inside[lid_faces] = False
@@ -177,12 +178,12 @@ def valley(mesh: Mesh) -> np.ndarray:
 
 
 def on_margin(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray, depth: np.ndarray | None = None,
-              step: float = 0.02) -> np.ndarray:
+              step: float = 0.02, locator=None) -> np.ndarray:
     """An eye's six landmarks slid onto the lids' margin of a one-surface eye: together, to the
     offset in the eye's plane (up to SLIDE_UP of its width across, SLIDE_ALONG along) at which
     the upper lid's arc, seen from the front, runs along the valley between lid and eyeball
     (of the valleys it meets going across, the lowest at least PEAK_SHARE as deep as the
-    deepest, unless a deeper one lies just above it: LOWER_LID); then the upper lid's two
+    deepest, unless a deeper one lies just above it: LOWER_LID_GAP); then the upper lid's two
     middle points each on its own (REFINE).
 
     Parameters
@@ -196,6 +197,8 @@ def on_margin(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray, depth: np.ndarray | 
         valley(mesh), where already computed.
     step : float
         The search's step, of the eye's width.
+    locator : TriangleLocator or None
+        Of the mesh, where already made (both eyes of a head share one).
 
     Returns
     -------
@@ -203,7 +206,6 @@ def on_margin(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray, depth: np.ndarray | 
         The slid landmarks on the surface; `pts` itself where they lie within TRUSTED of where
         the search would put them.
     """
-    from ..mesh.query import TriangleLocator
     depth = valley(mesh) if depth is None else depth
     centre, width, ex, ey = _eye_frame(pts, fwd)
     rel = mesh.vertices - centre
@@ -226,22 +228,23 @@ def on_margin(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray, depth: np.ndarray | 
     across = np.arange(-SLIDE_UP, SLIDE_UP + 1e-9, step)
     shifts = np.stack(np.meshgrid(along, across, indexing="ij"), -1).reshape(-1, 2)
     score = depth_at(arc[None] + shifts[:, None]).mean(1)
-    best = shifts[np.lexsort((np.linalg.norm(shifts, axis=1), -np.round(score, 9)))[0]]   # ties: the least move
     # the lid's fold above the margin can run deeper than the margin itself: of the valleys the
-    # arc meets going across, the lowest that is at least PEAK_SHARE as deep as the deepest
+    # arc meets going across, the lowest that is at least PEAK_SHARE as deep as the deepest ...
     prof = score.reshape(len(along), len(across))
     col = prof.argmax(0)
     top = prof[col, np.arange(len(across))]
-    peak = np.r_[False, (top[1:-1] > top[:-2]) & (top[1:-1] >= top[2:]), False] & (top >= PEAK_SHARE * top.max()) & (top > 0)
-    if peak.any():
-        ks = np.nonzero(peak)[0]
-        k = int(ks[0])
+    ks = np.nonzero(np.r_[False, (top[1:-1] > top[:-2]) & (top[1:-1] >= top[2:]), False]
+                    & (top >= PEAK_SHARE * top.max()) & (top > 0))[0]
+    if len(ks):
         # ... unless that is the lower lid's valley, caught by the arc's ends: a deeper valley
-        # lies above it by less than the lids' gap (LOWER_LID)
-        up = ks[(across[ks] - across[k] >= LOWER_LID[0] - 1e-9) & (across[ks] - across[k] <= LOWER_LID[1] + 1e-9)
-                & (top[ks] >= LOWER_LID[2] * top[k])]
-        k = int(up[0]) if len(up) else k
+        # lies above it by less than the lids' gap
+        rise = across[ks] - across[ks[0]]
+        up = ks[(rise >= LOWER_LID_GAP[0] - 1e-9) & (rise <= LOWER_LID_GAP[1] + 1e-9)
+                & (top[ks] >= LOWER_LID_DEEPER * top[ks[0]])]
+        k = int(up[0] if len(up) else ks[0])
         best = np.array([along[col[k]], across[k]])
+    else:                                              # no valley met: the deepest place, ties the least move
+        best = shifts[np.lexsort((np.linalg.norm(shifts, axis=1), -np.round(score, 9)))[0]]
     if abs(best[1]) < TRUSTED:
         return pts
     poly0, poly = poly, poly + best
@@ -251,11 +254,24 @@ def on_margin(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray, depth: np.ndarray | 
         part = (cand[:, k - 1:k + 1, None] * (1 - t[None]) + cand[:, k:k + 2, None] * t[None]).reshape(len(REFINE), -1, 2)
         poly[k, 1] += REFINE[np.argmax(depth_at(part).mean(1) - 1e-9 * np.abs(REFINE))]
     moved = pts + width * ((poly - poly0)[:, :1] * ex + (poly - poly0)[:, 1:] * ey)
-    return TriangleLocator(mesh.vertices, mesh.triangles).closest(moved)[2]
+    if locator is None:
+        locator = TriangleLocator(mesh.vertices, mesh.triangles)
+    return locator.closest(moved)[2]
 
 
-def _polyline_distance(q: np.ndarray, line: np.ndarray) -> np.ndarray:
-    """(m,) distance of 2D points q (m, 2) to a 2D polyline (k, 2)."""
+def polyline_distance(q: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """Each 2D point's distance to a 2D polyline.
+
+    Parameters
+    ----------
+    q : (m, 2) float array
+    line : (k, 2) float array
+        Its vertices in order.
+
+    Returns
+    -------
+    (m,) float array
+    """
     a, b = line[:-1], line[1:]
     ab = b - a
     t = np.clip(np.einsum("mkj,kj->mk", q[:, None] - a[None], ab) / np.maximum((ab * ab).sum(1), 1e-300), 0, 1)
@@ -283,7 +299,7 @@ def _loop_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | No
     c3 = int(cand[np.argmin(np.linalg.norm(v[cand] - pts[3], axis=1))])
     loop = []
     for a, b, arc in ((c0, c3, poly[[0, 1, 2, 3]]), (c3, c0, poly[[3, 4, 5, 0]])):
-        ok = front & (_polyline_distance(q, arc) < BAND)
+        ok = front & (polyline_distance(q, arc) < BAND)
         ok[[c0, c3]] = True
         keep = ok[e].all(1)
         g = coo_matrix((np.r_[cost[keep], cost[keep]], (np.r_[e[keep, 0], e[keep, 1]], np.r_[e[keep, 1], e[keep, 0]])),
@@ -354,6 +370,7 @@ def cut_eyes(mesh: Mesh, landmarks, found: bool = False) -> EyeCut:
         return out
     fwd = face_cylinder(lm).axes[2]
     depth = valley(mesh) if found else None
+    locator = TriangleLocator(mesh.vertices, mesh.triangles) if found else None   # both eyes' slides
     slid = lm.copy()
     fi, st = mesh.face_indices.copy(), mesh.face_starts
     face_of = np.repeat(np.arange(mesh.n_faces), np.diff(st))
@@ -364,7 +381,7 @@ def cut_eyes(mesh: Mesh, landmarks, found: bool = False) -> EyeCut:
         gap = 0.5 * (np.linalg.norm(pts[1] - pts[5]) + np.linalg.norm(pts[2] - pts[4]))
         if gap < OPEN * np.linalg.norm(pts[3] - pts[0]):
             continue                               # a shut eye: nothing to open
-        moved = on_margin(mesh, pts, fwd, depth) if found else pts
+        moved = on_margin(mesh, pts, fwd, depth, locator=locator) if found else pts
         if moved is not pts:                       # along the margin's valley near them
             inside = _loop_faces(Mesh(np.vstack(verts), fi, st), moved, fwd)
         else:
