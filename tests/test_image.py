@@ -271,3 +271,22 @@ def test_tiny_and_faceless_photos_write_nothing(tmp_path):
              "--out", out)
     assert r.returncode == 2 and "grey.png" in r.stderr and "no face" in r.stderr
     assert not out.exists()
+
+
+def test_cli_from_neutral_on_a_target_that_already_smiles(tmp_path):
+    """subject03's happy photo as the target, its normal one as its rest, and its own smile as the
+    source: from the rest, the smile it already wears is the source's, so the photo comes back
+    (mean change under a tenth of the smile added on top of its own); vtc is refused in one line,
+    nothing written."""
+    args = ("transfer-image", YALE / "subject03.normal.gif", YALE / "subject03.happy.gif",
+            "--target", YALE / "subject03.happy.gif")
+    r = _cli(*args, "--out", tmp_path / "stacked")
+    assert r.returncode == 0, r.stderr
+    r = _cli(*args, "--from-neutral", YALE / "subject03.normal.gif", "--out", tmp_path / "rest")
+    assert r.returncode == 0, r.stderr
+    tgt = read_image(YALE / "subject03.happy.gif")
+    stacked, rest = (np.abs(read_image(tmp_path / d / "subject03.happy.png") - tgt).mean() for d in ("stacked", "rest"))
+    assert rest < 0.15 * stacked, (rest, stacked)
+    r = _cli(*args, "--from-neutral", YALE / "subject03.normal.gif", "--method", "vtc", "--out", tmp_path / "no")
+    assert r.returncode == 2 and "method vtc" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "no").exists()

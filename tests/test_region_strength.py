@@ -89,3 +89,45 @@ def test_one_eye_at_zero_keeps_its_pixels_while_the_other_moves(pair, method):
         return np.abs(got[y0:y1, x0:x1][inside] - t[y0:y1, x0:x1][inside]).max() * 255
     assert change("eye_left") <= 1.0
     assert change("eye_right") > 5
+
+
+@pytest.fixture(scope="module")
+def smiling_target():
+    """Rendered ICT photos with exact truth: the target (identity004) already smiles at half the
+    happiness shape; its resting face; the source (identity001) neutral and happy; the truth, the
+    target at the whole happiness."""
+    from mimica.image.ictphotos import LIGHT_RIGHT, ICTPhotos
+    ph = ICTPhotos()
+    return (ph.photo("identity001"), ph.photo("identity001", "happiness"),
+            ph.photo("identity004", "happiness", LIGHT_RIGHT, amount=0.5), ph.photo("identity004", None, LIGHT_RIGHT),
+            ph.photo("identity004", "happiness", LIGHT_RIGHT))
+
+
+@pytest.mark.parametrize("method", ["shading", "warp"])
+def test_from_neutral_moves_a_smiling_target_by_the_smiles_difference_only(smiling_target, method):
+    """From the target's own resting face, a target that already smiles at 0.5 is moved by the rest
+    of the source's smile (to 1.0: the truth), not by the whole smile on top of its own (1.5):
+    points within half a pixel of the truth's, and the photo far closer to it than without."""
+    from mimica.image import psnr
+    from mimica.image.warp import align_to
+    (s, sp), (x, xp), (t, tp), (_, rp), (f, fp) = smiling_target
+    truth = align_to(f, fp, tp)
+    stacked = ImageAnalogy(t, tp).transfer(s, sp, x, xp, method=method)
+    an = ImageAnalogy(t, tp, rest_points=rp)
+    got = an.transfer(s, sp, x, xp, method=method)
+    assert np.abs(got.points - fp).max() < 0.5
+    assert np.abs(stacked.points - fp).max() > 4                      # the smile added to the target's own
+    m = got.mask > 0.5
+    assert psnr(got.image, truth, m) > psnr(stacked.image, truth, m) + 3
+    assert psnr(got.image, truth, m) > psnr(t, truth, m) + 3
+    assert np.abs(an.transfer(s, sp, x, xp, method=method, strength=0).image - t).max() < 2e-3
+
+
+def test_from_neutral_refuses_what_it_cannot_do(smiling_target):
+    (s, sp), (x, xp), (t, tp), (_, rp), _ = smiling_target
+    an = ImageAnalogy(t, tp, rest_points=rp)
+    for method in ("vtc", "eri"):
+        with pytest.raises(MimicaError, match=f"method {method}: from the target's resting face"):
+            an.transfer(s, sp, x, xp, method=method)
+    with pytest.raises(MimicaError, match="resting face: 68 finite"):
+        ImageAnalogy(t, tp, rest_points=rp[:60])

@@ -46,7 +46,8 @@ def cmd_transfer_image(a):
     opts = PhotoOptions(method=a.method, strength=_strength(a.strength), mouth=not a.no_mouth, head=a.head,
                         detector=a.detector, face=a.face, source_face=a.source_face)
     with _bar("frames") as progress:
-        r = transfer_photos(a.source_neutral, a.target, a.out, a.source_expr, a.driving, opts, progress=progress)
+        r = transfer_photos(a.source_neutral, a.target, a.out, a.source_expr, a.driving, opts, progress=progress,
+                            from_neutral=a.from_neutral)
     if r["kind"] == "video":
         _say(f"{r['count']} frames -> {a.out} ({r['count'] / max(r['transfer_s'], 1e-9):.1f} frames/s, landmarks tracked)")
     else:
@@ -69,7 +70,12 @@ def add_args(sub) -> None:
     ti.add_argument("source_neutral", help="photo of the source person, neutral")
     ti.add_argument("source_expr", nargs="*", help="photos of the same person with expressions")
     ti.add_argument("--driving", metavar="VIDEO", help="a video (MP4) or folder of frames of the source person")
-    ti.add_argument("--target", required=True, help="photo of the target person, neutral")
+    ti.add_argument("--target", required=True, help="photo of the target person, neutral (or any expression, "
+                    "with --from-neutral)")
+    ti.add_argument("--from-neutral", metavar="PHOTO",
+                    help="a photo of the target person at rest: the target photo may then wear an expression of its "
+                         "own, and the result wears the source's expression from that rest instead of added to the "
+                         "target's (--method shading or warp)")
     ti.add_argument("--method", choices=list(METHODS), default=D.method,
                     help="shading (default): the expression's shading on a 3D face under the target's own light; "
                          "vtc: Song's vertex-tent luminance transfer (eq. 4); eri: expression ratio images "

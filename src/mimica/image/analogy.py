@@ -138,9 +138,15 @@ class ImageAnalogy:
         at least 2).
     mouth : bool
         Fill an opening mouth from the source's (fill_mouth) when the target's is closed.
+    rest_points : (68, 2) float array or None
+        The target's own resting face (another photo of the same person, neutral: its points in
+        that photo's pixels). Given, the target photo may wear an expression of its own, and the
+        results wear the source's expression from that rest instead of added to the target's:
+        the target's points go to rest + the source's motion (an absolute neutral, not the target
+        photo's expression plus the source's). For the methods "shading" and "warp".
     """
 
-    def __init__(self, target, target_points, height=1.0, margin=0.25, feather=None, mouth=True):
+    def __init__(self, target, target_points, height=1.0, margin=0.25, feather=None, mouth=True, rest_points=None):
         t = np.asarray(target, np.float32)
         if t.ndim != 3 or t.shape[2] != 3:
             raise MimicaError("target: expected an RGB image (h, w, 3)")
@@ -148,6 +154,12 @@ class ImageAnalogy:
         if p.shape != (68, 2) or not np.isfinite(p).all():
             raise MimicaError("target: 68 finite feature points (x, y) are needed")
         self.target, self.points, self.height = t, p, float(height)
+        self.rest = None
+        if rest_points is not None:
+            r = np.asarray(rest_points, float)
+            if r.shape != (68, 2) or not np.isfinite(r).all():
+                raise MimicaError("target's resting face: 68 finite feature points (x, y) are needed")
+            self.rest = head_motion(r, p)(r)          # into the target photo's frame, on the stable points
         H, W = t.shape[:2]
         face = np.concatenate([p, forehead_points(p)])
         lo, hi = face.min(0), face.max(0)
@@ -191,7 +203,12 @@ class ImageAnalogy:
         p_s = np.concatenate([s_pts, forehead_points(s_pts), a.inverse()(self.border + off)])
         p_x = b.inverse()(p_s + d)
         k = self._control_strengths(strength)[:, None]
-        p_tw = self.ctrl_t + a.linear(k * d)                             # step 3: T warped
+        move = a.linear(d)
+        if self.rest is not None:                                        # from the target's own rest
+            r68 = self.rest - self.points
+            move = move + np.concatenate([r68, FOREHEAD_FOLLOW[:, None] * r68[FOREHEAD_BROW],
+                                          np.zeros((len(self.border), 2))])
+        p_tw = self.ctrl_t + k * move                                    # step 3: T warped
         return p_s, p_x, p_tw
 
     def _control_strengths(self, strength) -> np.ndarray:
@@ -361,7 +378,14 @@ class ImageAnalogy:
         """The expression's shading change under the target's light (image.shading), per pixel of
         the crop: 1 outside the face, to the power `strength` (a number or per region)."""
         from .shading import face_model
-        return self._apply_ratio(self._shading.ratio(face_model().fit_expression(s_pts, x_pts)), self.mask_t, strength)
+        weights = face_model().fit_expression(s_pts, x_pts)
+        return self._apply_ratio(self._shading.ratio(weights, self._own_expression), self.mask_t, strength)
+
+    @cached_property
+    def _own_expression(self):
+        """The target photo's own expression from its resting face (shape weights), or None."""
+        from .shading import face_model
+        return None if self.rest is None else face_model().fit_expression(self.rest, self.points)
 
     def transfer(self, source, s_pts, expressive, x_pts, method="shading", strength=1.0, head="still") -> Result:
         """The target with the expression of (source -> expressive).  Images in [0, 1]: RGB, or
@@ -374,6 +398,9 @@ class ImageAnalogy:
             raise MimicaError(f"unknown method {method!r}; use {', '.join(METHODS)}")
         if head not in ("still", "follow"):
             raise MimicaError(f"head {head!r}: still (the target's head stays) or follow (it moves as the source's)")
+        if self.rest is not None and method in ("vtc", "eri"):
+            raise MimicaError(f"method {method}: from the target's resting face only shading or warp (vtc and eri "
+                              "carry the source's own appearance change, which would add to the target's own)")
         per = point_strengths(strength)                       # a number, or {region: a}
         strength = float(per[0]) if np.all(per == per[0]) else per
         s_r, x_r, look, pts = self.prepare(source, s_pts, expressive, x_pts, strength,

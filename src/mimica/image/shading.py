@@ -186,11 +186,19 @@ class TargetShading:
     def _vertex_shade(self, vertices) -> np.ndarray:
         return _sh9(self._vertex_normals(vertices)) @ self.light
 
-    def ratio(self, weights: np.ndarray) -> np.ndarray:
-        """(h, w) float32: the shading after the expression over the shading before, 1 off the face."""
+    def ratio(self, weights: np.ndarray, before: np.ndarray | None = None) -> np.ndarray:
+        """(h, w) float32: the shading after the expression `weights` over the shading before (at
+        rest, or at the expression `before` that the photo already wears), 1 off the face."""
         from scipy.ndimage import gaussian_filter
         v = self.model.vertices + np.tensordot(np.asarray(weights, float), self.model.deltas, 1)
-        log_v = np.log(np.clip(np.maximum(self._vertex_shade(v), _FLOOR) / self._rest,
+        rest = self._rest
+        if before is not None:                           # the same for every expression: made once
+            key = np.asarray(before, float).tobytes()
+            if getattr(self, "_before", (None,))[0] != key:
+                v0 = self.model.vertices + np.tensordot(np.asarray(before, float), self.model.deltas, 1)
+                self._before = (key, np.maximum(self._vertex_shade(v0), _FLOOR))
+            rest = self._before[1]
+        log_v = np.log(np.clip(np.maximum(self._vertex_shade(v), _FLOOR) / rest,
                                1 / RATIO_CLIP, RATIO_CLIP)).astype(np.float32)
         log_r = np.zeros(self.coarse[0] * self.coarse[1], np.float32)
         log_r[self.cpix] = _interpolate(log_v[:, None], self.ctri, self.cbary)[:, 0]

@@ -97,7 +97,7 @@ def tile(img, like) -> np.ndarray:
 
 
 def transfer_photos(source_neutral, target, out, expressions=(), driving=None, options: PhotoOptions | None = None,
-                    progress=None) -> dict:
+                    progress=None, from_neutral=None) -> dict:
     """Move a source person's expressions onto a target person's photo.
 
     Parameters
@@ -114,6 +114,10 @@ def transfer_photos(source_neutral, target, out, expressions=(), driving=None, o
     options : PhotoOptions, optional
     progress : callable, optional
         Called as progress(done, total) over a video's frames.
+    from_neutral : str or Path, optional
+        A photo of the target person at rest (neutral). Given, the target photo may wear an
+        expression of its own: each result wears the source's expression from that rest, not added
+        to the target's (methods "shading" and "warp").
 
     Returns
     -------
@@ -134,6 +138,9 @@ def transfer_photos(source_neutral, target, out, expressions=(), driving=None, o
     if driving is None and not len(expressions):
         raise MimicaError("give source expression photos, or a driving video")
     point_strengths(o.strength if isinstance(o.strength, dict) else {"all": o.strength})   # before the work
+    if from_neutral is not None and o.method not in ("shading", "warp"):
+        raise MimicaError(f"method {o.method}: from the target's resting face only shading or warp (vtc and eri carry "
+                          "the source's own appearance change, which would add to the target photo's own)")
     out = Path(out)
     if driving is not None and out.suffix.lower() != ".mp4":
         raise MimicaError(f"{out}: with a driving video the output is a video; name it .mp4")
@@ -145,7 +152,10 @@ def transfer_photos(source_neutral, target, out, expressions=(), driving=None, o
     src, tgt = read_image(source_neutral), read_image(target)
     sp = image_points(src, source_neutral, o.source_face, o.detector)
     tp = image_points(tgt, target, o.face, o.detector)
-    an = ImageAnalogy(tgt, tp, mouth=o.mouth).setup(o.method)
+    rest = None
+    if from_neutral is not None:
+        rest = image_points(read_image(from_neutral), from_neutral, o.face, o.detector)
+    an = ImageAnalogy(tgt, tp, mouth=o.mouth, rest_points=rest).setup(o.method)
     src_y = luminance(src)                             # the same source for every expression / frame
     kw = dict(method=o.method, strength=o.strength, head=o.head)
     if driving is not None:
