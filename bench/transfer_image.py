@@ -16,8 +16,12 @@ video end to end; 3D and 2D landmarks.
 - expr_dist / expr_dist_warp / expr_dist_eri: how far a result's expression is from the
   source's, as MediaPipe's blendshape model scores them (transfer.photo_measures: L1 of the
   change from the target's neutral against the source's change, over the source's change; 0
-  exact, 1 none carried), median over the Yale pairs of the expressions no parameter was
-  chosen on (sad, sleepy, wink); per region printed beside it.
+  exact, 1 none carried), median over the held-out pairs pooled: the Yale pairs of the
+  expressions no parameter was chosen on (sad, sleepy, wink) and rendered ICT pairs of
+  identities drawn from the identity model under two lights no parameter was chosen under
+  (ict_held_out); each set, per region, and "own" (B's own photo of the expression -- on the
+  renders the truth, the same shape weights -- scored the same way: what the measure gives a
+  perfect result) printed beside it.
 - identity_ratio: dlib's face embedding, the result's distance to the target's neutral over
   the target's own expression photo's distance to it (<= 1: the person kept as well as their
   own expression keeps them), median over the same pairs; aligned_gain_vs_neutral: PSNR(ours)
@@ -207,11 +211,87 @@ class Judge:
         return self.kept[name]
 
 
+def new_measures() -> dict:
+    from mimica.transfer.photo_measures import REGIONS
+    return {"expr": {k: [] for k in ("shading", "warp", "eri", "neutral", "own")},
+            "region": {k: [] for k in REGIONS}, "ident": {k: [] for k in ("shading", "warp", "eri")}, "gain": []}
+
+
+def judge_pair(judge, measures, r, named, gain) -> None:
+    """One held-out pair's measures into `measures`: r the results by method, named the four photos
+    ((name, image) of A neutral, A expression, B neutral, B's own expression photo: "own", the
+    distance of B making the expression itself -- on the renders, the truth), gain
+    PSNR(ours) - PSNR(B's untouched neutral) against B's own photo.  A pair where a photo shows no face
+    to the scorer or the embedder is left out."""
+    from mimica.transfer.photo_measures import expression_distance, identity_distance
+    (sn, _), (sx, _), (st, et), (so, ex) = (judge.photo(n, img) for n, img in named)
+    got = {m: (judge.score(r[m]), judge.embed(r[m])) for m in ("shading", "warp", "eri")}
+    if not (all(v is not None for v in (sn, sx, st, et, so, ex))
+            and all(g[0] is not None and g[1] is not None for g in got.values())):
+        return
+    for m, (sc, _) in got.items():
+        measures["expr"][m].append(expression_distance(sc, st, sx, sn)["all"])
+    measures["expr"]["neutral"].append(expression_distance(st, st, sx, sn)["all"])
+    measures["expr"]["own"].append(expression_distance(so, st, sx, sn)["all"])   # B's own photo of the expression
+    for k, v in expression_distance(got["shading"][0], st, sx, sn).items():
+        if k in measures["region"]:
+            measures["region"][k].append(v)
+    own = identity_distance(ex, et)
+    for m, (_, em) in got.items():
+        measures["ident"][m].append(identity_distance(em, et) / max(own, 1e-9))
+    measures["gain"].append(gain)
+
+
+def print_measures(what, measures) -> dict:
+    """Print a set of held-out pairs' medians; return the bench line's figures."""
+    ex, rg, idn = measures["expr"], measures["region"], measures["ident"]
+    print(f"{what} ({len(measures['gain'])} pairs with a face found in every photo): expression distance "
+          "(0 exact, 1 none carried), median: " + ", ".join(f"{k} {np.nanmedian(v):.3f}" for k, v in ex.items())
+          + "; ours by region: " + ", ".join(f"{k} {np.nanmedian(v):.3f}" for k, v in rg.items()))
+    print("  identity: the result's embedding distance to B's neutral over B's own expression photo's, median: "
+          + ", ".join(f"{k} {np.median(v):.3f}" for k, v in idn.items())
+          + f"; aligned PSNR gain over the untouched neutral, median {np.median(measures['gain']):+.2f} dB")
+    return {"expr_dist": np.nanmedian(ex["shading"]), "expr_dist_warp": np.nanmedian(ex["warp"]),
+            "expr_dist_eri": np.nanmedian(ex["eri"]), "identity_ratio": np.median(idn["shading"]),
+            "aligned_gain_vs_neutral": np.median(measures["gain"])}
+
+
+# held-out rendered pairs: identities drawn from ICT's identity model (none of its 20 sample
+# identities), lit by two lights no parameter was chosen under
+ICT_HELD_OUT_SEEDS = (500, 501, 502, 503)
+LIGHT_TOP = (0.1, 0.75, 0.65)
+LIGHT_LOW_LEFT = (-0.35, -0.25, 0.9)
+
+
+def ict_held_out(judge, quick):
+    """A's expression onto B on rendered ICT faces no parameter was chosen on (identities drawn from
+    the identity model, A lit from above, B from low left; B's own expression rendered is the truth,
+    same pose: no alignment), measured as the Yale held-out pairs are."""
+    ph = ICTPhotos()
+    ids = {k: np.random.default_rng(k).normal(0, 0.8, 20) for k in ICT_HELD_OUT_SEEDS}   # identity weights
+    if quick:
+        ids = dict(list(ids.items())[:2])
+    exprs = ["happiness", "surprise", "disgust", "anger", "sadness", "fear"][: 3 if quick else 6]
+
+    def photo(k, e, light):
+        return ph.photo(ids[k], e, light)
+    measures = new_measures()
+    for a, b in itertools.permutations(ids, 2):
+        s, sp = photo(a, None, LIGHT_TOP)
+        t, tp = photo(b, None, LIGHT_LOW_LEFT)
+        an, mask = ImageAnalogy(t, tp), hull_mask(tp, t.shape)
+        for e in exprs:
+            x, xp = photo(a, e, LIGHT_TOP)
+            truth, _ = photo(b, e, LIGHT_LOW_LEFT)
+            r = {m: an.transfer(s, sp, x, xp, method=m).image for m in ("shading", "warp", "eri")}
+            judge_pair(judge, measures, r, ((f"ict{a}.top", s), (f"ict{a}.{e}.top", x), (f"ict{b}.low", t),
+                                            (f"ict{b}.{e}.low", truth)),
+                       psnr(r["shading"], truth, mask) - psnr(t, truth, mask))
+    return measures
+
+
 def yale_pairs(yale, quick, judge=None):
-    from mimica.transfer.photo_measures import REGIONS, expression_distance, identity_distance
-    measures = {"expr": {k: [] for k in ("shading", "warp", "eri", "neutral")},
-                "region": {k: [] for k in REGIONS}, "ident": {k: [] for k in ("shading", "warp", "eri")},
-                "gain": []}
+    measures = new_measures()
     subs = [f"subject{i:02d}" for i in range(1, 11 if not quick else 5)]
     tot = {k: [] for k in ("shading", "vtc", "eri", "warp", "neutral")}
     weak = {a: [] for a in (0.25, 0.5)}          # ours with less of A's expression (--strength)
@@ -240,21 +320,8 @@ def yale_pairs(yale, quick, judge=None):
                 res[m].append(psnr(r[m], truth, mask))
             res["neutral"].append(psnr(t, truth, mask))
             if judge is not None and e in HELD_OUT:
-                (sn, _), (sx, _), (st, et), (_, ex) = (judge.photo(n, img) for n, img in (
-                    (f"{a}.normal", s), (f"{a}.{e}", x), (f"{b}.normal", t), (f"{b}.{e}", yale(f"{b}.{e}")[0])))
-                got = {m: (judge.score(r[m]), judge.embed(r[m])) for m in ("shading", "warp", "eri")}
-                if all(v is not None for v in (sn, sx, st, et, ex)) and all(g[0] is not None and g[1] is not None
-                                                                           for g in got.values()):
-                    for m, (sc, _) in got.items():
-                        measures["expr"][m].append(expression_distance(sc, st, sx, sn)["all"])
-                    measures["expr"]["neutral"].append(expression_distance(st, st, sx, sn)["all"])
-                    for k, v in expression_distance(got["shading"][0], st, sx, sn).items():
-                        if k in measures["region"]:
-                            measures["region"][k].append(v)
-                    own = identity_distance(ex, et)
-                    for m, (_, em) in got.items():
-                        measures["ident"][m].append(identity_distance(em, et) / max(own, 1e-9))
-                    measures["gain"].append(res["shading"][-1] - res["neutral"][-1])
+                judge_pair(judge, measures, r, ((f"{a}.normal", s), (f"{a}.{e}", x), (f"{b}.normal", t),
+                                                (f"{b}.{e}", yale(f"{b}.{e}")[0])), res["shading"][-1] - res["neutral"][-1])
             for k in weak:
                 weak[k].append(psnr(an.transfer(s, sp, x, xp, strength=k).image, truth, mask))
             if (a, b) in (("subject01", "subject03"), ("subject04", "subject02")) and e in ("happy", "surprised"):
@@ -283,21 +350,22 @@ def yale_pairs(yale, quick, judge=None):
             labels=["A neutral", "A expression", "B neutral", "ERI", "Song eq. 4", "warp alone", "ours",
                     "B's own photo"] * len(rows),
             title="Yale faces: A's expression onto B"))
-    if judge is not None and measures["gain"]:
-        ex, rg, idn = measures["expr"], measures["region"], measures["ident"]
-        print(f"Yale A->B, the expressions no parameter was chosen on ({', '.join(HELD_OUT)}; {len(measures['gain'])} "
-              "pairs with a face found in every photo): expression distance (0 exact, 1 none carried), median: "
-              + ", ".join(f"{k} {np.nanmedian(v):.3f}" for k, v in ex.items())
-              + "; ours by region: " + ", ".join(f"{k} {np.nanmedian(v):.3f}" for k, v in rg.items()))
-        print("  identity: the result's embedding distance to B's neutral over B's own expression photo's, median: "
-              + ", ".join(f"{k} {np.median(v):.3f}" for k, v in idn.items())
-              + f"; aligned PSNR gain over the untouched neutral, median {np.median(measures['gain']):+.2f} dB")
-        judged = {"expr_dist": np.nanmedian(ex["shading"]), "expr_dist_warp": np.nanmedian(ex["warp"]),
-                  "expr_dist_eri": np.nanmedian(ex["eri"]), "identity_ratio": np.median(idn["shading"]),
-                  "aligned_gain_vs_neutral": np.median(measures["gain"])}
-    else:
-        judged = {}
-    return float(np.median(strong)), judged
+    return float(np.median(strong)), measures
+
+
+def held_out_figures(yale_measures, ict_measures) -> dict:
+    """Both held-out sets printed, and the bench line's figures over them pooled."""
+    print_measures(f"Yale A->B, the expressions no parameter was chosen on ({', '.join(HELD_OUT)})", yale_measures)
+    print_measures("rendered ICT A->B, identities and lights no parameter was chosen on", ict_measures)
+    pooled = new_measures()
+    for m in (yale_measures, ict_measures):
+        for k, v in m.items():
+            if isinstance(v, dict):
+                for kk, vv in v.items():
+                    pooled[k][kk] += vv
+            else:
+                pooled[k] += v
+    return print_measures("all held-out pairs pooled", pooled)
 
 
 def landmarks2d(quick):
@@ -379,12 +447,20 @@ def landmarks3d(quick):
 
 def main():
     quick = "--quick" in sys.argv
+    if "--held-out" in sys.argv:           # the field's measures on the held-out pairs only
+        judge = Judge()
+        _, yale_measures = yale_pairs(Yale(), quick, judge)
+        judged = held_out_figures(yale_measures, ict_held_out(judge, quick))
+        print(" ".join(f"{k}={v:.3f}" if k != "aligned_gain_vs_neutral" else f"{k}={v:.2f}" for k, v in judged.items()))
+        return
     print(f"machine: {platform.machine()}, {platform.processor() or ''} python {platform.python_version()}")
     yale = Yale()
     image_s, eri_s = timing(quick)
     p_self = self_transfer(yale, quick)
     gain, gain_warp = ict_pairs(quick)
-    yale_gain, judged = yale_pairs(yale, quick, Judge())
+    judge = Judge()
+    yale_gain, yale_measures = yale_pairs(yale, quick, judge)
+    judged = held_out_figures(yale_measures, ict_held_out(judge, quick))
     vfps = video(quick)
     lm3 = landmarks3d(quick)
     lm2 = landmarks2d(quick)
