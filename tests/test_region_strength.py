@@ -131,3 +131,20 @@ def test_from_neutral_refuses_what_it_cannot_do(smiling_target):
             an.transfer(s, sp, x, xp, method=method)
     with pytest.raises(MimicaError, match="resting face: 68 finite"):
         ImageAnalogy(t, tp, rest_points=rp[:60])
+
+
+def test_from_neutral_with_a_source_whose_neutral_already_smiles(smiling_target):
+    """The source's 'neutral' already smiles at half the happiness, its expression at the whole:
+    from the target's resting face the target is moved by the smile's difference only (to half
+    the happiness: the truth rendered), as the relative transfer does."""
+    from mimica.image import psnr
+    from mimica.image.ictphotos import LIGHT_RIGHT, ICTPhotos
+    from mimica.image.warp import align_to
+    ph = ICTPhotos()
+    s, sp = ph.photo("identity001", "happiness", amount=0.5)
+    (_, _), (x, xp), _, (n, np_), _ = smiling_target
+    h, hp = ph.photo("identity004", "happiness", LIGHT_RIGHT, amount=0.5)
+    got = ImageAnalogy(n, np_, rest_points=np_).transfer(s, sp, x, xp)
+    assert np.abs(got.points - hp).max() < 0.5
+    m = got.mask > 0.5
+    assert psnr(got.image, align_to(h, hp, np_), m) > psnr(n, align_to(h, hp, np_), m) + 5

@@ -285,7 +285,8 @@ def _loop_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | No
     length (correspond.mouth's seam).  None where no loop closes."""
     from scipy.sparse import coo_matrix
     from ..mesh.query import concave_angles
-    from .mouth import CREASE, shortest_path
+    from ..mesh.query import shortest_path
+    from .mouth import CREASE
     centre, width, ex, ey = _eye_frame(pts, fwd)
     v = mesh.vertices
     rel = v - centre

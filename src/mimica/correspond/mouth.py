@@ -14,12 +14,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..align import face_cylinder
 from ..mesh import Mesh
-from ..mesh.query import concave_angles
+from ..mesh.query import concave_angles, shortest_path
 
 WAYPOINTS = [(60,), (61, 67), (62, 66), (63, 65), (64,)]
 CREASE = 1.5              # a valley edge costs exp(-CREASE x its concave angle) of its length
@@ -148,29 +148,6 @@ def _seam(mesh: Mesh, lm, crease: float = CREASE, valley_corners: bool = False, 
         if x != out[-1]:
             out.append(x)
     return np.array(out, np.int64)
-
-
-def shortest_path(graph, a: int, b: int) -> list | None:
-    """The shortest path from a to b over a weighted graph, by Dijkstra.
-
-    Parameters
-    ----------
-    graph : (n, n) sparse matrix
-        Edge weights (CSR), symmetric.
-    a, b : int
-        The ends.
-
-    Returns
-    -------
-    list of int or None
-        The path's vertices, a and b included; None where b cannot be reached.
-    """
-    _, pred = dijkstra(graph, indices=a, return_predecessors=True)
-    seg, x = [], b
-    while x != a and x >= 0:
-        seg.append(x)
-        x = pred[x]
-    return None if x < 0 else [a] + seg[::-1]
 
 
 def cut_mouth(mesh: Mesh, landmarks) -> MouthCut:

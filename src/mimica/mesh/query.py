@@ -1,8 +1,9 @@
-"""Geometric queries on triangle meshes: closest points, barycentric coordinates."""
+"""Geometric queries on triangle meshes: closest points, barycentric coordinates, shortest paths."""
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 try:  # libigl's AABB tree: exact closest points, about 9x faster than the k-d tree search below
@@ -278,3 +279,26 @@ def concave_angles(mesh, edges=None) -> np.ndarray:
     hit = (uniq[two][pos] == ek) if two.any() else np.zeros(len(edges), bool)
     out[hit] = val[pos[hit]]
     return out
+
+
+def shortest_path(graph, a: int, b: int) -> list | None:
+    """The shortest path from a to b over a weighted graph, by Dijkstra.
+
+    Parameters
+    ----------
+    graph : (n, n) sparse matrix
+        Edge weights (CSR), symmetric.
+    a, b : int
+        The ends.
+
+    Returns
+    -------
+    list of int or None
+        The path's vertices, a and b included; None where b cannot be reached.
+    """
+    _, pred = dijkstra(graph, indices=a, return_predecessors=True)
+    seg, x = [], b
+    while x != a and x >= 0:
+        seg.append(x)
+        x = pred[x]
+    return None if x < 0 else [a] + seg[::-1]
