@@ -284,8 +284,7 @@ def _loop_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | No
     Dijkstra within BAND of its arc, an edge costing exp(-CREASE x its concave angle) of its
     length (correspond.mouth's seam).  None where no loop closes."""
     from scipy.sparse import coo_matrix
-    from ..mesh.query import concave_angles
-    from ..mesh.query import shortest_path
+    from ..mesh.query import concave_angles, shortest_path
     from .mouth import CREASE
     centre, width, ex, ey = _eye_frame(pts, fwd)
     v = mesh.vertices

@@ -398,9 +398,8 @@ class ImageAnalogy:
             raise MimicaError(f"unknown method {method!r}; use {', '.join(METHODS)}")
         if head not in ("still", "follow"):
             raise MimicaError(f"head {head!r}: still (the target's head stays) or follow (it moves as the source's)")
-        if self.rest is not None and method in ("vtc", "eri"):
-            raise MimicaError(f"method {method}: from the target's resting face only shading or warp (vtc and eri "
-                              "carry the source's own appearance change, which would add to the target's own)")
+        if self.rest is not None:
+            check_rest_method(method)
         per = point_strengths(strength)                       # a number, or {region: a}
         strength = float(per[0]) if np.all(per == per[0]) else per
         s_r, x_r, look, pts = self.prepare(source, s_pts, expressive, x_pts, strength,
@@ -463,6 +462,20 @@ REGIONS = {"brows": np.arange(17, 27), "eyes": np.arange(36, 48), "nose": np.ara
 # to the points around it, which would otherwise carry their motion into it)
 OUTLINES = {"eye_right": np.arange(36, 42), "eye_left": np.arange(42, 48), "mouth": np.arange(48, 60),
             "lip_upper": np.r_[48:55, 64, 63, 62, 61, 60], "lip_lower": np.r_[48, 60, 67, 66, 65, 64, 54:60]}
+
+
+def check_rest_method(method: str) -> None:
+    """Refuse, in one line, an appearance step that cannot start from the target's resting face.
+
+    Parameters
+    ----------
+    method : str
+        One of METHODS; "vtc" and "eri" carry the source's own appearance change, which would add
+        to the one the target photo already wears.
+    """
+    if method in ("vtc", "eri"):
+        raise MimicaError(f"method {method}: from the target's resting face only shading or warp (vtc and eri "
+                          "carry the source's own appearance change, which would add to the target photo's own)")
 
 
 def _hold_closed_regions(out, target, points, strength) -> None:

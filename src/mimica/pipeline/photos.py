@@ -126,7 +126,7 @@ def transfer_photos(source_neutral, target, out, expressions=(), driving=None, o
         "sheet".
     """
     from ..image import ImageAnalogy, read_image, write_image
-    from ..image.analogy import point_strengths
+    from ..image.analogy import check_rest_method, point_strengths
     from ..image.io import luminance
     from ..landmarks.detect2d import Tracker
     from ..render import contact_sheet, save_png
@@ -138,9 +138,8 @@ def transfer_photos(source_neutral, target, out, expressions=(), driving=None, o
     if driving is None and not len(expressions):
         raise MimicaError("give source expression photos, or a driving video")
     point_strengths(o.strength if isinstance(o.strength, dict) else {"all": o.strength})   # before the work
-    if from_neutral is not None and o.method not in ("shading", "warp"):
-        raise MimicaError(f"method {o.method}: from the target's resting face only shading or warp (vtc and eri carry "
-                          "the source's own appearance change, which would add to the target photo's own)")
+    if from_neutral is not None:
+        check_rest_method(o.method)                    # before the work
     out = Path(out)
     if driving is not None and out.suffix.lower() != ".mp4":
         raise MimicaError(f"{out}: with a driving video the output is a video; name it .mp4")
