@@ -272,17 +272,14 @@ def ict_held_out(judge, quick):
     if quick:
         ids = dict(list(ids.items())[:2])
     exprs = ["happiness", "surprise", "disgust", "anger", "sadness", "fear"][: 3 if quick else 6]
-
-    def photo(k, e, light):
-        return ph.photo(ids[k], e, light)
     measures = new_measures()
     for a, b in itertools.permutations(ids, 2):
-        s, sp = photo(a, None, LIGHT_TOP)
-        t, tp = photo(b, None, LIGHT_LOW_LEFT)
+        s, sp = ph.photo(ids[a], None, LIGHT_TOP)
+        t, tp = ph.photo(ids[b], None, LIGHT_LOW_LEFT)
         an, mask = ImageAnalogy(t, tp), hull_mask(tp, t.shape)
         for e in exprs:
-            x, xp = photo(a, e, LIGHT_TOP)
-            truth, _ = photo(b, e, LIGHT_LOW_LEFT)
+            x, xp = ph.photo(ids[a], e, LIGHT_TOP)
+            truth, _ = ph.photo(ids[b], e, LIGHT_LOW_LEFT)
             r = {m: an.transfer(s, sp, x, xp, method=m).image for m in ("shading", "warp", "eri")}
             judge_pair(judge, measures, r, ((f"ict{a}.top", s), (f"ict{a}.{e}.top", x), (f"ict{b}.low", t),
                                             (f"ict{b}.{e}.low", truth)),

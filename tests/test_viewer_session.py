@@ -24,13 +24,15 @@ def _rig(face):
 
 def test_precompute_some_systems_then_the_rest_as_all_at_once(face):
     from mimica.physics import precompute
+    from mimica.physics.face import skin_system
     rig = _rig(face)
-    precompute(rig, only=["frontalis_L"])
+    skin = skin_system(rig)                                # the shared matrices, made once by the caller
+    precompute(rig, only=["frontalis_L"], skin=skin)
     assert [m.basis is not None for m in rig.muscles] == [False, False, True, False] and rig.gravity_basis is None
-    assert "_skin_system" in rig.__dict__                  # the shared matrices kept for the rest
-    precompute(rig, only=["gravity", "zygomaticus_major_R"])
-    precompute(rig)
-    assert "_skin_system" not in rig.__dict__              # ... and let go with the last system
+    assert set(rig.__dict__) == set(_rig(face).__dict__)   # nothing of them kept on the rig
+    precompute(rig, only=["gravity", "zygomaticus_major_R"], skin=skin)
+    precompute(rig, skin=skin)
+    assert set(rig.__dict__) == set(_rig(face).__dict__)
     whole = precompute(_rig(face))
     for a, b in zip(rig.muscles + [rig], whole.muscles + [whole]):
         pa, pb = (a.basis, b.basis) if a is not rig else (a.gravity_basis, b.gravity_basis)
@@ -52,9 +54,13 @@ def test_a_simulator_takes_over_the_systems_of_another_at_the_same_density(face)
     assert not set(map(id, other.systems)) & set(map(id, first.systems))
 
 
-def test_a_session_opens_at_rest_and_makes_the_moved_systems_first(face):
+def test_a_session_opens_at_rest_and_makes_the_moved_systems_first(face, monkeypatch):
+    import mimica.physics.face as pf
     from mimica.physics import precompute
     from mimica.viewer import ViewerSession
+    made = []
+    real = pf.skin_system
+    monkeypatch.setattr(pf, "skin_system", lambda *a, **k: made.append(1) or real(*a, **k))
     s = ViewerSession(_rig(face))
     assert s.pending() == ["gravity"] + MUSCLES and s.sim is None
     np.testing.assert_array_equal(s.positions(), face.mesh.vertices.astype(np.float32))
@@ -68,6 +74,7 @@ def test_a_session_opens_at_rest_and_makes_the_moved_systems_first(face):
         if k == 4:
             s.set("zygomaticus_major_L", 0.5)             # made (third), not simulated: moved now
     s.make_systems(progress)
+    assert len(made) == 1                                  # the skin's matrices made once for the five systems
     assert [x[0] for x in seen] == ["gravity", "frontalis_R", "zygomaticus_major_L", "zygomaticus_major_R",
                                     "frontalis_L"]
     assert seen[2][1] == ["frontalis_R"]                  # taken in once the moved one was made

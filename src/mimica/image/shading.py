@@ -168,6 +168,7 @@ class TargetShading:
         self.light = coef.astype(np.float32)
         self.pix, self.shade0 = pix, b @ self.light          # the fit's pixels and its shading there
         self._rest = np.maximum(self._vertex_shade(m.vertices), _FLOOR)
+        self._before = (None, None)      # (weights' bytes, shading) of the expression the photo wears (ratio's before)
         # the ratio's grid: `step` pixels a cell, the smoothing's sigma at least 2 cells
         sigma = RATIO_BLUR * float(np.ptp(p, 0).max())
         self.step = step = max(1, int(sigma // 2))
@@ -194,7 +195,7 @@ class TargetShading:
         rest = self._rest
         if before is not None:                           # the same for every expression: made once
             key = np.asarray(before, float).tobytes()
-            if getattr(self, "_before", (None,))[0] != key:
+            if self._before[0] != key:
                 v0 = self.model.vertices + np.tensordot(np.asarray(before, float), self.model.deltas, 1)
                 self._before = (key, np.maximum(self._vertex_shade(v0), _FLOOR))
             rest = self._before[1]

@@ -134,6 +134,7 @@ class _MuscleSystem:
         self.solver = sv = ModalWarpingSolver(b, h, xi=xi, zeta=zeta, density=rho)
         self.h, self.w, self.warp = h, muscle.omega, warp
         self.q = self.v = 0.0
+        self._memo = {}          # reduced pieces (output subspace, frame model), kept for a simulator taking over
         self.resting = True           # exactly at rest (never moved since made or set): skipped
         self.fq_parts = None
         at, wt, of = muscle.springs()                                 # a strip's springs fan out over the skin
@@ -265,7 +266,7 @@ class _MuscleSystem:
         reach; the output u = Phi q then lives, up to a relative RMS error tol, in the span
         of the leading left singular vectors of Phi L (W_qq = L L^T).  Returns (U (3n_free, k)
         in the output's rows, R (r, k)) with U^T Phi = R^T Phi^T Phi."""
-        memo = self.__dict__.setdefault("_memo", {})
+        memo = self._memo
         if ("sub", tol) not in memo:
             memo[("sub", tol)] = self._output_subspace(tol)[1]           # R, small; U = Phi R
         R = memo[("sub", tol)]
@@ -305,7 +306,7 @@ class _MuscleSystem:
         carry the response kept (2 * the dropped sum <= tol * the largest, the H-infinity
         error bound).  Returns (Ar, Br, Cr, T, Ti): xr = T x, x ~ Ti xr, T Ti = I (kept for
         the next simulator that takes this system over: `proj` is then the same)."""
-        memo = self.__dict__.setdefault("_memo", {})
+        memo = self._memo
         if ("frame", substeps, tol) not in memo:
             memo[("frame", substeps, tol)] = self._frame_model(substeps, proj, tol)
         return memo[("frame", substeps, tol)]
@@ -316,7 +317,7 @@ class _MuscleSystem:
         modal coordinates to them (kept)."""
         U, R = self.output_subspace(tol)
         b = self.solver.b
-        memo = self.__dict__.setdefault("_memo", {})
+        memo = self._memo
         if ("proj", tol) not in memo:
             memo[("proj", tol)] = R.T @ (b.phi.T @ b.phi)
         return b.padded32(U), memo[("proj", tol)]
@@ -673,7 +674,7 @@ def skin_system(rig, rotation: bool = True):
     return energy, mass, K, W
 
 
-def precompute(rig, progress=None, only=None):
+def precompute(rig, progress=None, only=None, skin=None):
     """One modal system per force type on the rig (Kim §VI): each muscle's over its ROI (eq. 19),
     loaded at its spring nodes, and gravity's over the skin the skull does not hold; systems the
     rig already carries are kept (those loaded from a file are read back).
@@ -686,8 +687,10 @@ def precompute(rig, progress=None, only=None):
         Called as progress(k, n, name) before each muscle's system.
     only : collection of str, optional
         Make only these systems now (muscle names, "gravity"): a viewer makes each as it is
-        first moved.  The skin's shared matrices (skin_system, seconds on a whole head) are
-        then kept with the rig until its last system is made.
+        first moved.
+    skin : tuple, optional
+        skin_system(rig), when the caller made it once for several calls (seconds on a whole
+        head); None: made here.
 
     Returns
     -------
@@ -699,15 +702,11 @@ def precompute(rig, progress=None, only=None):
     p = rig.params
     gravity = p.get("gravity", True) or rig.gravity_basis is not None
     left = [m for m in rig.muscles if not isinstance(m.basis, ModalBasis)]
-    grav_left = gravity and not isinstance(rig.gravity_basis, ModalBasis)
     todo = left if only is None else [m for m in left if m.name in only]
-    grav = grav_left and (only is None or "gravity" in only)
+    grav = gravity and not isinstance(rig.gravity_basis, ModalBasis) and (only is None or "gravity" in only)
     if not todo and not grav and "k_length" in p:
         return rig
-    kept = rig.__dict__.pop("_skin_system", None)
-    energy, mass, K, W = kept if kept is not None else skin_system(rig)
-    if len(todo) < len(left) or grav < grav_left:              # more to make later: keep the matrices
-        rig.__dict__["_skin_system"] = (energy, mass, K, W)
+    energy, mass, K, W = skin if skin is not None else skin_system(rig)
     p.update(k_area=energy.k_area, k_length=energy.k_length, k_bend=energy.k_bend)
     modes = int(p.get("modes", 8))
     def system(m):

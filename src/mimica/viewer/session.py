@@ -134,13 +134,15 @@ class ViewerSession:
             Called as progress(k, n, name) after each system is made.
         """
         from ..physics import precompute
+        from ..physics.face import skin_system
         left = self.pending()
         n, k = len(left), 0
+        skin = skin_system(self.rig) if left else None      # the skin's matrices, once for every system
         taken = {self.muscles[i] for i in self._order} if self.sim is not None else set()
         while left:
             moved = set(self._moved())
             name = "gravity" if "gravity" in left else next((x for x in left if x in moved), left[0])
-            precompute(self.rig, only=[name])
+            precompute(self.rig, only=[name], skin=skin)
             left.remove(name)
             k += 1
             self.made = (k, n)
