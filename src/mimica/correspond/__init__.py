@@ -112,6 +112,7 @@ def _locate(points, pts_mesh, tris):
 
 
 METHODS = ("nicp", "cylinder")
+NORMAL_LENGTH = 0.5           # register's normal-space lambda, x the target landmarks' RMS spread
 CONTOUR_WEIGHT = 1.0          # of a contour sample, against a landmark's (register.POINT_WEIGHT)
 
 
@@ -229,7 +230,9 @@ def _registered(source: Mesh, source_lm, target: Mesh, target_lm, lookup, contou
         c_rows, c_pts, names = matched_contours(source, source_lm, target, target_lm)
         k = np.sqrt(CONTOUR_WEIGHT)
         rows, pts = sp.vstack([rows, k * c_rows]).tocsr(), np.vstack([pts, k * c_pts])
-    reg = register(source, rows, target, pts)
+    lm = target_lm[both]
+    reg = register(source, rows, target, pts,
+                   normal_length=NORMAL_LENGTH * float(np.sqrt(((lm - lm.mean(0)) ** 2).sum(1).mean())))
     tri, bary, _, dist = TriangleLocator(reg.vertices, source.triangles).closest(lookup)
     h = reg.edge
     beyond = on_boundary(source, tri, bary) & (dist > h)
