@@ -1,4 +1,4 @@
-"""Benchmark: `mimica batch` (issue 19) against the same work as separate `mimica` commands run
+"""Benchmark: `mimica batch` against the same work as separate `mimica` commands run
 one after another, measured in the same run.
 
 Run from the project root:  .venv/bin/python bench/batch.py [--heads 6 --performances 4 --frames 120]

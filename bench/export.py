@@ -1,4 +1,4 @@
-"""Benchmark: the files animators take home (issue 17), against the one-target-per-frame files
+"""Benchmark: the files animators take home, against the one-target-per-frame files
 of before, measured in the same run.
 
 Run from the project root:  .venv/bin/python bench/export.py

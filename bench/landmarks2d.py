@@ -1,4 +1,4 @@
-"""Benchmark: 2D landmarks (issue 20, part 4), dlib's 68 points against MediaPipe's face mesh
+"""Benchmark: 2D landmarks, dlib's 68 points against MediaPipe's face mesh
 read at 68 of its points, measured in the same run.
 
 Run from the project root:  .venv/bin/python bench/landmarks2d.py   (needs the extras photo and mediapipe)

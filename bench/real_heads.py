@@ -1,4 +1,4 @@
-"""Benchmark: the 52 ARKit shapes on heads of other topologies (issue 16), against ICT-FaceKit's
+"""Benchmark: the 52 ARKit shapes on heads of other topologies, against ICT-FaceKit's
 own sculpted shapes on its own head, measured in the same run.
 
 Run from the project root:  .venv/bin/python bench/real_heads.py

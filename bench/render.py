@@ -1,4 +1,4 @@
-"""Benchmark: pictures and take-home files (issue 5).
+"""Benchmark: pictures and take-home files.
 
 - render_s: a 26,719-vertex head (the whole ICT-FaceKit model) to a 1024x1024 PNG, render and
   PNG encoding, best of 3; beside it the same render drawing every triangle (no back-face

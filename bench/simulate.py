@@ -1,4 +1,4 @@
-"""Benchmark: muscle-driven skin (issue 3) — modal system steps against the full-space solver.
+"""Benchmark: muscle-driven skin — modal system steps against the full-space solver.
 
 Run from the project root: .venv/bin/python bench/simulate.py
 Skin: the ICT-FaceKit face area (9,409 vertices); Kim's 8 muscles, one system per muscle.
@@ -57,7 +57,7 @@ def main():
     pre = time.perf_counter() - t
     print(f"rig precompute (8 muscles + gravity, modes included): {pre:.2f}s")
 
-    sim = FaceSimulator(rig, warp=False)             # the linear path (issue 3's figures)
+    sim = FaceSimulator(rig, warp=False)             # the linear path (the modal figures)
     act = np.full(len(rig.muscles), 0.6)
     for _ in range(10):
         sim.step(act)
@@ -189,7 +189,7 @@ def main():
         tiles.append(render_mesh(skin, v, size=(280, 280), frame=fr))
     save_png(out / "presets.png", contact_sheet(tiles, list(PRESETS), columns=4,
                                                 title=f"expression presets ({len(names)} muscles and drives, Kim 2020 shells, warped)"))
-    # issue 18: the whole library with the jaw and the lids
+    # the whole library with the jaw and the lids
     lib_steps = library_steps(whole)
     lib_pre = library_precompute()
     view_first, view_base = viewer_first_frame()

@@ -1,4 +1,4 @@
-"""Benchmark: 3D expression transfer (issue 2), ours (VTC) against Sumner-Popović DT in the same run.
+"""Benchmark: 3D expression transfer, ours (VTC) against Sumner-Popović DT in the same run.
 
 Run from the project root with the project's interpreter:  .venv/bin/python bench/transfer.py
 Data: ICT-FaceKit from the data directory ($MIMICA_DATA, default ../shared/data).  The model

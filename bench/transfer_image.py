@@ -1,4 +1,4 @@
-"""Benchmark: 2D expression analogy (issues 6, 20) — ours (the warp of Song et al. §VI with the
+"""Benchmark: 2D expression analogy — ours (the warp of Song et al. §VI with the
 expression's shading under the target's light, image.shading) against Song's own appearance step
 (eq. 4), expression ratio images (Liu et al. 2001, in-project) and the warp alone, in the same run;
 video end to end; 3D and 2D landmarks.

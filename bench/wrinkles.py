@@ -1,4 +1,4 @@
-"""Benchmark: wrinkles (issue 4) — cylinder fit, bulge table, mask transfer, and the
+"""Benchmark: wrinkles — cylinder fit, bulge table, mask transfer, and the
 animated face with its wrinkles (simulation + wrinkle layer per frame, against the
 simulation alone in the same process).  Also writes the pictures in docs/figures/.
 

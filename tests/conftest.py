@@ -6,7 +6,6 @@ import os
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 # one data setting for the tests, also when they run against an installed wheel (CI): the
@@ -37,28 +36,10 @@ def full_model():
     return ICTModel()
 
 
-def held_out_identity(model, seed):
-    """Identities no parameter was tuned on (seeds >= 100; the benchmark uses 1000+)."""
-    rng = np.random.default_rng(seed)
-    return model.identity(rng.normal(0, 0.8, 20))
-
-
-def skin_patch(model, radius):
-    """A real piece of skin: the ICT face polygons within `radius` cm of the right mouth
-    corner, and its border nodes."""
-    from mimica.data import ICT_FACE_AREA_FACES, ICT_LANDMARKS_68
-    m = model.mesh
-    c = m.vertices[ICT_LANDMARKS_68[48]]
-    near = np.linalg.norm(m.face_centroids()[:ICT_FACE_AREA_FACES] - c, axis=1) < radius
-    sub, _ = m.submesh(np.nonzero(near)[0])
-    return sub, sub.boundary_vertices()
-
-
 @pytest.fixture(scope="session")
 def head_glb(tmp_path_factory):
     """The shared 468-vertex head's ARKit blendshapes, as `mimica blendshapes` writes them."""
-    from mimica.cli import main
+    from mimica.pipeline import make_blendshapes
     d = tmp_path_factory.mktemp("head_arkit")
     data = Path(os.environ["MIMICA_DATA"]) / "real-heads" / "mediapipe-canonical"
-    assert main(["blendshapes", str(data / "head.obj"), "--out", str(d / "head_arkit.glb")]) == 0
-    return d / "head_arkit.glb"
+    return make_blendshapes(data / "head.obj", d / "head_arkit.glb").path

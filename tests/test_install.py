@@ -1,4 +1,4 @@
-"""The package as a user installs it (issue 15): its data files are in it, and the built wheel
+"""The package as a user installs it: its data files are in it, and the built wheel
 runs the main commands from a folder outside this repository, with no data directory set.
 
 `make test` (and so CI) runs the suite against the wheel installed into .venv, never `-e`

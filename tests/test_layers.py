@@ -245,3 +245,15 @@ def test_public_definitions_carry_numpydoc_sections():
                 if not any(f"{s}\n---" in doc for s in ("Parameters", "Returns", "Attributes", "Yields")):
                     missing.append(f"{name}.{node.name}")
     assert len(missing) <= 0.05 * total, f"{len(missing)} of {total} without numpydoc sections: {missing}"
+
+
+def test_the_tests_are_laid_out_by_module():
+    """Each folder of tests is named for the package or module of mimica it tests (the command
+    line's own tests, parsing, messages and exit codes, under cli/); project-wide checks, like
+    this one, sit at the top."""
+    tests = Path(__file__).resolve().parent
+    modules = {p.stem for p in PACKAGE.iterdir() if p.suffix == ".py" or (p / "__init__.py").is_file()}
+    folders = {p.name for p in tests.iterdir() if p.is_dir() and not p.name.startswith((".", "_"))}
+    assert folders and folders <= modules, sorted(folders - modules)
+    names = [p.name for p in tests.rglob("test_*.py")]
+    assert len(names) == len(set(names)), "two test files of one name (pytest imports them by name)"

@@ -1,4 +1,4 @@
-"""Run inside Blender's Python (bpy), by tests/test_foreign_files.py and bench/foreign_files.py:
+"""Run inside Blender's Python (bpy), by tests/mesh/test_foreign_files.py and bench/foreign_files.py:
 Blender as the other tool a user's files come from and go back to.
 
     python-with-bpy blender_files.py export HEAD.obj OUT.glb|OUT.fbx

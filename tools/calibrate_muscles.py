@@ -1,4 +1,4 @@
-"""Calibrate the muscle library against ICT-FaceKit's sculpted shapes (issue 18, part 1).
+"""Calibrate the muscle library against ICT-FaceKit's sculpted shapes.
 
 Each muscle of rig/muscles.py is placed from the 68 landmarks by a few numbers (offsets of its
 origin and insertion, width, depths, its reach alpha, its contraction).  For each muscle with a
@@ -26,7 +26,7 @@ ALONE_SLACK); one muscle a run, as the library is read when the tool starts.
 (physics.face.SKIN_AREA, SKIN_BEND, DRIVE_SPRING).  calibration.json's present round was made with
 `--skin 0.25 0.2 8` (a softer membrane, a stiffer bend, stiffer bone attachments: the fields spread
 as ICT's do) and kept on the simulator's own skin, where it fits ICT's shapes better than a round
-made on it (docs/benchmarks.md, issue 18); five muscles were then placed again with `--joint-all`
+made on it (docs/benchmarks.md); five muscles were then placed again with `--joint-all`
 on the simulator's skin ('how' says which).
 
 Run from the project root: .venv/bin/python tools/calibrate_muscles.py [--skin A B D] [muscle ... |

@@ -316,7 +316,7 @@ def read_take(path, fps: float | None = None):
     return times, {n: weights[n] for n in ARKIT}
 
 
-if bpy is not None:  # pragma: no cover - runs inside Blender (tests/test_blender.py drives it headless)
+if bpy is not None:  # pragma: no cover - runs inside Blender (tests/blender_addon/test_blender.py drives it headless)
 
     class MimicaPreferences(bpy.types.AddonPreferences):
         bl_idname = __name__

@@ -1,4 +1,4 @@
-"""Automatic 3D landmarks (issue: no landmark file for meshes of other topologies): render the
+"""Automatic 3D landmarks (for meshes of other topologies with no landmark file): render the
 mesh from the front, find the 68 points in the picture with the 2D detector, and cast each
 back onto the visible surface along the view ray."""
 

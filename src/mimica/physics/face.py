@@ -931,7 +931,7 @@ class FaceSimulator:
         spring's pull enters its node's frame by R^T and the displacement leaves it by the
         integrated rotation.  On a full smile against --solver full: 0.311 max deviation warped,
         0.333 linear (bench/simulate.py); a bent strip: 3-4x closer than linear modes
-        (tests/test_simulate.py).  warp=False: the linear modal face (twice the skin output
+        (tests/physics/test_simulate.py).  warp=False: the linear modal face (twice the skin output
         rate), which fit-muscles' fields and the reduced model are made of.
 
         reduced: a relative RMS tolerance (e.g. 1e-4): the muscles' summed output is then

@@ -78,7 +78,7 @@ def skin_stiffness(rig):
 def static_field(rig, m, K, spring: float = 4.0, motion=None) -> np.ndarray:
     """One muscle's (or drive's) steady state at activation 1 by one sparse solve in full space,
     (K + K_s) u = K_s u_m over its region of interest -- what its modal system settles to (its
-    static load shapes make that exact, tests/test_drives.py), without the modes.
+    static load shapes make that exact, tests/physics/test_drives.py), without the modes.
 
     Parameters
     ----------

@@ -1,0 +1,154 @@
+"""The parts of a head, on ICT-FaceKit's full mesh: its own topology, and the
+same head made into "another topology" (vertices shuffled, so nothing of ICT's table applies)
+with and without its material names."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mimica.align import fit_similarity
+from mimica.correspond.parts import ROLES, split_parts
+from mimica.data import ICT_HEAD_FACES, ICT_LANDMARKS_68
+from mimica.landmarks import Landmarks, ict_landmarks
+from mimica.mesh import Mesh
+from mimica.transfer import ExpressionTransfer, static_vertices
+
+MOUTH = np.arange(14062, 21451)          # ICT: gums, tongue and teeth
+EYE_L, EYE_R, LASHES = np.arange(21451, 23021), np.arange(23021, 24591), np.arange(25351, 26719)
+
+
+@pytest.fixture(scope="module")
+def full(full_model):
+    return full_model.mesh
+
+
+@pytest.fixture(scope="module")
+def shuffled(full):
+    """The full ICT head with its vertices in another order: another topology to mimica."""
+    perm = np.random.default_rng(7).permutation(full.n_vertices)
+    inv = np.argsort(perm)                          # new index of each old vertex
+    m = Mesh(full.vertices[perm], inv[full.face_indices], full.face_starts, name="shuffled",
+             groups=full.groups, group_names=full.group_names)
+    return m, inv
+
+
+def _jaw_truth(full_model):
+    """ICT's own jawOpen: the mouth vertices that move are the jaw's."""
+    return np.linalg.norm(full_model.shape("jawOpen") - full_model.neutral, axis=1) > 1e-3
+
+
+def test_ict_parts_from_its_table(full, full_model):
+    p = split_parts(full, full.vertices[ICT_LANDMARKS_68])
+    assert p.skin.sum() == 11248 and p.skin[:11248].all()
+    assert (p.role[EYE_L] == ROLES.index("eye.left")).all() and (p.role[EYE_R] == ROLES.index("eye.right")).all()
+    assert (p.role[LASHES] == ROLES.index("follow")).all()
+    jaw = p.role[MOUTH] == ROLES.index("jaw")
+    assert (jaw == _jaw_truth(full_model)[MOUTH]).mean() > 0.95           # 95.6% measured
+    assert len(p.skin_faces) == ICT_HEAD_FACES
+
+
+@pytest.mark.parametrize("names", [True, False])
+def test_parts_of_another_topology(full_model, shuffled, names):
+    m, inv = shuffled
+    if not names:                                   # geometry alone: no material names
+        m = Mesh(m.vertices, m.face_indices, m.face_starts)
+    p = split_parts(m, m.vertices[inv[ICT_LANDMARKS_68]])
+    role = p.role[inv]                              # back in ICT's order
+    assert (role[:11248] == ROLES.index("skin")).all()
+    assert (role[EYE_L] == ROLES.index("eye.left")).all() and (role[EYE_R] == ROLES.index("eye.right")).all()
+    jaw = role[MOUTH] == ROLES.index("jaw")
+    assert (jaw == _jaw_truth(full_model)[MOUTH]).mean() > 0.95
+    assert (role[LASHES] == ROLES.index("follow")).all()
+
+
+def test_one_piece_head_is_all_skin(head_model):
+    p = split_parts(head_model.mesh, head_model.neutral[ICT_LANDMARKS_68])
+    assert p.only_skin
+
+
+def test_full_source_gives_the_head_only_result(full_model, head_model):
+    """Transferring from ICT's whole mesh (teeth, eyes, lashes, sockets) gives the same skin as
+    from its head-only part, onto a target of another topology."""
+    from mimica.correspond.remesh import resample_face
+    idv = full_model.identity("identity012")
+    head = head_model.mesh
+    rs = resample_face(head.with_vertices(idv[:11248]), idv[ICT_LANDMARKS_68], n_vertices=9000, seed=3)
+    lt = Landmarks.snap(rs.mesh, idv[ICT_LANDMARKS_68])
+    frames = np.stack([full_model.shape(s) for s in ("jawOpen", "mouthSmile_L", "eyeBlink_L")])
+    full = full_model.mesh
+    a = ExpressionTransfer(full, rs.mesh, ict_landmarks(full), lt, static=static_vertices(full.vertices, frames))
+    b = ExpressionTransfer(head, rs.mesh, ict_landmarks(head), lt,
+                           static=static_vertices(head.vertices, frames[:, :11248]))
+    assert a.parts is not None and b.parts is None
+    np.testing.assert_allclose(a.apply(frames), b.apply(frames[:, :11248]), atol=1e-6 * np.ptp(idv))
+
+
+def test_rigid_parts_move_rigidly(full_model, head_model, shuffled):
+    """Onto the whole head of another topology: teeth and eyeballs move as rigid bodies (the
+    jaw's from the source), the upper teeth stay, the lashes ride on the closing lid."""
+    m, inv = shuffled
+    src = full_model.mesh
+    x = ExpressionTransfer(src, m, ict_landmarks(src), Landmarks.snap(m, m.vertices[inv[ICT_LANDMARKS_68]]))
+    names = ("jawOpen", "eyeBlink_L", "mouthSmile_L")
+    out = x.apply(np.stack([full_model.shape(s) for s in names]))[:, inv]        # ICT's order
+    rest = full_model.neutral
+    pt = x.parts[1]
+    role = pt.role[inv]
+    truth = _jaw_truth(full_model)
+    for k, name in enumerate(names):
+        for r in ("jaw", "skull", "eye.left", "eye.right"):
+            v = np.nonzero(role == ROLES.index(r))[0]
+            fit = fit_similarity(rest[v], out[k, v], scale=False)
+            assert np.abs(fit.apply(rest[v]) - out[k, v]).max() < 1e-6 * np.ptp(rest[v]), (name, r)
+        upper = MOUTH[(role[MOUTH] == ROLES.index("skull"))]
+        assert np.abs(out[k, upper] - rest[upper]).max() < 1e-9
+    lower = MOUTH[(role[MOUTH] == ROLES.index("jaw")) & truth[MOUTH]]
+    ict_move = np.linalg.norm(full_model.shape("jawOpen")[lower] - rest[lower], axis=1).mean()
+    our_move = np.linalg.norm(out[0, lower] - rest[lower], axis=1).mean()
+    assert 0.8 < our_move / ict_move < 1.25                           # the jaw opens as ICT's does
+    assert np.abs(out[2, MOUTH] - rest[MOUTH]).max() < 1e-3 * np.ptp(rest)   # a smile leaves the teeth
+    lash = LASHES[:684]                                                # the left lashes
+    ict_lash = np.linalg.norm(full_model.shape("eyeBlink_L")[lash] - rest[lash], axis=1).mean()
+    our_lash = np.linalg.norm(out[1, lash] - rest[lash], axis=1).mean()
+    assert our_lash > 0.5 * ict_lash                                   # they close with the lid
+
+
+def test_fused_parts_are_still_found(full_model):
+    """Game heads often come with their parts fused: the vertices where lashes, tear and
+    occlusion shells meet the skin welded into one (773 coincident pairs on ICT's whole mesh),
+    no material names, another vertex order.  The parts are found all the same, and the teeth
+    and eyeballs still move rigidly."""
+    from scipy.spatial import cKDTree
+    full = full_model.mesh
+    v = full.vertices
+    rep = np.arange(len(v))
+    pairs = cKDTree(v).query_pairs(1e-6 * np.ptp(v), output_type="ndarray")
+    assert len(pairs) > 500
+    for a, b in pairs[np.argsort(pairs.max(1))]:
+        rep[max(a, b)] = rep[min(a, b)]
+    for _ in range(4):
+        rep = rep[rep]
+    used = np.unique(rep[full.face_indices])
+    perm = np.random.default_rng(3).permutation(len(used))
+    new = np.full(len(v), -1)
+    new[used[perm]] = np.arange(len(used))                 # fused, then shuffled
+    idx = new[rep]                                          # each ICT vertex -> its fused vertex
+    m = Mesh(v[used[perm]], idx[full.face_indices], full.face_starts)
+    assert m.n_vertices < full.n_vertices
+    p = split_parts(m, m.vertices[idx[ICT_LANDMARKS_68]])
+    role = p.role[idx]
+    for part, r in ((EYE_L, "eye.left"), (EYE_R, "eye.right")):
+        assert (role[part] == ROLES.index(r)).all()
+    assert (role[:11248] == ROLES.index("skin")).all()
+    jaw = role[MOUTH] == ROLES.index("jaw")
+    assert (jaw == _jaw_truth(full_model)[MOUTH]).mean() > 0.95
+    src = full
+    x = ExpressionTransfer(src, m, ict_landmarks(src), Landmarks.snap(m, m.vertices[idx[ICT_LANDMARKS_68]]))
+    out = x.apply(np.stack([full_model.shape(s) for s in ("jawOpen", "mouthSmile_L")]))[:, idx]
+    rest = full_model.neutral
+    for k in range(2):
+        for r in ("jaw", "skull", "eye.left", "eye.right"):
+            sel = np.nonzero(role == ROLES.index(r))[0]
+            fit = fit_similarity(rest[sel], out[k, sel], scale=False)
+            assert np.abs(fit.apply(rest[sel]) - out[k, sel]).max() < 1e-6 * np.ptp(rest[sel]), r

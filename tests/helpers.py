@@ -1,0 +1,77 @@
+"""What several test packages share: held-out identities and a patch of skin from ICT, the Khronos
+glTF-Validator, a Live Link Face take, the Blenders the tests drive (tests/ is on the path
+through its conftest)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mimica.export import ARKIT_52
+
+ROOT = Path(__file__).resolve().parents[1]
+TOOLS = ROOT / "tools" / "gltf"
+
+# the Blenders the tests run: 4.5 LTS and the current 5.x, each bpy in a venv of its own
+BLENDERS = {"4.5": ".venv-blender", "5.0": ".venv-blender5"}
+
+ROTATIONS = ["HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
+             "RightEyeYaw", "RightEyePitch", "RightEyeRoll"]
+
+
+def validate(paths) -> list[dict]:
+    """The glTF-Validator's report of each file (tools/gltf); fails under CI when it is missing."""
+    node = shutil.which("node")
+    if node is None or not (TOOLS / "node_modules" / "gltf-validator").is_dir():
+        if os.environ.get("CI"):
+            pytest.fail("the glTF-Validator is missing in CI: `make test` installs it with npm (tools/gltf)")
+        pytest.skip("Node.js or tools/gltf/node_modules missing (make test installs the validator)")
+    run = subprocess.run([node, str(TOOLS / "validate.mjs"), *map(str, paths)], capture_output=True, text=True,
+                         timeout=300, check=True)
+    return [json.loads(line) for line in run.stdout.splitlines()]
+
+
+def live_link_csv(path, weights, start="13:32:48:00"):
+    """A take as Live Link Face writes it: Timecode at 60 fps, BlendShapeCount, PascalCase names."""
+    h, m, s, _ = start.split(":")
+    lines = [",".join(["Timecode", "BlendShapeCount"] + [n[0].upper() + n[1:] for n in ARKIT_52] + ROTATIONS)]
+    for f, w in enumerate(weights):
+        sec, fr = divmod(f, 60)
+        tc = f"{h}:{m}:{int(s) + sec:02d}:{fr:02d}.{(37 * f) % 1000:03d}"
+        lines.append(",".join([tc, "61"] + [f"{x:.6f}" for x in w] + ["0.01"] * len(ROTATIONS)))
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+def blender_python(version: str = "4.5") -> str:
+    """The Python with Blender `version`'s bpy; fails under CI when it is missing."""
+    exe = (os.environ.get("MIMICA_BLENDER_PYTHON") if version == "4.5" else None) or \
+        str(ROOT / BLENDERS[version] / "bin" / "python")
+    if not Path(exe).is_file():
+        if os.environ.get("CI"):
+            pytest.fail(f"Blender {version}'s bpy is missing in CI: `make test` installs it into "
+                        f"{BLENDERS[version]} under CI")
+        pytest.skip(f"no Python with Blender {version}'s bpy ({BLENDERS[version]}; make blender)")
+    return exe
+
+
+def held_out_identity(model, seed):
+    """Identities no parameter was tuned on (seeds >= 100; the benchmark uses 1000+)."""
+    rng = np.random.default_rng(seed)
+    return model.identity(rng.normal(0, 0.8, 20))
+
+
+def skin_patch(model, radius):
+    """A real piece of skin: the ICT face polygons within `radius` cm of the right mouth
+    corner, and its border nodes."""
+    from mimica.data import ICT_FACE_AREA_FACES, ICT_LANDMARKS_68
+    m = model.mesh
+    c = m.vertices[ICT_LANDMARKS_68[48]]
+    near = np.linalg.norm(m.face_centroids()[:ICT_FACE_AREA_FACES] - c, axis=1) < radius
+    sub, _ = m.submesh(np.nonzero(near)[0])
+    return sub, sub.boundary_vertices()
