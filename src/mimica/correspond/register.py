@@ -24,7 +24,8 @@ than 0.0022; lambda = half the landmarks' RMS spread, in the first 3 of the 6 st
 10 target edges, or all six steps: no better; the matched vertex alone, without its triangles:
 0.0661, and a coarse head's lips tore).  Amberg's rule stays: no data where the closest point
 lies on the target's edge (with the normal-space match's own edge alone, the source's extra neck
-found matches inside the target: 0.0759).
+found matches inside the target: 0.0759).  Only where the target resolves lambda (at least
+NORMAL_MIN_EDGES of its edges across it): on a coarser one closest points throughout.
 
 Departure from Amberg: the unknowns are per-vertex displacements d, not per-vertex affine
 transforms (X_i, 12 unknowns).  The faces are already aligned (a similarity fit on the
@@ -53,6 +54,7 @@ POINT_WEIGHT = 10.0                            # beta: landmarks and contour poi
 MAX_ANGLE = 60.0                               # degrees between normals beyond which no data
 REACH = 10.0                                  # no data farther than this x the target's edge
 NORMAL_STEPS = 3                               # stiffness steps matched in (position, normal) space
+NORMAL_MIN_EDGES = 6.0                         # ... where lambda spans at least this many target edges
 K = 8                                          # without libigl: closest-point candidates, first round
 EXACT = 1.0                                    # without libigl: exact within this x the edge
 
@@ -184,7 +186,8 @@ def register(source: Mesh, points: sp.spmatrix, target: Mesh, targets: np.ndarra
     normal_length : float
         Lambda, in the meshes' units: in the first `normal_steps` steps each source vertex is
         pulled to the target point nearest in (x, lambda n) rather than to its closest point
-        (0: closest points throughout, Amberg's rule).
+        (0, or under NORMAL_MIN_EDGES of the target's edges: closest points throughout, Amberg's
+        rule).
     normal_steps : int
         How many of the stiffness steps match in normal space.
 
@@ -203,7 +206,9 @@ def register(source: Mesh, points: sp.spmatrix, target: Mesh, targets: np.ndarra
     h = median_edge(target)
     edge_of_target = target.boundary_vertices()
     cos_max = np.cos(np.radians(max_angle))
-    six = _NormalSpace(target, t_normals, normal_length) if normal_length > 0 else None
+    # a target coarser than that has too few vertex normals across lambda to match on (the shared
+    # 468-vertex head, lambda 3.8 edges: a coarse lip's edges stretched, 6 against 4 without)
+    six = _NormalSpace(target, t_normals, normal_length) if normal_length >= NORMAL_MIN_EDGES * h else None
     d = np.zeros_like(v0)
     w = np.zeros(len(v0))
     tie = 1e-8 * sp.identity(len(v0))            # keeps a vertex no term reaches (unused) in place
