@@ -18,7 +18,7 @@ if _BLENDER.is_file():
 # the repository's tools (the viewer's browser harness, tools/viewer_probe.py) for the tests
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 
-from mimica.data import ICT_HEAD_VERTICES, ICTModel, data_dir  # noqa: E402
+from mimica.data import ICT_FACE_AREA_VERTICES, ICT_HEAD_VERTICES, ICTModel, data_dir  # noqa: E402
 
 
 def pytest_report_header(config):
@@ -34,6 +34,12 @@ def head_model():
 @pytest.fixture(scope="session")
 def full_model():
     return ICTModel()
+
+
+@pytest.fixture(scope="session")
+def face():
+    """ICT's face area (its 9,409 vertices), the model the simulation tests drive."""
+    return ICTModel(ICT_FACE_AREA_VERTICES)
 
 
 @pytest.fixture(scope="session")

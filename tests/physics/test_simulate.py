@@ -199,45 +199,6 @@ def test_timeline_interpolation_and_files(tmp_path):
         Timeline.preset("boredom", ["zygomaticus_major_L"])
 
 
-def test_cli_rig_and_simulate(tmp_path, face, capsys):
-    from mimica import write_mesh
-    from mimica.cli import main
-    obj = write_mesh(tmp_path / "face.obj", face.mesh)
-    rig_path = tmp_path / "face.rig"
-    assert main(["rig", str(obj), "--muscles", "zygomaticus_major_R", "--out", str(rig_path)]) == 0
-    out = tmp_path / "sim"
-    assert main(["simulate", str(rig_path), "--expression", "happiness", "--duration", "0.25", "--out", str(out)]) == 0
-    frames = sorted(out.glob("frame_*.obj"))
-    assert len(frames) == 16 and (out / "strip.png").is_file()
-    from pygltflib import GLTF2
-    g = GLTF2().load(str(out / "animation.glb"))
-    # 16 frames: one morph target each, or a few basis shapes with per-frame weights (compact)
-    n_targets = len(g.meshes[0].primitives[0].targets)
-    assert len(g.meshes[0].extras.get("frames", g.meshes[0].extras["targetNames"])) == 16 and n_targets <= 16
-    assert g.animations[0].channels[0].target.path == "weights"
-    assert g.accessors[g.animations[0].samplers[0].input].max == [pytest.approx(0.25)]
-    tl = tmp_path / "t.json"
-    tl.write_text(json.dumps({"format": "mimica-timeline/1", "channels": {"buccinator_R": {"keys": [[0, 1]]}}}))
-    assert main(["simulate", str(rig_path), "--timeline", str(tl), "--out", str(tmp_path / "s2")]) == 2
-    assert "not a muscle" in capsys.readouterr().err and not (tmp_path / "s2").exists()
-    for extra in (["--solver", "full", "--gravity", "1"], ["--solver", "full", "--engine", "sprung"]):
-        assert main(["simulate", str(rig_path), "--out", str(tmp_path / "s3")] + extra) == 2
-        assert "full solver" in capsys.readouterr().err and not (tmp_path / "s3").exists()
-    assert main(["simulate", str(rig_path), "--solver", "full", "--duration", "0.05", "--fps", "40",
-                 "--out", str(tmp_path / "s4")]) == 0
-    assert len(list((tmp_path / "s4").glob("frame_*.obj"))) == 3
-    assert main(["simulate", str(rig_path), "--springs", "kim", "--expression", "happiness", "--duration", "0.1",
-                 "--out", str(tmp_path / "s5")]) == 0
-    assert len(list((tmp_path / "s5").glob("frame_*.obj"))) == 7
-    assert main(["simulate", str(rig_path), "--springs", "kim", "--solver", "full", "--out", str(tmp_path / "s6")]) == 2
-    assert "springs" in capsys.readouterr().err and not (tmp_path / "s6").exists()
-    assert main(["rig", str(obj), "--muscles", "zygomaticus_major_R", "--stretch", "shell",
-                 "--out", str(tmp_path / "shell.rig")]) == 0
-    shell = Rig.load(tmp_path / "shell.rig")
-    assert shell.params["stretch"] == "shell"
-    assert not np.allclose(shell.muscles[0].stretch, Rig.load(rig_path).muscles[0].stretch)
-
-
 def test_sprung_engine_rests_moves_and_returns(rig, face):
     from mimica.physics.sprung import SprungFace
     from mimica.rig.muscles import FACIAL_ACTIONS, action_activations
@@ -264,23 +225,6 @@ def test_user_pull_moves_its_region_only(rig, face):
     d = np.linalg.norm(face.neutral - nose, axis=1)
     assert u[d < 0.5, 2].mean() > 0                                 # pulled forward
     assert np.abs(u[d > 3.0]).max() == 0.0                           # outside its reach: still
-
-
-def test_cli_pull_keyed_on_a_curve(tmp_path, rig, face, capsys):
-    from mimica.cli import main
-    rp = rig.save(tmp_path / "f.rig")
-    nose = face.neutral[ICT_LANDMARKS_68[30]]
-    tl = tmp_path / "t.json"
-    tl.write_text(json.dumps({"format": "mimica-timeline/1", "duration": 0.5,
-                              "channels": {"pull": {"interp": "linear", "keys": [[0, 0], [0.2, 1]]}}}))
-    spec = f"{nose[0]},{nose[1]},{nose[2]}:1.0:0,0,5"
-    out = tmp_path / "o"
-    assert main(["simulate", str(rp), "--timeline", str(tl), "--pull", spec, "--out", str(out)]) == 0
-    from mimica import read_mesh
-    last = read_mesh(sorted(out.glob("frame_*.obj"))[-1]).vertices
-    assert (last - face.neutral)[np.linalg.norm(face.neutral - nose, axis=1) < 0.5, 2].mean() > 0
-    assert main(["simulate", str(rp), "--pull", "1,2:3", "--out", str(tmp_path / "bad")]) == 2
-    assert "--pull" in capsys.readouterr().err
 
 
 def test_reduced_output_matches_the_full_sum(rig):

@@ -100,7 +100,7 @@ def test_table_lookup_and_inversion_within_one_percent():
 # ---------------------------------------------------------------- the mask (§3)
 import json  # noqa: E402
 
-from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel  # noqa: E402
+from mimica.data import ICT_LANDMARKS_68  # noqa: E402
 from mimica.mesh.query import TriangleLocator  # noqa: E402
 from mimica.rig.muscles import MUSCLES  # noqa: E402
 from mimica.wrinkles import WrinkledSkin, WrinkleLayer, WrinkleMask, reference_mask, transfer_mask  # noqa: E402
@@ -334,42 +334,3 @@ def test_engine_maps_blend_back_to_the_clip(head_model, tmp_path):
     mask = np.asarray(Image.open(tmp_path / "maps" / "forehead_mask.png"))
     assert (mask[h != 0] == 255).all() and 0 < (mask == 255).mean() < 0.5
     assert json.loads((tmp_path / "maps" / "maps.json").read_text())["regions"][0]["region"] == list(regions)[0]
-
-
-# ---------------------------------------------------------------- command line
-def test_cli_wrinkle_mask_simulate_and_age(tmp_path, capsys):
-    from mimica import write_mesh
-    from mimica.cli import main
-    face = ICTModel(ICT_FACE_AREA_VERTICES)
-    obj = write_mesh(tmp_path / "face.obj", face.mesh)
-    mask = tmp_path / "face.wrinkles"
-    assert main(["wrinkle-mask", str(obj), "--out", str(mask), "--show", str(tmp_path / "m.png")]) == 0
-    assert len(WrinkleMask.load(mask)) == len(reference_mask()) and (tmp_path / "m.png").is_file()
-    rig = tmp_path / "face.rig"
-    assert main(["rig", str(obj), "--muscles", "frontalis_R,frontalis_L", "--modes", "4", "--out", str(rig)]) == 0
-    out = tmp_path / "sim"
-    assert main(["simulate", str(rig), "--expression", "surprise", "--duration", "0.3", "--wrinkles", str(mask),
-                 "--age", "70", "--maps", "128", "--out", str(out)]) == 0
-    said = capsys.readouterr().err
-    assert "wrinkles: 21" in said and "forehead" in said
-    assert len(list(out.glob("frame_*.obj"))) == 19 and list(out.glob("wrinkles_frame_*_normal.png"))
-    assert main(["simulate", str(rig), "--expression", "surprise", "--duration", "0.1", "--wrinkles", str(mask),
-                 "--maps", "64", "--maps-set", "engine", "--out", str(tmp_path / "eng")]) == 0
-    assert "engine maps of 15 regions" in capsys.readouterr().err
-    assert (tmp_path / "eng" / "wrinkle_maps" / "weights.csv").is_file()
-    assert len(list((tmp_path / "eng" / "wrinkle_maps").glob("*_normal.png"))) == 15
-    sheet = tmp_path / "age.png"
-    assert main(["age", str(obj), "--rig", str(rig), "--ages", "30,80", "--expression", "surprise",
-                 "--size", "96", "--out", str(sheet)]) == 0 and sheet.is_file()
-    # a mask of another face, a broken mask, bad ages: one line, exit 2, nothing written
-    other = reference_mask()
-    for w in other.wrinkles:
-        w.points = w.points + 5.0
-    other.save(tmp_path / "other.wrinkles")
-    (tmp_path / "bad.wrinkles").write_text('{"format": "mimica-wrinkles/1"}')
-    for args, word in ((["--wrinkles", str(tmp_path / "other.wrinkles")], "does not lie on"),
-                       (["--wrinkles", str(tmp_path / "bad.wrinkles")], "anchors")):
-        assert main(["simulate", str(rig), "--duration", "0.1", *args, "--out", str(tmp_path / "x")]) == 2
-        assert word in capsys.readouterr().err and not (tmp_path / "x").exists()
-    assert main(["age", str(obj), "--rig", str(rig), "--ages", "young", "--out", str(tmp_path / "y.png")]) == 2
-    assert "--ages" in capsys.readouterr().err and not (tmp_path / "y.png").exists()
