@@ -7,7 +7,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mimica.cli import main
 from mimica.data import ICT_LANDMARKS_68
 from mimica.physics.face import FaceSimulator
 from mimica.physics.fit import MuscleFit, _box_ls, muscle_fields
@@ -79,46 +78,3 @@ def test_box_least_squares_needs_no_fallback_with_many_channels(monkeypatch):
         a = _box_ls(M, y, 1.0)
         np.testing.assert_allclose(a, lsq_linear(M, y, bounds=(0.0, 1.0), method="bvls").x, atol=1e-7)
     assert len(calls) <= 2
-
-
-def test_fit_muscles_writes_a_timeline_simulate_plays(rig, face, tmp_path, capsys):
-    """`fit-muscles RIG --target` on a shape the rig makes: the timeline holds the activations
-    and `simulate --timeline` plays it into that shape."""
-    from mimica.anim import Timeline
-    from mimica.mesh import write_mesh
-    rig.save(tmp_path / "face.rig")
-    fit = MuscleFit.of_rig(rig)
-    a = np.array([0.8, 0.2, 0.5])
-    target = rig.skin.vertices + fit.displacement(a)
-    write_mesh(tmp_path / "target.obj", rig.skin.with_vertices(target))
-    out = tmp_path / "act.json"
-    assert main(["fit-muscles", str(tmp_path / "face.rig"), "--target", str(tmp_path / "target.obj"),
-                 "--out", str(out)]) == 0
-    said = capsys.readouterr().err
-    assert "3 muscles fitted to 1 target" in said and "0% misfit" in said, said
-    tl = Timeline.load(out)
-    np.testing.assert_allclose(tl.values(0.5, MUSCLES), a, atol=1e-4)
-    assert main(["simulate", str(tmp_path / "face.rig"), "--timeline", str(out), "--duration", "0.8",
-                 "--out", str(tmp_path / "sim")]) == 0
-    from mimica.mesh import read_vertices
-    last = read_vertices(sorted((tmp_path / "sim").glob("frame_*.obj"))[-1]) - rig.skin.vertices
-    want = target - rig.skin.vertices
-    cos = (last * want).sum() / np.linalg.norm(last) / np.linalg.norm(want)
-    assert cos > 0.99 and 0.8 < np.linalg.norm(last) / np.linalg.norm(want) < 1.1
-
-
-def test_fit_muscles_refuses_what_it_cannot_fit(rig, face, tmp_path, capsys):
-    from mimica.mesh import write_mesh
-    rig.save(tmp_path / "face.rig")
-    write_mesh(tmp_path / "other.obj", face.mesh)
-    bad = tmp_path / "few.obj"
-    bad.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
-    cases = [(["--out", str(tmp_path / "a.json")], "give --target"),
-             (["--target", str(bad), "--out", str(tmp_path / "a.json")], "3 vertices; the rig's skin has"),
-             (["--target", str(tmp_path / "other.obj"), "--out", str(tmp_path / "a.txt")], "timeline .json")]
-    for args, said in cases:
-        capsys.readouterr()
-        assert main(["fit-muscles", str(tmp_path / "face.rig"), *args]) == 2
-        err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and said in err[0], err
-        assert not (tmp_path / "a.json").exists() and not (tmp_path / "a.txt").exists()

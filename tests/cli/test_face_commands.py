@@ -1,5 +1,5 @@
-"""`mimica rig`, `simulate`, `wrinkle-mask` and `age` from the command line: the files each
-writes, and one line, exit 2 and nothing written for what they refuse."""
+"""`mimica rig`, `simulate`, `fit-muscles`, `wrinkle-mask` and `age` from the command line: the
+files each writes, and one line, exit 2 and nothing written for what they refuse."""
 
 from __future__ import annotations
 
@@ -8,19 +8,23 @@ import json
 import numpy as np
 import pytest
 
+from mimica.cli import main
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel
+from mimica.physics.fit import MuscleFit
 from mimica.rig import Rig, build_rig
 from mimica.wrinkles import WrinkleMask, reference_mask
 
 
+MUSCLES = ["zygomaticus_major_L", "zygomaticus_major_R", "depressor_anguli_oris_R"]
+
+
 @pytest.fixture(scope="module")
 def rig(face):
-    return build_rig(face.mesh, face.neutral[ICT_LANDMARKS_68], muscles=["zygomaticus_major_L", "depressor_anguli_oris_R"])
+    return build_rig(face.mesh, face.neutral[ICT_LANDMARKS_68], muscles=MUSCLES)
 
 
 def test_cli_rig_and_simulate(tmp_path, face, capsys):
     from mimica import write_mesh
-    from mimica.cli import main
     obj = write_mesh(tmp_path / "face.obj", face.mesh)
     rig_path = tmp_path / "face.rig"
     assert main(["rig", str(obj), "--muscles", "zygomaticus_major_R", "--out", str(rig_path)]) == 0
@@ -58,7 +62,6 @@ def test_cli_rig_and_simulate(tmp_path, face, capsys):
 
 
 def test_cli_pull_keyed_on_a_curve(tmp_path, rig, face, capsys):
-    from mimica.cli import main
     rp = rig.save(tmp_path / "f.rig")
     nose = face.neutral[ICT_LANDMARKS_68[30]]
     tl = tmp_path / "t.json"
@@ -76,7 +79,6 @@ def test_cli_pull_keyed_on_a_curve(tmp_path, rig, face, capsys):
 
 def test_cli_wrinkle_mask_simulate_and_age(tmp_path, capsys):
     from mimica import write_mesh
-    from mimica.cli import main
     face = ICTModel(ICT_FACE_AREA_VERTICES)
     obj = write_mesh(tmp_path / "face.obj", face.mesh)
     mask = tmp_path / "face.wrinkles"
@@ -110,3 +112,46 @@ def test_cli_wrinkle_mask_simulate_and_age(tmp_path, capsys):
         assert word in capsys.readouterr().err and not (tmp_path / "x").exists()
     assert main(["age", str(obj), "--rig", str(rig), "--ages", "young", "--out", str(tmp_path / "y.png")]) == 2
     assert "--ages" in capsys.readouterr().err and not (tmp_path / "y.png").exists()
+
+
+def test_fit_muscles_writes_a_timeline_simulate_plays(rig, face, tmp_path, capsys):
+    """`fit-muscles RIG --target` on a shape the rig makes: the timeline holds the activations
+    and `simulate --timeline` plays it into that shape."""
+    from mimica.anim import Timeline
+    from mimica.mesh import write_mesh
+    rig.save(tmp_path / "face.rig")
+    fit = MuscleFit.of_rig(rig)
+    a = np.array([0.8, 0.2, 0.5])
+    target = rig.skin.vertices + fit.displacement(a)
+    write_mesh(tmp_path / "target.obj", rig.skin.with_vertices(target))
+    out = tmp_path / "act.json"
+    assert main(["fit-muscles", str(tmp_path / "face.rig"), "--target", str(tmp_path / "target.obj"),
+                 "--out", str(out)]) == 0
+    said = capsys.readouterr().err
+    assert "3 muscles fitted to 1 target" in said and "0% misfit" in said, said
+    tl = Timeline.load(out)
+    np.testing.assert_allclose(tl.values(0.5, MUSCLES), a, atol=1e-4)
+    assert main(["simulate", str(tmp_path / "face.rig"), "--timeline", str(out), "--duration", "0.8",
+                 "--out", str(tmp_path / "sim")]) == 0
+    from mimica.mesh import read_vertices
+    last = read_vertices(sorted((tmp_path / "sim").glob("frame_*.obj"))[-1]) - rig.skin.vertices
+    want = target - rig.skin.vertices
+    cos = (last * want).sum() / np.linalg.norm(last) / np.linalg.norm(want)
+    assert cos > 0.99 and 0.8 < np.linalg.norm(last) / np.linalg.norm(want) < 1.1
+
+
+def test_fit_muscles_refuses_what_it_cannot_fit(rig, face, tmp_path, capsys):
+    from mimica.mesh import write_mesh
+    rig.save(tmp_path / "face.rig")
+    write_mesh(tmp_path / "other.obj", face.mesh)
+    bad = tmp_path / "few.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    cases = [(["--out", str(tmp_path / "a.json")], "give --target"),
+             (["--target", str(bad), "--out", str(tmp_path / "a.json")], "3 vertices; the rig's skin has"),
+             (["--target", str(tmp_path / "other.obj"), "--out", str(tmp_path / "a.txt")], "timeline .json")]
+    for args, said in cases:
+        capsys.readouterr()
+        assert main(["fit-muscles", str(tmp_path / "face.rig"), *args]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and said in err[0], err
+        assert not (tmp_path / "a.json").exists() and not (tmp_path / "a.txt").exists()
