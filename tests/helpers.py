@@ -75,3 +75,35 @@ def skin_patch(model, radius):
     near = np.linalg.norm(m.face_centroids()[:ICT_FACE_AREA_FACES] - c, axis=1) < radius
     sub, _ = m.submesh(np.nonzero(near)[0])
     return sub, sub.boundary_vertices()
+
+
+def remeshed_scan(model, seed):
+    """A held-out identity's face area resampled to ~11k vertices of its own topology, holes at
+    the eyes, nostrils and mouth: (identity vertices, the Resampled, its landmarks)."""
+    from mimica.correspond.remesh import resample_face
+    from mimica.data import ICT_FACE_AREA_FACES, ICT_LANDMARKS_68
+    from mimica.landmarks import Landmarks
+    tv = held_out_identity(model, seed)
+    face, _ = model.mesh.with_vertices(tv).submesh(np.arange(ICT_FACE_AREA_FACES))
+    rs = resample_face(face, tv[ICT_LANDMARKS_68], n_vertices=11000, seed=seed)
+    return tv, rs, Landmarks.snap(rs.mesh, tv[ICT_LANDMARKS_68])
+
+
+def sealed_lips(model):
+    """ICT's identity014 remeshed with its lips sealed: (mesh, landmarks), the inner lips' points
+    a little inside their own lip (on sealed lips the closest point of both is on the seam, on
+    either side of a cut)."""
+    from mimica.align import face_cylinder
+    from mimica.correspond.remesh import resample_face
+    from mimica.data import ICT_LANDMARKS_68
+    from mimica.landmarks import Landmarks
+    tv = model.identity("identity014")
+    orig = model.mesh.with_vertices(tv)
+    rs = resample_face(orig, tv[ICT_LANDMARKS_68], n_vertices=10000, seed=5, seal=("mouth",))
+    pts = tv[ICT_LANDMARKS_68].copy()
+    up = face_cylinder(pts).axes[1]
+    d = 0.03 * np.linalg.norm(pts[45] - pts[36])
+    pts[[61, 62, 63]] += d * up
+    pts[[65, 66, 67]] -= d * up
+    return rs.mesh, Landmarks.snap(rs.mesh, pts)
+

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import held_out_identity
+from helpers import remeshed_scan
 
-from mimica.data import EXPRESSIONS, ICT_FACE_AREA_FACES, ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68
+from mimica.data import EXPRESSIONS, ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68
 from mimica.landmarks import Landmarks, ict_landmarks
-from mimica.correspond.remesh import resample_face
 from mimica.transfer import ExpressionTransfer, relative_error, static_vertices
 
 FACE = slice(0, ICT_FACE_AREA_VERTICES)
@@ -17,13 +16,7 @@ FACE = slice(0, ICT_FACE_AREA_VERTICES)
 @pytest.fixture(scope="module")
 def scans(head_model):
     """Held-out identities, resampled to ~11k vertices with holes at eyes, nostrils, mouth."""
-    out = []
-    for seed in (100, 101):
-        tv = held_out_identity(head_model, seed)
-        face, _ = head_model.mesh.with_vertices(tv).submesh(np.arange(ICT_FACE_AREA_FACES))
-        rs = resample_face(face, tv[ICT_LANDMARKS_68], n_vertices=11000, seed=seed)
-        out.append((tv, rs, Landmarks.snap(rs.mesh, tv[ICT_LANDMARKS_68])))
-    return out
+    return [remeshed_scan(head_model, seed) for seed in (100, 101)]
 
 
 def test_remeshed_scan_has_its_own_topology_and_holes(scans):
@@ -123,7 +116,6 @@ def test_correspondence_lands_near_the_true_point(head_model, scans):
     assert np.median(d) < 0.02 * width                        # median within 2% of the face width
 
 
-
 def test_normal_matching_brings_partners_nearer(head_model, scans, monkeypatch):
     """The registration's first steps match position and normal together (register.py): the
     partners' median distance from the true point falls on both held-out scans (measured 0.0071
@@ -212,34 +204,3 @@ def test_contours_pair_landmark_to_landmark(head_model, scans):
     carried = np.einsum("ij,ijk->ik", bary, rs.carry(S.vertices[FACE])[T.triangles[tri]])
     d = np.linalg.norm(carried - on_source, axis=1)
     assert np.median(d) < 2 * median_edge(T), np.median(d)
-
-
-def test_cli_says_how_the_target_was_matched(head_model, scans, tmp_path, capsys):
-    """transfer prints the correspondence's method, its matched and low-confidence shares and
-    the paired lids; --match cylinder takes Song's map; --show draws the confidence map."""
-    from mimica.cli import main
-    from mimica.image import read_image
-    from mimica.landmarks import write_landmarks
-    from mimica.mesh import read_mesh, write_mesh
-    tv, rs, lt = scans[0]
-    write_mesh(tmp_path / "S.obj", head_model.mesh)
-    write_mesh(tmp_path / "smile.obj", head_model.mesh.with_vertices(head_model.shape("mouthSmile_L")))
-    write_mesh(tmp_path / "T.obj", rs.mesh)
-    write_landmarks(tmp_path / "T.json", lt.positions(rs.mesh))
-    args = ["transfer", str(tmp_path / "S.obj"), str(tmp_path / "smile.obj"), "--target", str(tmp_path / "T.obj"),
-            "--target-landmarks", str(tmp_path / "T.json")]
-    out = {}
-    for match in ("nicp", "cylinder"):
-        capsys.readouterr()
-        assert main(args + ["--out", str(tmp_path / match), "--match", match, "--show", str(tmp_path / f"{match}.png")]) == 0
-        said = [ln for ln in capsys.readouterr().err.splitlines() if "correspondence (" in ln]
-        assert len(said) == 1 and f"correspondence ({match})" in said[0], said
-        assert ("low confidence" in said[0]) == (match == "nicp")
-        assert "lid rims paired by arc length: right and left eye" in said[0]
-        out[match] = read_mesh(tmp_path / match / "smile.obj").vertices
-        picture = read_image(tmp_path / f"{match}.png")
-        assert picture.shape[1] > 1200                        # two views, the confidence map, the legend
-    assert not np.allclose(out["nicp"], out["cylinder"])
-    with pytest.raises(SystemExit) as bad:                     # argparse: one line, exit 2
-        main(args + ["--out", str(tmp_path / "bad"), "--match", "nearest"])
-    assert bad.value.code == 2 and not (tmp_path / "bad").exists()

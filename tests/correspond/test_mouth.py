@@ -8,7 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from mimica.align import face_cylinder
+from helpers import sealed_lips
+
 from mimica.correspond.mouth import cut_mouth, mouth_is_open
 from mimica.correspond.remesh import resample_face
 from mimica.data import ICT_LANDMARKS_68, data_dir
@@ -24,18 +25,7 @@ def _jaw_ratio(lm):
 @pytest.fixture(scope="module")
 def sealed(head_model):
     """A held-out ICT identity remeshed with its lips sealed."""
-    tv = head_model.identity("identity014")
-    orig = head_model.mesh.with_vertices(tv)
-    rs = resample_face(orig, tv[ICT_LANDMARKS_68], n_vertices=10000, seed=5, seal=("mouth",))
-    # the inner lips' points a little inside their own lip (on sealed lips the closest point
-    # of both is on the seam, on either side of a cut)
-    pts = tv[ICT_LANDMARKS_68].copy()
-    up = face_cylinder(pts).axes[1]
-    d = 0.03 * np.linalg.norm(pts[45] - pts[36])
-    pts[[61, 62, 63]] += d * up
-    pts[[65, 66, 67]] -= d * up
-    lm = Landmarks.snap(rs.mesh, pts)
-    return rs.mesh, lm
+    return sealed_lips(head_model)
 
 
 def test_cut_keeps_the_vertex_order(sealed):
@@ -124,31 +114,6 @@ def test_sealed_eyes_are_told(head_model):
     lm = Landmarks.from_vertex_indices(head, json.loads((d / "head.json").read_text())["landmark_vertices"])
     assert sorted(sealed_eyes(head, lm.positions(head))) == ["left", "right"]
     assert sealed_eyes(head_model.mesh, head_model.neutral[ICT_LANDMARKS_68]) == []
-
-
-def test_cli_cuts_sealed_lips_in_one_line(head_model, sealed, tmp_path, capsys):
-    from mimica.cli import main
-    from mimica.landmarks import write_landmarks
-    from mimica.mesh import write_mesh
-    mesh, lm = sealed
-    write_mesh(tmp_path / "S.obj", head_model.mesh)
-    write_mesh(tmp_path / "jaw.obj", head_model.mesh.with_vertices(head_model.shape("jawOpen")))
-    write_mesh(tmp_path / "T.obj", mesh)
-    write_landmarks(tmp_path / "T.json", lm.positions(mesh))
-    args = ["transfer", str(tmp_path / "S.obj"), str(tmp_path / "jaw.obj"), "--target", str(tmp_path / "T.obj"),
-            "--target-landmarks", str(tmp_path / "T.json")]
-    capsys.readouterr()
-    assert main(args + ["--out", str(tmp_path / "cut"), "--show", str(tmp_path / "seen.png")]) == 0
-    said = [ln for ln in capsys.readouterr().err.splitlines() if "lips were sealed" in ln]
-    assert len(said) == 1 and "cut apart" in said[0]
-    from mimica.image import read_image
-    seen = read_image(tmp_path / "seen.png")                     # the parts picture: the seam in red
-    red = (seen[..., 0] > 0.8) & (seen[..., 1] < 0.25) & (seen[..., 2] < 0.25)
-    assert seen.shape[1] > 800 and red.sum() > 20
-    cut = read_mesh(tmp_path / "cut" / "jaw.obj")
-    assert cut.n_vertices > mesh.n_vertices and cut.n_faces == mesh.n_faces
-    assert main(args + ["--out", str(tmp_path / "shut"), "--cut-mouth", "off"]) == 0
-    assert read_mesh(tmp_path / "shut" / "jaw.obj").same_topology(mesh)
 
 
 def test_blinks_close_the_lids(head_model, sealed):
