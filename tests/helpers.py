@@ -107,3 +107,23 @@ def sealed_lips(model):
     pts[[65, 66, 67]] -= d * up
     return rs.mesh, Landmarks.snap(rs.mesh, pts)
 
+
+def ramp(frames, start, length, peak):
+    """A weight rising from 0 to `peak` and back over `length` frames from `start` (sin^2)."""
+    w = np.zeros(frames)
+    w[start:start + length] = peak * np.sin(np.linspace(0, np.pi, length)) ** 2
+    return w
+
+
+def jaw_frames(folder, jaw, blank=(), size=(320, 400)):
+    """Rendered frames of ICT's face opening its jaw by `jaw` (one a frame); frames in `blank`
+    show no face (the background alone)."""
+    from mimica.image.ictphotos import ICTPhotos
+    from mimica.image.io import write_image
+    photos = ICTPhotos(size=size)
+    folder.mkdir()
+    for f, a in enumerate(jaw):
+        img = np.full((size[1], size[0], 3), 0.8) if f in blank else \
+            photos.photo(np.zeros(20), "jawOpen" if a > 0 else None, amount=max(a, 1e-9))[0]
+        write_image(folder / f"f{f:03d}.png", img)
+    return folder

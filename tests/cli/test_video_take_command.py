@@ -1,0 +1,129 @@
+"""`mimica animate --video` from the command line: a rendered take written as the animation and
+a Live Link-style CSV that `animate --arkit` reads back; frames with no face found, said and
+previewed; requests that cannot be met and takes that cannot be read give one line and write
+nothing."""
+
+from __future__ import annotations
+
+import numpy as np
+from helpers import jaw_frames, ramp, validate
+
+from mimica.cli import main
+from mimica.export import ARKIT_52
+
+
+def test_video_to_animation_and_live_link_csv(head_glb, tmp_path, capsys):
+    """A folder of rendered frames (ICT's face opening its jaw) -> take.glb and take.csv: the
+    GLB passes the validator, the CSV reads back as a take with the GLB's weights, and jawOpen
+    rises and falls with the rendered jaw."""
+    import pygltflib as gl
+    from mimica.export.take import read_take
+    from mimica.image.ictphotos import ICTPhotos
+    from mimica.image.io import write_image
+    from mimica.mesh.io.gltf import read_accessor
+    photos = ICTPhotos(size=(320, 400))
+    jaw = ramp(14, 2, 10, 1.0)
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    ident = np.zeros(20)
+    for f, a in enumerate(jaw):
+        img, _ = photos.photo(ident, "jawOpen" if a > 0 else None, amount=max(a, 1e-9))
+        write_image(frames / f"f{f:03d}.png", img)
+    out = tmp_path / "take.glb"
+    capsys.readouterr()
+    assert main(["animate", str(head_glb), "--video", str(frames), "--out", str(out)]) == 0
+    said = capsys.readouterr().err
+    assert "14 frames tracked" in said and "frame 0 taken as the performer's rest" in said, said
+    assert out.is_file() and out.with_suffix(".csv").is_file()
+    # a folder plays at 25 fps; the take is under a second, so its rate is given to the reader
+    times, weights, rate = read_take(out.with_suffix(".csv"), fps=25)
+    assert len(times) == 14 and {"headYaw", "headPitch", "headRoll"} <= set(weights)
+    g = gl.GLTF2().load(str(out))
+    np.testing.assert_allclose(read_accessor(g, g.animations[0].samplers[0].input), times, atol=1e-6)
+    np.testing.assert_allclose(times, np.arange(14) / 25, atol=1e-6)
+    names = g.meshes[0].extras["targetNames"]
+    anim = read_accessor(g, g.animations[0].samplers[0].output).reshape(14, len(names))
+    for j, n in enumerate(names):
+        np.testing.assert_allclose(anim[:, j], weights[n], atol=2e-6)
+    got = weights["jawOpen"]
+    assert np.corrcoef(got, jaw)[0, 1] > 0.9 and got.max() > 0.5 and got[0] < 0.05, np.round(got, 2)
+    r = validate([out])[0]
+    assert r["errors"] == 0 and r["warnings"] == 0, r["messages"]
+
+
+def test_video_requests_that_cannot_be_met_say_one_line(head_glb, tmp_path, capsys):
+    import pygltflib as gl
+    frames = tmp_path / "empty"
+    frames.mkdir()
+    old = tmp_path / "old.glb"
+    g = gl.GLTF2().load(str(head_glb))
+    g.meshes[0].extras.pop("mimica_landmarks")
+    g.save_binary(str(old))
+    (tmp_path / "w.csv").write_text(",".join(["time"] + ARKIT_52) + "\n0," + ",".join(["0"] * 52) + "\n")
+    cases = [([str(head_glb), "--video", str(frames), "--arkit", str(tmp_path / "w.csv")], "one of them"),
+             ([str(head_glb)], "one of them"),
+             ([str(old), "--video", str(frames)], "no landmarks stored"),
+             ([str(head_glb), "--video", str(frames)], "holds no image frames"),
+             ([str(head_glb), "--video", str(tmp_path / "none.mp4")], "no such video")]
+    for args, said in cases:
+        out = tmp_path / "bad.glb"
+        capsys.readouterr()
+        assert main(["animate", *args, "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and said in err[0], (args, err)
+        assert not out.exists() and not out.with_suffix(".csv").exists()
+
+
+def test_frames_without_a_face_are_found_said_and_previewed(head_glb, tmp_path, capsys):
+    """A take whose face leaves the picture for frames 7-10: exactly those frames are said to
+    show no face, fitted to points filled in from their neighbours (the jaw still follows the
+    rest), and the preview (the video beside the head) marks them with a red band."""
+    from mimica.image.video import frame_source
+    from mimica.pipeline import animate
+    jaw = ramp(20, 2, 16, 1.0)
+    frames = jaw_frames(tmp_path / "frames", jaw, blank=range(7, 11), size=(480, 600))    # checked at half size
+    r = animate(head_glb, tmp_path / "take.glb", video=frames, preview=tmp_path / "preview.mp4")
+    assert r.video["saw"]["no_face"] == [(7, 10)]
+    assert r.video["fit"].missing.sum() == 4 and np.isfinite(r.video["fit"].weights).all()
+    seen = np.r_[0:7, 11:20]
+    assert np.corrcoef(r.weights["jawOpen"][seen], jaw[seen])[0, 1] > 0.9
+    n, _, shown = frame_source(r.preview)
+    shown = list(shown)
+    assert len(shown) == 20 and shown[0].shape[:2] == (360, 288 + 360)    # the video and the head, side by side
+    red = [bool((img[:4, :, 0] > 0.7).all() and (img[:4, :, 1] < 0.35).all()) for img in shown]
+    assert red == [f in range(7, 11) for f in range(20)]
+    capsys.readouterr()
+    assert main(["animate", str(head_glb), "--video", str(frames), "--out", str(tmp_path / "again.glb")]) == 0
+    said = capsys.readouterr().err
+    assert "what it saw: no face in 4 frames (7-10)" in said, said
+
+
+def test_takes_that_cannot_be_read_say_one_line(head_glb, tmp_path, capsys):
+    """A video with no face, a video cut short (its index first, so ffmpeg decodes what is
+    there), a preview without a video or not an MP4: one line each, nothing written."""
+    import subprocess
+    import imageio_ffmpeg
+    from mimica.image.io import read_image
+    from mimica.image.video import VideoWriter
+    blank = jaw_frames(tmp_path / "blank", np.zeros(6), blank=range(6))
+    frames = jaw_frames(tmp_path / "frames", ramp(30, 2, 26, 1.0))
+    with VideoWriter(tmp_path / "v.mp4", 25) as w:
+        for f in sorted(frames.glob("*.png")):
+            w.write(read_image(f))
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error", "-i", str(tmp_path / "v.mp4"),
+                    "-c", "copy", "-movflags", "+faststart", str(tmp_path / "fast.mp4")], check=True)
+    whole = (tmp_path / "fast.mp4").read_bytes()
+    (tmp_path / "cut.mp4").write_bytes(whole[: len(whole) // 2])
+    (tmp_path / "w.csv").write_text(",".join(["time"] + ARKIT_52) + "\n0," + ",".join(["0"] * 52) + "\n")
+    cases = [(["--video", str(blank)], "no face in any of its 6 frames"),
+             (["--video", str(tmp_path / "cut.mp4")], "breaks off after"),
+             (["--arkit", str(tmp_path / "w.csv"), "--preview", str(tmp_path / "p.mp4")], "give --video"),
+             (["--video", str(frames), "--preview", str(tmp_path / "p.gif")], "written as .mp4")]
+    for args, said in cases:
+        out = tmp_path / "bad.glb"
+        capsys.readouterr()
+        assert main(["animate", str(head_glb), *args, "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and said in err[0], (args, err)
+        assert not out.exists() and not out.with_suffix(".csv").exists()
+        assert not any(tmp_path.glob("p.*")) and not any(tmp_path.glob(".p.*"))
