@@ -49,3 +49,11 @@ def head_glb(tmp_path_factory):
     d = tmp_path_factory.mktemp("head_arkit")
     data = Path(os.environ["MIMICA_DATA"]) / "real-heads" / "mediapipe-canonical"
     return make_blendshapes(data / "head.obj", d / "head_arkit.glb").path
+
+
+@pytest.fixture(scope="session")
+def mediapipe():
+    """MediaPipe's face landmarker is there (the `photo` extra); skipped without it, except in CI."""
+    if os.environ.get("CI") is None:
+        pytest.importorskip("mediapipe")
+    return True

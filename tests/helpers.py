@@ -127,3 +127,8 @@ def jaw_frames(folder, jaw, blank=(), size=(320, 400)):
             photos.photo(np.zeros(20), "jawOpen" if a > 0 else None, amount=max(a, 1e-9))[0]
         write_image(folder / f"f{f:03d}.png", img)
     return folder
+
+
+def landmark_error(pts, truth):
+    """Median distance of 68 points from the truth, over the eyes' outer corners' distance."""
+    return float(np.median(np.linalg.norm(pts - truth, axis=1)) / np.linalg.norm(truth[36] - truth[45]))
