@@ -12,6 +12,7 @@ import pytest
 
 from helpers import validate
 from mimica.mesh import Mesh, write_glb, write_mesh
+from mimica.pipeline import ExportOptions, export_sequence, make_blendshapes
 
 def _accessor(g, i):
     from mimica.mesh.io.gltf import read_accessor
@@ -33,7 +34,6 @@ def _vertex_of(g) -> np.ndarray:
 def written(head_model, full_model, tmp_path_factory):
     """One file of each kind: mesh (.glb, .gltf; quads triangulated; a vertex no face uses),
     morph targets (blendshapes), morph targets with an animation (export, simulate)."""
-    from mimica.cli import main
     d = tmp_path_factory.mktemp("gltf")
     m = head_model.mesh
     write_mesh(d / "head.glb", m)
@@ -50,10 +50,11 @@ def written(head_model, full_model, tmp_path_factory):
     frames.mkdir()
     for i, name in enumerate(("mouthSmile_L", "jawOpen", "eyeBlink_R")):
         write_mesh(frames / f"f{i}.obj", m.with_vertices(head_model.shape(name)))
-    assert main(["export", str(frames), "--out", str(d / "clip.glb"), "--fps", "24"]) == 0
-    assert main(["export", str(frames), "--out", str(d / "clip.gltf"), "--fps", "24"]) == 0
+    paths = sorted(frames.glob("*.obj"))
+    for clip in ("clip.glb", "clip.gltf"):
+        export_sequence(paths, d / clip, ExportOptions(fps=24))
     data = Path(os.environ["MIMICA_DATA"]) / "real-heads" / "mediapipe-canonical"
-    assert main(["blendshapes", str(data / "head.obj"), "--out", str(d / "arkit.glb")]) == 0
+    make_blendshapes(data / "head.obj", d / "arkit.glb")
     return d
 
 
@@ -202,12 +203,11 @@ def test_quantized_targets_equal_the_float_ones_within_their_step(written, head_
     assert size["quantized"] - size["head"] < 0.6 * (size["sparse"] - size["head"]), size
 
 
-def test_a_clip_as_a_few_basis_shapes(head_model, tmp_path, capsys):
+def test_a_clip_as_a_few_basis_shapes(head_model, tmp_path):
     """export writes a clip as basis shapes and per-frame weights when every vertex stays
     within 0.1 mm: a 40-frame blend of three expressions becomes 3 basis shapes, the frames
-    rebuilt from them within the bound; --compact off keeps one target per frame."""
+    rebuilt from them within the bound; compact=False keeps one target per frame."""
     import pygltflib as gl
-    from mimica.cli import main
     m = head_model.mesh
     t = np.linspace(0, 1, 40)[:, None, None]
     d = [head_model.shape(n) - m.vertices for n in ("mouthSmile_L", "jawOpen", "browDown_R")]
@@ -215,10 +215,10 @@ def test_a_clip_as_a_few_basis_shapes(head_model, tmp_path, capsys):
     seq = tmp_path / "seq"
     for i, f in enumerate(frames):
         write_mesh(seq / f"f{i}.obj", m.with_vertices(f))
-    capsys.readouterr()
-    assert main(["export", str(seq), "--rest", str(seq / "f0.obj"), "--out", str(tmp_path / "c.glb")]) == 0
-    assert "3 basis shapes" in capsys.readouterr().err
-    assert main(["export", str(seq), "--out", str(tmp_path / "d.glb"), "--compact", "off"]) == 0
+    paths = [seq / f"f{i}.obj" for i in range(len(frames))]
+    info = export_sequence(paths, tmp_path / "c.glb", ExportOptions(rest=seq / "f0.obj"))
+    assert info["basis"] and info["shapes"] == 3
+    assert not export_sequence(paths, tmp_path / "d.glb", ExportOptions(compact=False))["basis"]
     g = gl.GLTF2().load(str(tmp_path / "c.glb"))
     prim, ex = g.meshes[0].primitives[0], g.meshes[0].extras
     assert len(prim.targets) == 3 and len(ex["frames"]) == 40 and ex["maxErrorMetres"] <= 1e-4
