@@ -132,3 +132,63 @@ def jaw_frames(folder, jaw, blank=(), size=(320, 400)):
 def landmark_error(pts, truth):
     """Median distance of 68 points from the truth, over the eyes' outer corners' distance."""
     return float(np.median(np.linalg.norm(pts - truth, axis=1)) / np.linalg.norm(truth[36] - truth[45]))
+
+
+BATCH_FRAMES = ("jawOpen", "mouthSmile_L", "eyeBlink_L", "browInnerUp_R")
+BATCH_HEADS = 'ids = { glob = "heads/id*.obj" }\nscan = { mesh = "heads/scan.obj", landmarks = "heads/scan.json" }'
+
+
+def batch_studio(m, d):
+    """Two ICT identities, a remeshed head of its own topology with its landmark file, a corrupt
+    head; a performance of four expressions of ICT's neutral; an ARKit-free manifest."""
+    from mimica.correspond.remesh import resample_face
+    from mimica.data import ICT_FACE_AREA_FACES, ICT_LANDMARKS_68
+    from mimica.landmarks import write_landmarks
+    from mimica.mesh import write_mesh
+    (d / "heads").mkdir()
+    (d / "perf" / "talk").mkdir(parents=True)
+    write_mesh(d / "perf" / "neutral.obj", m.mesh)
+    for i, s in enumerate(BATCH_FRAMES):
+        write_mesh(d / "perf" / "talk" / f"f{i}.obj", m.mesh.with_vertices(m.shape(s)))
+    for k, name in enumerate(("identity003", "identity011")):
+        write_mesh(d / "heads" / f"id{k}.obj", m.mesh.with_vertices(m.identity(name)))
+    tv = m.identity("identity007")
+    face, _ = m.mesh.with_vertices(tv).submesh(np.arange(ICT_FACE_AREA_FACES))
+    rs = resample_face(face, tv[ICT_LANDMARKS_68], n_vertices=5000, seed=2)
+    write_mesh(d / "heads" / "scan.obj", rs.mesh)
+    write_landmarks(d / "heads" / "scan.json", tv[ICT_LANDMARKS_68])
+    (d / "heads" / "broken.obj").write_text("v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n")
+    return d
+
+
+def batch_manifest(d: Path, heads: str, extra: str = "") -> Path:
+    """A batch manifest of the studio's heads (`heads`, TOML) x its performance: transfer, then export."""
+    p = d / f"jobs-{abs(hash((heads, extra))) % 10**8}.toml"
+    p.write_text(f"""
+[heads]
+{heads}
+
+[performances]
+talk = {{ neutral = "perf/neutral.obj", frames = "perf/talk" }}
+
+[jobs.talk]
+run = "transfer"
+
+[jobs.clip]
+run = "export"
+from = "talk"
+{extra}
+""")
+    return p
+
+
+def batch_outputs(out: Path) -> dict:
+    """Every output file's vertices (meshes) or bytes (others), by relative path."""
+    from mimica.mesh import read_mesh
+    got = {}
+    for f in sorted(out.rglob("*")):
+        rel = f.relative_to(out)
+        if f.is_dir() or rel.parts[0] in (".batch", "batch.json") or rel.name.startswith("."):
+            continue
+        got[str(rel)] = read_mesh(f).vertices if f.suffix == ".obj" else f.read_bytes()
+    return got

@@ -1,7 +1,6 @@
-"""`mimica batch`: a manifest of heads x performances run on a local pool and on a
-local Ray cluster with the same outputs; reruns skip what did not change; a corrupt head fails
-its own jobs only; a killed batch resumes; a killed worker has its job retried; bad manifests
-are refused in one line before anything runs."""
+"""Batches (mimica.batch): a manifest of heads x performances run on a local pool and on a local
+Ray cluster with the same outputs; reruns skip what did not change; a killed batch resumes; a
+killed worker has its job retried (the command's own tests: tests/cli/test_batch_command.py)."""
 
 from __future__ import annotations
 
@@ -16,90 +15,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mimica.batch import batch_status, run_batch
-from mimica.cli import main
-from mimica.data import ICT_FACE_AREA_FACES, ICT_LANDMARKS_68
-from mimica.mesh import read_mesh, write_mesh
+from helpers import BATCH_FRAMES as FRAMES, BATCH_HEADS as HEADS, batch_studio
+from helpers import batch_manifest as manifest, batch_outputs as outputs
 
-FRAMES = ("jawOpen", "mouthSmile_L", "eyeBlink_L", "browInnerUp_R")
+from mimica.batch import run_batch
+from mimica.mesh import read_mesh, write_mesh
 
 
 @pytest.fixture(scope="module")
 def studio(head_model, tmp_path_factory):
-    """Two ICT identities, a remeshed head of its own topology with its landmark file, a corrupt
-    head; a performance of four expressions of ICT's neutral; an ARKit-free manifest."""
-    from mimica.correspond.remesh import resample_face
-    from mimica.landmarks import write_landmarks
-    d = tmp_path_factory.mktemp("studio")
-    (d / "heads").mkdir()
-    (d / "perf" / "talk").mkdir(parents=True)
-    m = head_model
-    write_mesh(d / "perf" / "neutral.obj", m.mesh)
-    for i, s in enumerate(FRAMES):
-        write_mesh(d / "perf" / "talk" / f"f{i}.obj", m.mesh.with_vertices(m.shape(s)))
-    for k, name in enumerate(("identity003", "identity011")):
-        write_mesh(d / "heads" / f"id{k}.obj", m.mesh.with_vertices(m.identity(name)))
-    tv = m.identity("identity007")
-    face, _ = m.mesh.with_vertices(tv).submesh(np.arange(ICT_FACE_AREA_FACES))
-    rs = resample_face(face, tv[ICT_LANDMARKS_68], n_vertices=5000, seed=2)
-    write_mesh(d / "heads" / "scan.obj", rs.mesh)
-    write_landmarks(d / "heads" / "scan.json", tv[ICT_LANDMARKS_68])
-    (d / "heads" / "broken.obj").write_text("v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n")
-    return d
+    return batch_studio(head_model, tmp_path_factory.mktemp("studio"))
 
 
-def manifest(d: Path, heads: str, extra: str = "") -> Path:
-    p = d / f"jobs-{abs(hash((heads, extra))) % 10**8}.toml"
-    p.write_text(f"""
-[heads]
-{heads}
-
-[performances]
-talk = {{ neutral = "perf/neutral.obj", frames = "perf/talk" }}
-
-[jobs.talk]
-run = "transfer"
-
-[jobs.clip]
-run = "export"
-from = "talk"
-{extra}
-""")
-    return p
-
-
-HEADS = 'ids = { glob = "heads/id*.obj" }\nscan = { mesh = "heads/scan.obj", landmarks = "heads/scan.json" }'
-
-
-def outputs(out: Path) -> dict:
-    """Every output file's vertices (meshes) or bytes (others), by relative path."""
-    got = {}
-    for f in sorted(out.rglob("*")):
-        rel = f.relative_to(out)
-        if f.is_dir() or rel.parts[0] in (".batch", "batch.json") or rel.name.startswith("."):
-            continue
-        got[str(rel)] = read_mesh(f).vertices if f.suffix == ".obj" else f.read_bytes()
-    return got
-
-
-def test_batch_equals_the_commands(studio, tmp_path, head_model):
-    """Every job's output equals what the `mimica transfer` command makes of the same inputs;
-    a rerun skips them all and says so; --status reads the folder alone."""
-    rep = run_batch(manifest(studio, HEADS), tmp_path / "out", workers=2)
-    assert rep["counts"] == {"done": 6, "skipped": 0, "failed": 0}, rep
-    for head, lm in (("ids/id0", None), ("scan", studio / "heads" / "scan.json")):
-        src = head.split("/")[-1]
-        args = ["transfer", str(studio / "perf" / "neutral.obj"), str(studio / "perf" / "talk"),
-                "--target", str(studio / "heads" / f"{src}.obj"), "--out", str(tmp_path / f"cmd-{src}")]
-        assert main(args + (["--target-landmarks", str(lm)] if lm else [])) == 0
-        for i in range(len(FRAMES)):
-            a = read_mesh(tmp_path / "out" / "talk" / head / "talk" / f"f{i}.obj").vertices
-            b = read_mesh(tmp_path / f"cmd-{src}" / f"f{i}.obj").vertices
-            np.testing.assert_allclose(a, b, atol=1e-9 * np.ptp(b))
-    again = run_batch(manifest(studio, HEADS), tmp_path / "out", workers=2)
-    assert again["counts"] == {"done": 0, "skipped": 6, "failed": 0}
-    st = batch_status(tmp_path / "out")
-    assert len(st["done"]) == 6 and not st["pending"] and not st["failed"]
 
 
 def test_a_changed_head_reruns_its_jobs_only(studio, tmp_path, head_model):
@@ -114,50 +41,6 @@ def test_a_changed_head_reruns_its_jobs_only(studio, tmp_path, head_model):
     assert ran == {"talk/ids/id1/talk", "clip/ids/id1/talk"}, rep
     for p, t in before.items():
         assert (p.stat().st_mtime_ns == t) == ("ids/id1" not in str(p)), p
-
-
-def test_a_corrupt_head_fails_its_own_jobs(studio, tmp_path, capsys):
-    heads = HEADS + '\nbroken = "heads/broken.obj"'
-    out = tmp_path / "out"
-    assert main(["batch", str(manifest(studio, heads)), "--workers", "2", "--out", str(out)]) == 1
-    err = capsys.readouterr().err
-    assert "6 done" in err and "2 failed" in err
-    failed = [ln for ln in err.splitlines() if ln.strip().startswith("failed")]
-    assert len(failed) == 2 and "broken.obj" in failed[0] and "non-finite" in failed[0]
-    assert "talk/broken/talk, which failed" in failed[1]
-    assert not (out / "talk" / "broken").exists()
-    assert main(["batch", "--status", "--out", str(out)]) == 0
-    said = capsys.readouterr().out
-    assert said.startswith(f"{out}: 6 done, 0 pending, 2 failed") and "non-finite" in said
-
-
-@pytest.mark.parametrize("case, says", [
-    ('[heads]\na = "heads/id0.obj"\n[jobs.x]\nrun = "transfer"\nspeed = 3\n', "unknown option 'speed'"),
-    ('[heads]\na = "heads/nothere.obj"\n[jobs.x]\nrun = "blendshapes"\n', "no such file"),
-    ('[heads]\na = "heads/id0.obj"\n[jobs.x]\nrun = "render"\nfrom = "y"\n[jobs.y]\nrun = "export"\nfrom = "x"\n',
-     "circle"),
-    ('[heads]\na = "heads/id0.obj"\n[jobs.x]\nrun = "dance"\n', "run = 'dance'"),
-    ('[heads]\na = "heads/id0.obj"\n[people]\n[jobs.x]\nrun = "blendshapes"\n', "unknown section 'people'"),
-    ('[heads]\na = "heads/id0.obj"\n[jobs.x]\nrun = "transfer"\n', "no performance"),
-    ('[heads\n', "not valid TOML"),
-    ('[heads]\na = "heads/id0.obj"\n[jobs.x]\nrun = "age"\nages = ["old"]\n', "a list of numbers"),
-])
-def test_a_bad_manifest_runs_nothing(studio, tmp_path, capsys, case, says):
-    p = studio / f"bad-{abs(hash(case)) % 10**8}.toml"
-    p.write_text(case)
-    out = tmp_path / "out"
-    assert main(["batch", str(p), "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and says in err and p.name in err, err
-    assert not out.exists()
-
-
-def test_a_users_folder_is_not_a_batch_folder(studio, tmp_path, capsys):
-    (tmp_path / "mine").mkdir()
-    (tmp_path / "mine" / "notes.txt").write_text("mine")
-    assert main(["batch", str(manifest(studio, HEADS)), "--out", str(tmp_path / "mine")]) == 2
-    assert "holds files of its own" in capsys.readouterr().err
-    assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == ["notes.txt"]
 
 
 def _children(pid: int) -> list[int]:
