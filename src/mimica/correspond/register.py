@@ -11,12 +11,11 @@ pairs (the landmarks, the lid and lip contours) is held with a fixed weight:
            + beta * sum_k |B_k (v + d) - p_k|^2                      (Amberg eq. 8, 3-9)
 
 Departure from Amberg: in the stiff first steps a source vertex is pulled to the target point
-nearest to it in position and normal together, (x, lambda n) in R^6 (normal-space matching, as in
-Rusinkiewicz and Levoy's ICP variants: the target vertex nearest in R^6, then the point of its
-triangles nearest in R^6), not to the closest point: closest points hold a surface only along
-its normal, so where no landmark is near (the neck, the cheeks) the source slides along the
-target as far as the landmarks drag it, and a source with more neck than the target slides its
-neck up over the target's.  Matching normals too ties the slide to the shape (the chin's turn
+nearest to it in position and normal together, (x, lambda n) in R^6 (the target vertex nearest in
+R^6, then the point of its triangles nearest in R^6), not to the closest point: closest points
+hold a surface only along its normal, so where no landmark is near (the neck, the cheeks) the
+source slides along the target as far as the landmarks drag it, and a source with more neck than
+the target slides its neck up over the target's.  Matching normals too ties the slide to the shape (the chin's turn
 under the jaw, the cheekbones).  Measured on 40 remeshed ICT identities (seeds 200-239, three
 random mixes each; not bench/transfer.py's held-out seeds): the transfer's mean relative error
 0.0714 -> 0.0659, the neck's share 0.0227 -> 0.0190, 36 of 40 cases better, none worse by more
