@@ -1,6 +1,7 @@
-"""What several test packages share: held-out identities and a patch of skin from ICT, the Khronos
-glTF-Validator, a Live Link Face take, the Blenders the tests drive (tests/ is on the path
-through its conftest)."""
+"""What several test folders share (a library's tests and the command line's): heads made from ICT
+(held-out identities, a patch of skin, a remeshed scan, sealed lips), rendered frames of a jaw
+opening, a batch studio and its manifest, the Khronos glTF-Validator, a Live Link Face take, the
+Blenders the tests drive.  tests/ is on the path through its conftest."""
 
 from __future__ import annotations
 
