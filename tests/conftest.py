@@ -57,3 +57,25 @@ def mediapipe():
     if os.environ.get("CI") is None:
         pytest.importorskip("mediapipe")
     return True
+
+
+def _blender_export(tmp_path_factory, suffix):
+    """ICT-FaceKit's identity001 through Blender's OBJ importer and its glTF or FBX exporter."""
+    from helpers import blender_files
+    d = tmp_path_factory.mktemp("blender_head")
+    blender_files("export", Path(os.environ["MIMICA_DATA"]) / "ict-facekit" / "FaceXModel" / "identity001.obj",
+                  d / f"head{suffix}")
+    return d / f"head{suffix}"
+
+
+@pytest.fixture(scope="session")
+def blender_head(tmp_path_factory):
+    """Blender's GLB (defaults) of ICT's identity001."""
+    return _blender_export(tmp_path_factory, ".glb")
+
+
+@pytest.fixture(scope="session")
+def blender_fbx(tmp_path_factory):
+    """Blender's FBX (defaults) of ICT's identity001."""
+    return _blender_export(tmp_path_factory, ".fbx")
+

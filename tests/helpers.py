@@ -193,3 +193,11 @@ def batch_outputs(out: Path) -> dict:
             continue
         got[str(rel)] = read_mesh(f).vertices if f.suffix == ".obj" else f.read_bytes()
     return got
+
+
+def blender_files(*args, timeout=600, version="4.5"):
+    """tools/blender_files.py run in Blender `version`'s Python (export, import, ...)."""
+    run = subprocess.run([blender_python(version), str(ROOT / "tools" / "blender_files.py"), *map(str, args)],
+                         stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout)
+    assert run.returncode == 0, run.stderr[-3000:] + run.stdout[-2000:]
+
