@@ -1,4 +1,4 @@
-"""Run inside Blender's Python (bpy), by tests/test_blender.py: the add-on's four operators on
+"""Run inside Blender's Python (bpy), by tests/blender_addon/test_blender.py: the add-on's four operators on
 real meshes, headless; what they made is written as JSON for the test to check.
 
     python-with-bpy blender_driver.py mimica_blender.zip HEAD.obj TAKE.csv OUT.json [GLB ...]
