@@ -19,9 +19,10 @@ the target slides its neck up over the target's.  Matching normals too ties the 
 under the jaw, the cheekbones).  Measured on 40 remeshed ICT identities (seeds 200-239, three
 random mixes each; not bench/transfer.py's held-out seeds): the transfer's mean relative error
 0.0714 -> 0.0659, the neck's share 0.0227 -> 0.0190, 36 of 40 cases better, none worse by more
-than 0.0022; lambda = half the landmarks' RMS spread, in the first 3 of the 6 steps (lambda =
-10 target edges, or all six steps: no better; the matched vertex alone, without its triangles:
-0.0661, and a coarse head's lips tore).  Amberg's rule stays: no data where the closest point
+than 0.0022; lambda = half the landmarks' RMS spread, in the first 3 of the 6 steps (on seeds
+200-219, matching the vertex alone: lambda = 10 target edges 0.0635 against 0.0636; 5 edges in
+all six steps 0.0660 against 0.0652 in four; the vertex alone, without its triangles, on all 40:
+0.0661 against 0.0659, and a coarse head's lips tore).  Amberg's rule stays: no data where the closest point
 lies on the target's edge (with the normal-space match's own edge alone, the source's extra neck
 found matches inside the target: 0.0759).  Only where the target resolves lambda (at least
 NORMAL_MIN_EDGES of its edges across it): on a coarser one closest points throughout.
