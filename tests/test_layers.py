@@ -257,3 +257,19 @@ def test_the_tests_are_laid_out_by_module():
     assert folders and folders <= modules, sorted(folders - modules)
     names = [p.name for p in tests.rglob("test_*.py")]
     assert len(names) == len(set(names)), "two test files of one name (pytest imports them by name)"
+
+
+# folders whose tests drive the command line for what they test, not for the command: the
+# pipeline's parity with the command, the batch's killed worker (a process to kill) and the
+# add-on's own `mimica` executable
+DRIVE_THE_COMMAND = {"cli", "pipeline", "batch", "blender_addon"}
+
+
+def test_only_the_command_line_tests_drive_the_command_line():
+    """A library's tests call the library: the command line (`mimica.cli`, in process or as a
+    child) is driven from tests/cli/ and the folders DRIVE_THE_COMMAND names."""
+    tests = Path(__file__).resolve().parent
+    bad = [str(p.relative_to(tests)) for p in tests.rglob("test_*.py")
+           if p.parent != tests and p.relative_to(tests).parts[0] not in DRIVE_THE_COMMAND
+           and "mimica.cli" in p.read_text(encoding="utf-8")]
+    assert not bad, f"drive the command line from tests/cli/: {bad}"
