@@ -243,7 +243,7 @@ def stretch_modes(face, seeds=(1001, 1002, 1003)):
     shell`) against the bar's (what the library is calibrated with): each calibrated muscle's
     rest field (one sparse solve, physics.fit.static_field) against its ICT shape, on the
     held-out identities."""
-    from mimica.physics.face import shell_stretch_modes
+    from mimica.physics.systems import shell_stretch_modes
     from mimica.physics.fit import skin_stiffness, static_field
     names = list(ICT_SHAPES)
     cos = {"bar": [], "shell": []}
@@ -381,7 +381,7 @@ def blink_gaps(rig, mf, expr, act, rest, d):
     smallest opening anywhere (negative: crossed).  A picture of each eye: at rest, ICT's blink,
     the least squares alone held back evenly (before session 10), the fit now
     (docs/figures/blink_fit.png)."""
-    from mimica.physics.face import lid_contact
+    from mimica.physics.drives import lid_contact
     from mimica.rig.drives import lid_opening, open_pairs
     sim = FaceSimulator(rig)
     states = [sm.steady_state() for sm in sim.systems]

@@ -101,7 +101,7 @@ def test_the_graph_sees_the_imports():
     g = graph()
     assert "mimica.correspond.remesh" in g["mimica.demo"]                 # `from .correspond.remesh import`
     assert "mimica.landmarks.detect2d" in g["mimica.landmarks.detect3d"]   # `from . import detect2d`
-    assert "mimica.physics.face" in g["mimica.physics.fullface"]
+    assert "mimica.physics.systems" in g["mimica.physics.fullface"]
     assert "mimica.landmarks.detect3d" in g["mimica.landmarks.auto"]
     assert "mimica.store" in g["mimica.data"]
     assert any(t.startswith("mimica.pipeline") for t in g["mimica.cli.simulate"])    # inside functions

@@ -23,7 +23,7 @@ fits (the mean of the worst quarter of their fitted cosines, its own shape alone
 ALONE_SLACK); one muscle a run, as the library is read when the tool starts.
 
 `--skin AREA BEND DRIVE_SPRING` (first): calibrate on another skin than the simulator's
-(physics.face.SKIN_AREA, SKIN_BEND, DRIVE_SPRING).  calibration.json's present round was made with
+(physics.systems.SKIN_AREA, SKIN_BEND, physics.springs.DRIVE_SPRING).  calibration.json's present round was made with
 `--skin 0.25 0.2 8` (a softer membrane, a stiffer bend, stiffer bone attachments: the fields spread
 as ICT's do) and kept on the simulator's own skin, where it fits ICT's shapes better than a round
 made on it (docs/benchmarks.md); five muscles were then placed again with `--joint-all`
@@ -253,8 +253,8 @@ def calibrate_joint(name, faces, target, evals=120, shapes=None):
 def main():
     skin = ""
     if sys.argv[1:2] == ["--skin"]:
-        from mimica.physics import face
-        face.SKIN_AREA, face.SKIN_BEND, face.DRIVE_SPRING = map(float, sys.argv[2:5])
+        from mimica.physics import springs, systems
+        systems.SKIN_AREA, systems.SKIN_BEND, springs.DRIVE_SPRING = map(float, sys.argv[2:5])
         skin = " ".join(sys.argv[1:5])
         del sys.argv[1:5]
     model = ICTModel(ICT_FACE_AREA_VERTICES)

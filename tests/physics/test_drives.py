@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from mimica.data import ICT_FACE_AREA_VERTICES, ICT_LANDMARKS_68, ICTModel
-from mimica.physics.face import ActivationMap, FaceSimulator, displacement_cosine, lid_contact
+from mimica.physics.drives import ActivationMap, lid_contact
+from mimica.physics.face import FaceSimulator, displacement_cosine
 from mimica.physics.fit import MuscleFit, muscle_fields, skin_stiffness, static_field, static_fields
 from mimica.rig import Rig, build_rig
 from mimica.rig.drives import jaw_open_factors, jaw_open_parts, lid_opening, open_pairs

@@ -270,7 +270,7 @@ def test_lyapunov_doubling_matches_scipy(rig):
     SciPy's Schur-based solver does, for the substep and for the frame (A^4, transposed)."""
     import scipy.linalg as sl
 
-    from mimica.physics.face import _dlyap
+    from mimica.physics.systems import _dlyap
     sm = FaceSimulator(rig, fps=60).systems[0]
     A, B = sm.transition()
     Q = np.outer(B, B)
@@ -399,10 +399,10 @@ def test_every_engine_refuses_non_finite_or_exploded_frames(rig, engine):
 
 
 def test_kim_eq15_spring_gradients_match_finite_differences():
-    """Kim's eqs. 14-16 (physics.face.kim_spring): both Jacobians against central differences on
+    """Kim's eqs. 14-16 (physics.springs.kim_spring): both Jacobians against central differences on
     random springs, stretched and compressed, and the force along the spring's deformation with
     the magnitude of eq. 15 (k times the relative elongation)."""
-    from mimica.physics.face import kim_spring
+    from mimica.physics.springs import kim_spring
     rng = np.random.default_rng(7)
     m = 64
     s0 = rng.normal(size=(m, 3))
@@ -463,7 +463,7 @@ def test_shell_stretch_mode_of_a_straight_strip_is_its_stretch(face):
     aligned with the bar's stretch is that stretch (alignment > 0.9: measured 0.96, the 7th of
     8), the origin row held, the insertion drawn toward the origin.  On a rig, every strip muscle
     takes its shell mode before its system is made, and not after."""
-    from mimica.physics.face import shell_stretch_mode, shell_stretch_modes
+    from mimica.physics.systems import shell_stretch_mode, shell_stretch_modes
     from mimica.physics import precompute
     from mimica.rig import COLS, ROWS, stretch_mode
     s = np.linspace(0, 1, ROWS)[:, None]

@@ -24,7 +24,7 @@ def _rig(face):
 
 def test_precompute_some_systems_then_the_rest_as_all_at_once(face):
     from mimica.physics import precompute
-    from mimica.physics.face import skin_system
+    from mimica.physics.systems import skin_system
     rig = _rig(face)
     skin = skin_system(rig)                                # the shared matrices, made once by the caller
     precompute(rig, only=["frontalis_L"], skin=skin)
@@ -55,7 +55,7 @@ def test_a_simulator_takes_over_the_systems_of_another_at_the_same_density(face)
 
 
 def test_a_session_opens_at_rest_and_makes_the_moved_systems_first(face, monkeypatch):
-    import mimica.physics.face as pf
+    import mimica.physics.systems as pf
     from mimica.physics import precompute
     from mimica.viewer import ViewerSession
     made = []

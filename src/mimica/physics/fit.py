@@ -69,7 +69,7 @@ def skin_stiffness(rig):
     -------
     (3n, 3n) sparse matrix
     """
-    from .face import skin_system
+    from .systems import skin_system
     energy, _, K, _ = skin_system(rig, rotation=False)
     rig.params.update(k_area=energy.k_area, k_length=energy.k_length, k_bend=energy.k_bend)
     return K
@@ -97,7 +97,8 @@ def static_field(rig, m, K, spring: float = 4.0, motion=None) -> np.ndarray:
     """
     import scipy.sparse as sp
     from ..solver import SPDSolver
-    from .face import drive_load, drive_springs, strip_springs
+    from .drives import drive_load
+    from .springs import drive_springs, strip_springs
     n = rig.skin.n_vertices
     if m.kind == "drive":
         ks, f = drive_springs(rig, m), drive_load(rig, m, motion)     # fixed at precompute
@@ -219,7 +220,7 @@ class MuscleFit:
     def of_fields(cls, rig, fields: np.ndarray, inputs=None) -> "MuscleFit":
         """The fit for a rig from its muscles' fields (m, n, 3) made otherwise (static_fields:
         what calibration evaluates); inputs: the rig's ActivationMap (made when None)."""
-        from .face import ActivationMap
+        from .drives import ActivationMap
         inputs = ActivationMap(rig.muscles, lid_room=False) if inputs is None else inputs
         fields = np.array(fields, float)
         # the jaw's closers are left out (at 0): they only hold the jaw that the digastric opens
@@ -326,7 +327,7 @@ class MuscleFit:
     def displacement(self, activations: np.ndarray) -> np.ndarray:
         """The rest displacement (n, 3) of the fitted activations (m,): the fields' sum, the lids
         held where they meet (lid contact, as the modal face holds them)."""
-        from .face import lid_contact
+        from .drives import lid_contact
         a = np.asarray(activations, float)
         u = (a @ self._U).reshape(-1, 3)
         for c, info in self.lids:

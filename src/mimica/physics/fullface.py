@@ -19,8 +19,9 @@ import scipy.sparse as sp
 from ..errors import MimicaError
 from ..rig.drives import jaw_open_factors
 from .engine import run_frames
-from .face import (DRIVE_SPRING, ActivationMap, drive_motions, follow_activation, precompute, skin_density,
-                   spring_stiffness, tether_springs)
+from .drives import ActivationMap, drive_motions
+from .springs import DRIVE_SPRING, spring_stiffness, tether_springs
+from .systems import follow_activation, precompute, skin_density
 from .modal import FullSolver
 from .shell import ShellEnergy, lumped_mass
 

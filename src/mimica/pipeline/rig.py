@@ -68,7 +68,7 @@ def make_rig(face, landmarks=None, options: RigOptions | None = None, out=None, 
     lm = landmarks if isinstance(landmarks, Landmarks) else landmarks_for(skin, landmarks, str(face))
     rig = build_rig(skin, lm.positions(skin), muscles=o.muscles, alpha=o.alpha, modes=o.modes)
     if o.stretch == "shell":
-        from ..physics.face import shell_stretch_modes
+        from ..physics.systems import shell_stretch_modes
         shell_stretch_modes(rig)
     if systems:
         precompute(rig, progress=progress)

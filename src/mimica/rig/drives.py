@@ -25,7 +25,7 @@ result on held-out identities):
 
 Lid contact: the closing drive moves every upper-lid node at most onto the lower rim, never
 past it; with the lower lid raised as well they would cross, and the modal face holds the
-closing lid where the rims meet, position by position along the eye (physics.face.lid_contact),
+closing lid where the rims meet, position by position along the eye (physics.drives.lid_contact),
 so the rims meet and never cross; the fit closes a closed target's lid until they meet
 (physics.fit.MuscleFit).
 """

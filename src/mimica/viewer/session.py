@@ -134,7 +134,7 @@ class ViewerSession:
             Called as progress(k, n, name) after each system is made.
         """
         from ..physics import precompute
-        from ..physics.face import skin_system
+        from ..physics.systems import skin_system
         left = self.pending()
         n, k = len(left), 0
         skin = skin_system(self.rig) if left else None      # the skin's matrices, once for every system
