@@ -273,3 +273,20 @@ def test_only_the_command_line_tests_drive_the_command_line():
            if p.parent != tests and p.relative_to(tests).parts[0] not in DRIVE_THE_COMMAND
            and "mimica.cli" in p.read_text(encoding="utf-8")]
     assert not bad, f"drive the command line from tests/cli/: {bad}"
+
+
+def test_no_module_takes_another_modules_private_names():
+    """A name with a leading underscore stays in its module: what another module needs is public
+    (with its docstring), or lives in a private helper module (cli._common) made to be shared."""
+    bad = []
+    for path in PACKAGE.rglob("*.py"):
+        for n in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(n, ast.ImportFrom) or not (n.level or (n.module or "").startswith("mimica")):
+                continue
+            if (n.module or "").rsplit(".", 1)[-1].startswith("_"):
+                continue                                     # a private helper module's names
+            taken = [a.name for a in n.names if a.name.startswith("_") and not a.name.startswith("__")]
+            if taken:
+                where = f"{path.relative_to(PACKAGE)}:{n.lineno}"
+                bad.append(f"{where} takes {', '.join(taken)} from {'.' * n.level}{n.module or ''}")
+    assert not bad, "\n".join(bad)

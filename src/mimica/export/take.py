@@ -167,12 +167,12 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: 
         {"driven": how many of the head's targets the take drives, "pivot": the pivot used or
         None, "bending": how many vertices bend with the neck}.
     """
-    from ..mesh.io.gltf import ARRAY_BUFFER, FLOAT, UNSIGNED_BYTE, _placed_meshes, open_for_edit, save_edited
+    from ..mesh.io.gltf import ARRAY_BUFFER, FLOAT, UNSIGNED_BYTE, placed_meshes, open_for_edit, save_edited
     head_glb = Path(head_glb)
     g, doc, buf, _ = open_for_edit(head_glb)
     # every node of the scene showing a mesh with morph targets named like the take's shapes
     shown = {}
-    for node, mi, _, _ in _placed_meshes(g, head_glb):
+    for node, mi, _, _ in placed_meshes(g, head_glb):
         names = list((doc["meshes"][mi].get("extras") or {}).get("targetNames") or [])
         if any(n in weights for n in names):
             shown.setdefault(mi, []).append(node)

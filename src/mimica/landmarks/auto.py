@@ -32,8 +32,8 @@ def landmarks_for(mesh: Mesh, path=None, what="mesh") -> Landmarks:
         return read_landmarks(path, mesh)
     if is_ict_topology(mesh):
         return ict_landmarks(mesh)
-    from .detect2d import _models
-    _models()                                    # dlib missing from a broken install: said as such
+    from .detect2d import dlib_models
+    dlib_models()                                    # dlib missing from a broken install: said as such
     try:
         pts, _ = detect_mesh(mesh, what=what)    # render, find the 68 points, cast them back
         found = Landmarks.snap(mesh, pts)

@@ -43,19 +43,37 @@ DEFAULT_DETECTOR = "mediapipe"     # the more accurate, consistent and faster on
 
 
 @lru_cache(maxsize=1)
-def _models():
+def dlib_models():
+    """dlib's face detector and 68-point shape predictor, loaded once.
+
+    Returns
+    -------
+    detector : dlib.fhog_object_detector
+    predictor : dlib.shape_predictor
+
+    Raises
+    ------
+    MimicaError
+        Where dlib or its model is missing (a broken install).
+    """
     try:
         import dlib
     except ImportError:
         raise MimicaError("finding face landmarks automatically needs dlib (the package dlib-bin), a dependency "
                           "of mimica that is missing: pip install --force-reinstall mimica") from None
-    return dlib.get_frontal_face_detector(), dlib.shape_predictor(str(_predictor_file()))
+    return dlib.get_frontal_face_detector(), dlib.shape_predictor(str(predictor_file()))
 
 
-def _predictor_file() -> Path:
+def predictor_file() -> Path:
     """dlib's 68-point model inside face-recognition-models, found without importing that
     package (its __init__ needs pkg_resources, which setuptools >= 81 and Python 3.12's
-    fresh venvs lack)."""
+    fresh venvs lack); its face embedding model lies beside it.
+
+    Returns
+    -------
+    Path
+        shape_predictor_68_face_landmarks.dat.
+    """
     import importlib.util
     spec = importlib.util.find_spec("face_recognition_models")
     f = (Path(next(iter(spec.submodule_search_locations))) / "models" / "shape_predictor_68_face_landmarks.dat"
@@ -89,7 +107,7 @@ def detect_faces(img, upsample=None) -> list:
     list of tuple
         Boxes (left, top, right, bottom), largest first.
     """
-    det, _ = _models()
+    det, _ = dlib_models()
     g = _grey8(img)
     if upsample is None:
         upsample = 1 if min(g.shape) < 400 else 0
@@ -113,7 +131,7 @@ def fit_points(img, box) -> np.ndarray:
         Pixels (x, y).
     """
     import dlib
-    _, pred = _models()
+    _, pred = dlib_models()
     g = _grey8(img)
     s = pred(g, dlib.rectangle(*[int(round(c)) for c in box]))
     return np.array([(s.part(i).x, s.part(i).y) for i in range(N)], float)

@@ -9,7 +9,7 @@ import numpy as np
 from ..correspond import Correspondence
 from ..correspond.parts import ROLES
 from ..image.raster import render_mesh
-from .sheet import _font, contact_sheet
+from .sheet import label_font, contact_sheet
 from .shots import VIEWS, shared_frame_all_views
 
 # what each colour means (RGB in [0, 1]), in the order the legend lists them
@@ -87,7 +87,7 @@ def _legend(entries, size) -> np.ndarray:
     from PIL import Image, ImageDraw
     img = Image.new("RGB", (size, size), (255, 255, 255))
     d = ImageDraw.Draw(img)
-    font = _font(15)
+    font = label_font(15)
     for i, (text, c) in enumerate(entries):
         y = 20 + 30 * i
         d.rectangle([12, y, 34, y + 20], fill=tuple(int(255 * x) for x in c), outline=(60, 60, 60))

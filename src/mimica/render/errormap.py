@@ -8,7 +8,7 @@ from PIL import Image, ImageDraw
 from ..mesh import Mesh
 from ..image.raster import render_mesh
 from ..image.io import write_image as save_png
-from .sheet import _font
+from .sheet import label_font
 
 # Song Fig. 11 levels: < 0.1 % green, [0.1 %, 0.5 %) blue, [0.5 %, 2 %) red; beyond: purple
 BINS = (0.001, 0.005, 0.02)
@@ -80,12 +80,12 @@ def error_map_image(mesh: Mesh, err: np.ndarray, title="", size=420, bins=BINS) 
     w = 2 * size + 3 * pad
     img = Image.new("RGB", (w, top + size + legend_h + pad), "white")
     draw = ImageDraw.Draw(img)
-    draw.text((pad, 6), title, fill=(20, 20, 20), font=_font(16))
+    draw.text((pad, 6), title, fill=(20, 20, 20), font=label_font(16))
     for i, v in enumerate(views):
         img.paste(Image.fromarray(v), (pad + i * (size + pad), top))
     x = pad
     y = top + size + 8
-    font = _font(13)
+    font = label_font(13)
     entries = list(zip(bin_labels(bins), COLORS)) + [("no motion", NO_MOTION)]
     for lab, c in entries:
         draw.rectangle([x, y, x + 16, y + 16], fill=tuple(int(255 * t) for t in c))

@@ -6,7 +6,18 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 
-def _font(size=14):
+def label_font(size=14):
+    """The pictures' label font: DejaVu Sans where installed, else Pillow's own.
+
+    Parameters
+    ----------
+    size : int
+        Pixels.
+
+    Returns
+    -------
+    PIL.ImageFont.FreeTypeFont or PIL.ImageFont.ImageFont
+    """
     for name in ("DejaVuSans.ttf", "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf"):
         try:
             return ImageFont.truetype(name, size)
@@ -45,9 +56,9 @@ def contact_sheet(tiles, labels=None, columns=None, title=None, row_labels=None,
     left = 200 if row_labels else 0
     sheet = Image.new("RGB", (left + cols * (w + pad) + pad, top + rows * (h + cap + pad) + pad), "white")
     draw = ImageDraw.Draw(sheet)
-    font = _font(14)
+    font = label_font(14)
     if title:
-        draw.text((pad, 6), title, fill=(20, 20, 20), font=_font(18))
+        draw.text((pad, 6), title, fill=(20, 20, 20), font=label_font(18))
     for i, tile in enumerate(tiles):
         r, c = divmod(i, cols)
         x, y = left + pad + c * (w + pad), top + pad + r * (h + cap + pad)

