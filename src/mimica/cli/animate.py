@@ -41,18 +41,22 @@ def cmd_animate(a):
              f"points misfit median {v['misfit_median'] * 100:.1f} % of the face's width; "
              f"{v['unseen']} shapes the points cannot see (gaze, tongue) stay 0")
         _say(f"{a.video}: what it saw: {_saw(v['saw'])}")
-    w = r.weights
-    if r.pivot is not None:
-        turn = np.degrees(np.abs([w[n] for n in ("headYaw", "headPitch", "headRoll")]).max(1))
-        head_line = (f"; the head turns (up to yaw {turn[0]:.0f}, pitch {turn[1]:.0f}, roll {turn[2]:.0f} degrees) "
-                     f"about ({', '.join(f'{x:.3f}' for x in r.pivot)}) m, "
-                     + (f"{r.bending} vertices bending with the neck" if r.bending else "whole"))
-    else:
-        head_line = "; the head stays still (--head-rotation turns it)" if "headYaw" in w else ""
+    head_line = _head_line(r)
     _say(f"{a.video or a.arkit}: {len(r.times)} frames over {r.times[-1]:.2f}s ({r.rate:.3g} fps) drive {r.driven} "
          f"morph targets of {Path(a.head).name}{head_line} -> {r.out}" + (f" (weights: {r.csv})" if r.csv else "")
          + (f"; preview: {r.preview}" if r.preview else ""))
     return 0
+
+
+def _head_line(r) -> str:
+    """How the head moves in the take, as a part of its line."""
+    w = r.weights
+    if r.pivot is None:
+        return "; the head stays still (--head-rotation turns it)" if "headYaw" in w else ""
+    turn = np.degrees(np.abs([w[n] for n in ("headYaw", "headPitch", "headRoll")]).max(1))
+    return (f"; the head turns (up to yaw {turn[0]:.0f}, pitch {turn[1]:.0f}, roll {turn[2]:.0f} degrees) "
+            f"about ({', '.join(f'{x:.3f}' for x in r.pivot)}) m, "
+            + (f"{r.bending} vertices bending with the neck" if r.bending else "whole"))
 
 
 def _frames(spans) -> str:

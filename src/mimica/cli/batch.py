@@ -44,6 +44,23 @@ def cmd_batch(a):
         return _print_status(out)
     if not a.manifest:
         raise MimicaError("batch: name the manifest (jobs.toml), or ask --status")
+    bar, progress = _job_bar()
+    try:
+        rep = run_batch(a.manifest, out, workers=a.workers, ray=a.ray, retry=a.retry, progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    c = rep["counts"]
+    _say(f"batch: {c['done']} done, {c['skipped']} skipped (finished before, inputs unchanged), {c['failed']} failed "
+         f"in {rep['seconds']:.1f}s on {rep['engine']}; report {out / 'batch.json'}")
+    for r in rep["jobs"]:
+        if r["status"] == "failed":
+            _say(f"  failed {r['id']}: {r.get('error', '')}")
+    return 1 if c["failed"] else 0
+
+
+def _job_bar():
+    """(a job bar on a terminal or None, the batch's progress callback feeding it)."""
     bar = None
     if sys.stderr.isatty():
         from tqdm import tqdm
@@ -57,18 +74,7 @@ def cmd_batch(a):
                 return
             bar.set_postfix_str(ev["job"][-40:])
             bar.update(1)
-    try:
-        rep = run_batch(a.manifest, out, workers=a.workers, ray=a.ray, retry=a.retry, progress=progress)
-    finally:
-        if bar is not None:
-            bar.close()
-    c = rep["counts"]
-    _say(f"batch: {c['done']} done, {c['skipped']} skipped (finished before, inputs unchanged), {c['failed']} failed "
-         f"in {rep['seconds']:.1f}s on {rep['engine']}; report {out / 'batch.json'}")
-    for r in rep["jobs"]:
-        if r["status"] == "failed":
-            _say(f"  failed {r['id']}: {r.get('error', '')}")
-    return 1 if c["failed"] else 0
+    return bar, progress
 
 
 def add_args(sub) -> None:

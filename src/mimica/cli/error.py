@@ -35,22 +35,7 @@ def cmd_error(a):
         if m.n_vertices != res.n_vertices:
             raise MimicaError(f"{p}: has {m.n_vertices} vertices, the result has {res.n_vertices}; "
                               "the error needs meshes of one topology")
-    region = None
-    if a.region:
-        try:
-            lo, hi = (int(x) for x in a.region.split(":"))
-        except ValueError:
-            lo = hi = -1
-        if not 0 <= lo < hi <= res.n_vertices:
-            raise MimicaError(f"--region {a.region!r}: expected LO:HI vertex indices with 0 <= LO < HI <= "
-                              f"{res.n_vertices}, e.g. 0:9409")
-        region = slice(lo, hi)
-    try:
-        bins = tuple(float(x) / 100 for x in a.bins.split(","))
-    except ValueError:
-        bins = ()
-    if len(bins) != 3 or not np.isfinite(bins).all() or min(bins) <= 0 or list(bins) != sorted(bins):
-        raise MimicaError(f"--bins {a.bins!r}: expected three increasing positive percentages, e.g. 0.1,0.5,2")
+    region, bins = _region(a.region, res.n_vertices), _bins(a.bins)
     e = song_vertex_error(res.vertices, res_n.vertices, ref.vertices, ref_n.vertices)
     rel = relative_error(res.vertices, ref.vertices + (res_n.vertices - ref_n.vertices), res_n.vertices, region)
     ee = e if region is None else e[region]
@@ -60,6 +45,30 @@ def cmd_error(a):
         error_map_png(a.out, res, e, title=f"{Path(a.result).name} vs {Path(a.reference).name}", bins=bins)
         _say(f"error map -> {a.out}")
     return 0
+
+
+def _region(spec: str | None, n: int) -> slice | None:
+    """--region LO:HI as a slice of the n vertices (None: every vertex)."""
+    if not spec:
+        return None
+    try:
+        lo, hi = (int(x) for x in spec.split(":"))
+    except ValueError:
+        lo = hi = -1
+    if not 0 <= lo < hi <= n:
+        raise MimicaError(f"--region {spec!r}: expected LO:HI vertex indices with 0 <= LO < HI <= {n}, e.g. 0:9409")
+    return slice(lo, hi)
+
+
+def _bins(spec: str) -> tuple:
+    """--bins as three increasing fractions (given in percent)."""
+    try:
+        bins = tuple(float(x) / 100 for x in spec.split(","))
+    except ValueError:
+        bins = ()
+    if len(bins) != 3 or not np.isfinite(bins).all() or min(bins) <= 0 or list(bins) != sorted(bins):
+        raise MimicaError(f"--bins {spec!r}: expected three increasing positive percentages, e.g. 0.1,0.5,2")
+    return bins
 
 
 def add_args(sub) -> None:

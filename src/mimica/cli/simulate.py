@@ -34,8 +34,14 @@ def cmd_simulate(a):
         raise MimicaError("--maps: the maps are the wrinkles'; give the wrinkle mask (--wrinkles MASK)")
     with _bar("simulating") as progress:
         r = simulate(a.rig, a.out, opts, progress=progress)
-    out = r.out
-    note = ""
+    _say(f"{r.frames} frames -> {r.out}/ (frame_*.obj, animation.glb, strip.png); {r.steps} steps in {r.seconds:.2f}s"
+         + _note(r, a.fps))
+    return 0
+
+
+def _note(r, fps: float) -> str:
+    """The wrinkles, the clip and the Newton steps of a simulation, as the tail of its line."""
+    out, note = r.out, ""
     if r.wrinkles is not None:
         w = r.wrinkles
         most = np.argsort(w["compression"])[:3]
@@ -44,17 +50,14 @@ def cmd_simulate(a):
                 "frames": f"; maps of every frame -> {out}/wrinkles_frame_*",
                 "peak": f"; maps of that frame -> {out}/wrinkles_frame_{w['peak']:04d}_*", None: ""}[w["maps"]]
         note += (f"; wrinkles: {len(w['names'])} on {w['nodes']} nodes (built in {w['build_s']:.1f}s), "
-                 f"{1000 * w['frame_s']:.2f} ms/frame; most compressed at t={w['peak'] / a.fps:.2f}s: "
+                 f"{1000 * w['frame_s']:.2f} ms/frame; most compressed at t={w['peak'] / fps:.2f}s: "
                  + ", ".join(f"{w['names'][i]} {w['compression'][i]:.2f}" for i in most) + maps)
     note += "; animation.glb: " + _clip_how(r.clip)
-    if r.newton is not None:
-        st = r.newton
+    if (st := r.newton) is not None:
         note += f"; Newton: {st['iterations'] / max(st['steps'], 1):.1f} iterations a step"
         if st["unconverged"]:
             note += f", {st['unconverged']} steps stopped at the iteration cap"
-    _say(f"{r.frames} frames -> {out}/ (frame_*.obj, animation.glb, strip.png); {r.steps} steps in {r.seconds:.2f}s"
-         + note)
-    return 0
+    return note
 
 
 def _wrinkle_args(s) -> None:

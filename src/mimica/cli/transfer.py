@@ -25,7 +25,6 @@ def cmd_transfer(a):
         The exit status (0: done).
     """
     from ..errors import NeedsLandmarks
-    from ..mesh.io import GltfLayout
     from ..pipeline import TransferOptions, transfer_sequence
     opts = TransferOptions(method=a.method, match=a.match, cut_mouth=a.cut_mouth == "auto",
                            cut_eyes=a.cut_eyes == "auto")
@@ -34,6 +33,13 @@ def cmd_transfer(a):
                               a.source_landmarks, a.target_landmarks, progress=_say)
     except NeedsLandmarks as e:
         raise MimicaError(f"{e}; pass it with --{e.which}-landmarks FILE") from None
+    _report(a, r)
+    return 0
+
+
+def _report(a, r) -> None:
+    """What a transfer did, said: cuts, the basis, the layout kept, the picture, the timings."""
+    from ..mesh.io import GltfLayout
     xfer, sec, n = r.transfer, r.seconds, len(r.files)
     if xfer.mouth is not None:
         _say(f"{a.target}: the lips were sealed; cut apart along {len(xfer.mouth.seam)} vertices, "
@@ -62,7 +68,6 @@ def cmd_transfer(a):
              "eyeballs and teeth rigid, lashes and shells with the skin)")
     _say(f"{n} expression(s) -> {r.out}/ ({a.method}; read {sec['read']:.2f}s, precompute {sec['precompute']:.2f}s, "
          f"transfer {sec['transfer']:.2f}s = {n / max(sec['transfer'], 1e-9):.0f} frames/s)")
-    return 0
 
 
 def add_args(sub) -> None:

@@ -21,8 +21,6 @@ def cmd_view(a):
     int
         The exit status (0: done).
     """
-    import asyncio
-    import webbrowser
     from ..mesh import read_mesh
     from ..pipeline import ViewOptions, prepare_view
     from ..viewer import ViewerServer, ViewerSession, ensure_three, port_in_use
@@ -42,12 +40,20 @@ def cmd_view(a):
     face = prepare_view(skin, lm, a.rig, ViewOptions(wrinkles=not a.no_wrinkles))
     session = ViewerSession(face.rig, face.mask)
     server = ViewerServer(session, vendor, title=f"mimica · {Path(a.rig or a.face).stem}", port=a.port, log=_say)
+    _serve(a, session, server)
+    return 0
+
+
+def _serve(a, session, server) -> None:
+    """The page served until interrupted, a browser opened on it, the muscles' bar while they are made."""
+    import asyncio
+    import contextlib
+    import webbrowser
 
     def ready(srv):
         _say(f"viewer on {srv.url} (Ctrl-C to stop)")
         if not a.no_browser:
             webbrowser.open(srv.url)
-    import contextlib
     pending = bool(session.pending())
     with _muscle_bar("muscles (those moved first)") if pending else contextlib.nullcontext(None) as bar:
         made = _one_blas_thread_when_made(bar, not pending)
@@ -55,7 +61,6 @@ def cmd_view(a):
             asyncio.run(server.run(ready, made))
         except OSError as e:
             _busy(a.port, e)
-    return 0
 
 
 def _one_blas_thread_when_made(bar, now: bool):
