@@ -153,10 +153,10 @@ def _children(pid):
 
 def basis_path(repeat=3):
     """bench/transfer.py's 300-frame sequence through its basis against frame by frame."""
-    from transfer import held_out_identity, sequence
+    from transfer import held_out_identity
     model = ICTModel(ICT_HEAD_VERTICES)
     S = model.mesh
-    frames, _ = sequence(model, 300)
+    frames = model.performance(300)
     T = S.with_vertices(held_out_identity(model, 0))
     x = ExpressionTransfer(S, T, ict_landmarks(S), ict_landmarks(T), method="vtc", static=static_vertices(S.vertices, frames))
     best, outs = {}, {}

@@ -59,16 +59,6 @@ def held_out_identity(model, seed):
     return model.identity(rng.normal(0, 0.8, 20))
 
 
-def sequence(model, n_frames, seed=0):
-    """A smooth performance: the six basic expressions blended with slowly varying weights."""
-    names = list(EXPRESSIONS)
-    d = np.stack([model.delta(EXPRESSIONS[e]) for e in names])
-    rng = np.random.default_rng(seed)
-    t = np.linspace(0, 2 * np.pi, n_frames)[:, None]
-    w = np.clip(np.sin(t * rng.uniform(0.5, 2.0, len(names)) + rng.uniform(0, 2 * np.pi, len(names))), 0, None)
-    return model.neutral + np.einsum("fk,knd->fnd", w, d), w @ d.reshape(len(names), -1)
-
-
 MOUTH_SHAPES = ("jaw", "mouth")
 
 
@@ -158,7 +148,7 @@ def main():
 
     model = ICTModel(ICT_HEAD_VERTICES)
     S = model.mesh
-    frames, _ = sequence(model, a.frames)
+    frames = model.performance(a.frames)
     deltas = frames - S.vertices
     static = static_vertices(S.vertices, frames)
     basic = np.stack([S.vertices + model.delta(EXPRESSIONS[e]) for e in EXPRESSIONS])
@@ -192,7 +182,7 @@ def main():
 
     # the full 26,719-vertex model (eyes, teeth, mouth socket included)
     full = ICTModel()
-    ff, _ = sequence(full, a.frames)
+    ff = full.performance(a.frames)
     Tf = full.mesh.with_vertices(held_out_identity(full, 0))
     xf = ExpressionTransfer(full.mesh, Tf, ict_landmarks(full.mesh), ict_landmarks(Tf), method="vtc",
                             static=static_vertices(full.neutral, ff))

@@ -179,3 +179,25 @@ class ICTModel:
         if isinstance(name_or_weights, str):
             return EXPRESSIONS.get(name_or_weights, {name_or_weights: 1.0})
         return dict(name_or_weights)
+
+    def performance(self, n_frames: int, seed: int = 0) -> np.ndarray:
+        """A smooth performance on the neutral: the six basic expressions (EXPRESSIONS) blended
+        with slowly varying weights, each a clipped sine of its own random rate and phase (the
+        benchmarks' and tests' sequences; rank 6).
+
+        Parameters
+        ----------
+        n_frames : int
+        seed : int
+            The rates' and phases' random seed.
+
+        Returns
+        -------
+        (n_frames, n, 3) float array
+        """
+        names = list(EXPRESSIONS)
+        d = np.stack([self.delta(EXPRESSIONS[e]) for e in names])
+        rng = np.random.default_rng(seed)
+        t = np.linspace(0, 2 * np.pi, n_frames)[:, None]
+        w = np.clip(np.sin(t * rng.uniform(0.5, 2.0, len(names)) + rng.uniform(0, 2 * np.pi, len(names))), 0, None)
+        return self.neutral + np.einsum("fk,knd->fnd", w, d)

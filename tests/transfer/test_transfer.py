@@ -104,16 +104,6 @@ def test_target_pose_does_not_matter(head_model, basic):
     np.testing.assert_allclose(out, sim.apply(ref), atol=1e-6)
 
 
-def _sequence(model, n, seed=0):
-    """n frames blending the six basic expressions with smooth random weights (rank 6)."""
-    names = list(EXPRESSIONS)
-    d = np.stack([model.delta(EXPRESSIONS[e]) for e in names])
-    rng = np.random.default_rng(seed)
-    t = np.linspace(0, 2 * np.pi, n)[:, None]
-    w = np.clip(np.sin(t * rng.uniform(0.5, 2.0, len(names)) + rng.uniform(0, 2 * np.pi, len(names))), 0, None)
-    return model.neutral + np.einsum("fk,knd->fnd", w, d)
-
-
 @pytest.mark.parametrize("kind", ["vtc", "dt"])
 def test_tips_from_their_operators(head_model, kind):
     """The basis path's tips (base + g(a x, b x)) are the elements' own tips, on moved frames."""
@@ -135,7 +125,7 @@ def test_long_sequences_go_through_their_basis(head_model):
     not see (a blink between two of them), goes frame by frame, unchanged; frames at rest stay
     at rest."""
     from mimica.transfer import BASIS_DEVIATION, BASIS_FRAMES
-    frames = _sequence(head_model, 160)
+    frames = head_model.performance(160)
     tv = held_out_identity(head_model, 131)
     x, exact = _transfer(head_model, tv, frames)                               # frame by frame
     assert not x.basis_report["used"]
@@ -203,7 +193,7 @@ def test_basis_across_topologies(head_model):
     face, _ = head_model.mesh.with_vertices(tv).submesh(np.arange(ICT_FACE_AREA_FACES))
     rs = resample_face(face, tv[ICT_LANDMARKS_68], n_vertices=6000, seed=4)
     S = head_model.mesh
-    frames = _sequence(head_model, 300, seed=3)
+    frames = head_model.performance(300, seed=3)
     x = ExpressionTransfer(S, rs.mesh, ict_landmarks(S), Landmarks.snap(rs.mesh, tv[ICT_LANDMARKS_68]),
                            static=static_vertices(S.vertices, frames))
     exact = x.apply(frames, basis=False)
