@@ -70,3 +70,21 @@ def test_concave_angles_of_a_fold(fold):
     assert np.abs(ang[~on_fold]).max() < 1e-6
     turned = Mesh.from_faces(v, np.array(tris)[:, ::-1])               # the same fold, a ridge now
     assert np.abs(concave_angles(turned, e)).max() < 1e-6
+
+
+def test_triangles_and_polygons_around_each_vertex(head_model):
+    """Mesh.vertex_triangles and vertex_faces list, for each vertex, exactly the triangles and
+    polygons that use it (ICT's quads, and a polygon that meets a vertex twice listed twice)."""
+    from mimica import Mesh
+    m = head_model.mesh
+    start, around = m.vertex_triangles
+    fstart, faround = m.vertex_faces
+    assert len(start) == len(fstart) == m.n_vertices + 1
+    corner_face = np.repeat(np.arange(m.n_faces), m.face_sizes)
+    for v in np.random.default_rng(0).choice(m.n_vertices, 200, replace=False):
+        assert np.array_equal(around[start[v]:start[v + 1]], np.nonzero((m.triangles == v).any(1))[0])
+        assert np.array_equal(faround[fstart[v]:fstart[v + 1]], corner_face[m.face_indices == v])
+    bow = Mesh(np.random.default_rng(1).normal(size=(5, 3)), np.array([0, 1, 2, 0, 3, 4, 1, 2, 3]),
+               np.array([0, 6, 9]))                           # a hexagon through vertex 0 twice, a triangle
+    s, a = bow.vertex_faces
+    assert a[s[0]:s[1]].tolist() == [0, 0] and a[s[3]:s[4]].tolist() == [0, 1] and s[-1] == 9

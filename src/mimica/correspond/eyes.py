@@ -142,10 +142,10 @@ def _eye_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | Non
     inside[lid_faces] = False
     # ... and the margin runs through them: a landmark's nearest vertex gets the face at it
     # nearest the eye's centre, where none of its faces is the eye's
-    face_of = np.repeat(np.arange(mesh.n_faces), mesh.face_sizes)
+    start, around = mesh.vertex_faces
     for p in pts:
         v = int(np.argmin(np.linalg.norm(mesh.vertices - p, axis=1)))
-        fan = np.unique(face_of[mesh.face_indices == v])
+        fan = np.unique(around[start[v]:start[v + 1]])
         fan = fan[near[fan] & ~np.isin(fan, lid_faces)]
         if len(fan) and not inside[fan].any():
             inside[fan[np.argmin(np.linalg.norm(cent[fan] - centre, axis=1))]] = True

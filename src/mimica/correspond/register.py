@@ -136,11 +136,7 @@ class _NormalSpace:
     coarse target's matches to its vertices)."""
 
     def __init__(self, target: Mesh, normals: np.ndarray, lam: float):
-        t = target.triangles
-        v = t.ravel()
-        order = np.argsort(v, kind="stable")
-        self.start = np.searchsorted(v[order], np.arange(target.n_vertices + 1))
-        self.around = order // 3                          # triangles by vertex, CSR with `start`
+        self.start, self.around = target.vertex_triangles    # triangles by vertex, CSR
         self.used = np.nonzero(np.diff(self.start) > 0)[0]
         self.tree = cKDTree(np.hstack([target.vertices[self.used], lam * normals[self.used]]))
         self.target, self.normals, self.lam = target, normals, lam

@@ -188,6 +188,33 @@ class Mesh:
         return np.repeat(np.arange(self.n_faces), np.maximum(self.face_sizes - 2, 0))
 
     @cached_property
+    def vertex_triangles(self) -> tuple[np.ndarray, np.ndarray]:
+        """The triangles (of `triangles`) around each vertex, as CSR arrays.
+
+        Returns
+        -------
+        start : (n + 1,) int array
+        around : (k,) int array
+            Vertex i's triangles are around[start[i]:start[i + 1]], in increasing order.
+        """
+        return _incidence(self.triangles.ravel(), 3, self.n_vertices)
+
+    @cached_property
+    def vertex_faces(self) -> tuple[np.ndarray, np.ndarray]:
+        """The polygons around each vertex, as CSR arrays.
+
+        Returns
+        -------
+        start : (n + 1,) int array
+        around : (k,) int array
+            Vertex i's polygons are around[start[i]:start[i + 1]], in increasing order (a polygon
+            that meets it twice, twice).
+        """
+        corner_face = np.repeat(np.arange(self.n_faces), self.face_sizes)
+        start, order = _incidence(self.face_indices, 1, self.n_vertices)
+        return start, corner_face[order]
+
+    @cached_property
     def half_edges(self) -> np.ndarray:
         """(k, 2) every polygon's sides in its winding, one row per face corner (its corner and
         the next): the same edge of two faces wound alike is an inconsistent orientation."""
@@ -356,3 +383,11 @@ def plane_grid(nx: int, ny: int, length: float, width: float) -> Mesh:
     t1 = np.where(odd[:, None], np.stack([a, b, c], 1), np.stack([a, b, d], 1))
     t2 = np.where(odd[:, None], np.stack([a, c, d], 1), np.stack([b, c, d], 1))
     return Mesh.from_faces(v, np.stack([t1, t2], 1).reshape(-1, 3))
+
+
+def _incidence(corners: np.ndarray, per: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Corners (k,) (vertex indices, `per` to an element, in order) grouped by vertex: (start
+    (n + 1,), the elements in vertex order); with per=1, the corners' positions instead."""
+    order = np.argsort(corners, kind="stable")
+    start = np.searchsorted(corners[order], np.arange(n + 1))
+    return start, order // per
