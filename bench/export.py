@@ -37,20 +37,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from mimica.data import EXPRESSIONS, ICTModel  # noqa: E402
+from mimica.data import ICTModel  # noqa: E402
 from mimica.export import ARKIT_52  # noqa: E402
 from mimica.export.compact import compact_clip  # noqa: E402
 from mimica.mesh import write_glb  # noqa: E402
 from mimica.mesh.io import glb_units  # noqa: E402
-
-
-def clip(model, n_frames=600, seed=0):
-    names = list(EXPRESSIONS)
-    d = np.stack([model.delta(EXPRESSIONS[e]) for e in names])
-    rng = np.random.default_rng(seed)
-    t = np.linspace(0, 2 * np.pi, n_frames)[:, None]
-    w = np.clip(np.sin(t * rng.uniform(0.5, 2.0, len(names)) + rng.uniform(0, 2 * np.pi, len(names))), 0, None)
-    return model.neutral + np.einsum("fk,knd->fnd", w, d)
 
 
 # the takes' expressions: each event a smooth rise and fall of one or a few ARKit shapes
@@ -191,7 +182,7 @@ def main():
     model = ICTModel()
     mesh = model.mesh
     tmp = Path(tempfile.mkdtemp(prefix="mimica-bench-export-"))
-    frames = clip(model)
+    frames = model.performance(600)
     names = [f"frame_{i:04d}" for i in range(len(frames))]
     unit, k = glb_units(mesh)
     t = time.perf_counter()
