@@ -118,10 +118,14 @@ def test_closed_form_gradients_equal_the_hyperdual_derivatives(patch, energy):
 def test_projected_hessian_is_psd_and_exact_at_rest(patch, energy):
     """The full solver's Newton matrix: positive semi-definite however the skin is deformed
     (here compressed by 30 % and jittered, where the exact Hessian is indefinite), and the
-    exact Hessian at rest, where every term's residual is zero."""
+    exact Hessian at rest, where every term's residual is zero (as is rest_stiffness, its straight
+    assembly)."""
     rest = patch.vertices
     np.testing.assert_allclose(energy.hessian(rest, project=True).toarray(), energy.hessian(rest).toarray(),
                                atol=1e-9 * abs(energy.hessian(rest)).max())
+    k = energy.rest_stiffness()                          # the systems' stiffness, assembled straight
+    np.testing.assert_allclose(k.toarray(), energy.hessian(rest).toarray(), atol=1e-12 * abs(k).max())
+    assert abs(k - k.T).max() == 0
     x = _deformed(patch, seed=7, scale=0.1) * [0.7, 1.0, 1.0]
     exact = np.linalg.eigvalsh(energy.hessian(x).toarray())
     psd = np.linalg.eigvalsh(energy.hessian(x, project=True).toarray())

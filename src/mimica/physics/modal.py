@@ -265,7 +265,7 @@ class ModalBasis:
         free = np.nonzero(~fixed)[0]
         if len(free) == 0:
             raise MimicaError("modal basis: every node is fixed")
-        K = energy.hessian(energy.rest) if stiffness is None else stiffness
+        K = energy.rest_stiffness() if stiffness is None else stiffness
         dof = (3 * free[:, None] + np.arange(3)).ravel()
         Kff = K[dof][:, dof].tocsc()
         m = np.repeat(mass[free], 3)
@@ -305,19 +305,25 @@ class ModalBasis:
         g, U = np.linalg.eigh(S.T @ S)
         if g[0] > 1e-8 * g[-1]:
             # well conditioned: orthonormal through the Gram matrix (orthonormal to about
-            # 1e-8, a third of Householder's time on the whole library)
-            V = (V @ U) / np.sqrt(g)
+            # 1e-8, a third of Householder's time on the whole library), V C with C = U g^-1/2
+            # kept folded into the small matrices: one product over the dofs fewer
+            C = U / np.sqrt(g)
         else:
             # rank-revealing (pivoted) QR: dependent columns (two strip nodes sharing a skin
             # node load it alike) go last and are dropped without taking the others' parts along
             q, rr, _ = scipy.linalg.qr(S, mode="economic", pivoting=True)
             keep = np.abs(np.diag(rr)) > 1e-10 * np.abs(rr[0, 0])
-            V = q[:, keep] / np.sqrt(m)[:, None]
-        kr = V.T @ (Kff @ V)
+            V, C = q[:, keep] / np.sqrt(m)[:, None], np.eye(int(keep.sum()))
+        kr = C.T @ (V.T @ (Kff @ V)) @ C
         lam, y = np.linalg.eigh(0.5 * (kr + kr.T))
-        phi = V @ y
+        return cls._ritz(free, V, C @ y, lam, m, mass, n, energy, rotation)
+
+    @classmethod
+    def _ritz(cls, free, V, y, lam, m, mass, n, energy, rotation) -> "ModalBasis":
+        """The basis of Ritz vectors V y (lowest first, mass-normalized)."""
         order = np.argsort(lam)
-        lam, phi = np.maximum(lam[order], 0.0), phi[:, order]
+        phi = V @ y[:, order]
+        lam = np.maximum(lam[order], 0.0)
         phi /= np.sqrt(np.einsum("ij,i,ij->j", phi, m, phi))[None, :]      # Phi^T M Phi = I
         W = rotation_operator(energy.rest, energy.triangles) if rotation is None else rotation
         return cls(free, phi, lam, None, mass, n, W)

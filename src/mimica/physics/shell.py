@@ -254,6 +254,31 @@ class ShellEnergy:
         indptr = np.searchsorted(rows, np.arange(3 * self.n + 1))
         return indptr, cols, slot.ravel(), len(uniq)
 
+    def rest_stiffness(self) -> sp.csr_matrix:
+        """The Hessian at rest, d2E/dx2 at `rest`: every term's residual d is 0 there, so
+        Gauss-Newton's 2 w grad(d) grad(d)^T is the exact Hessian (on ICT's head within 4e-16 of
+        the largest entry of the hyper-dual one, in a tenth of its time), summed straight into
+        CSR without the reusable pattern a Newton solver builds (`hessian`).
+
+        Returns
+        -------
+        (3n, 3n) sparse matrix
+            CSR, dof order x0, y0, z0, x1, ...
+        """
+        rows, cols, vals = [], [], []
+        for k, idx, fn, par in self._terms():
+            if k == 0 or len(idx) == 0:
+                continue
+            w, _, g = _residual(fn, self._stack(self.rest, idx), par)
+            dof = (3 * idx[:, :, None] + np.arange(3)).reshape(len(idx), -1)
+            q = dof.shape[1]
+            rows.append(np.repeat(dof, q, axis=1).ravel())
+            cols.append(np.tile(dof, (1, q)).ravel())
+            vals.append(((2.0 * k * w)[:, None, None] * g[:, :, None] * g[:, None, :]).ravel())
+        n3 = 3 * self.n
+        h = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n3, n3)).tocsr()
+        return (0.5 * (h + h.T)).tocsr()            # the sums' order left (i, j) and (j, i) 1e-16 apart
+
     def hessian(self, x: np.ndarray, project: bool = False) -> sp.csr_matrix:
         """d2E/dx2 as a sparse (3n x 3n) matrix (dof order x0, y0, z0, x1, ...).
 

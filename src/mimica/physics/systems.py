@@ -337,7 +337,7 @@ def skin_system(rig, rotation: bool = True):
     energy = ShellEnergy.default(skin, k_area=SKIN_AREA, k_bend=SKIN_BEND)
     mass = lumped_mass(skin)
     k_node = tether_springs(p.get("tether", 0.0), energy.k_length, p["mean_edge"], mass)   # K + the tethers
-    K = (energy.hessian(energy.rest) + sp.diags(np.repeat(k_node, 3))).tocsr()
+    K = (energy.rest_stiffness() + sp.diags(np.repeat(k_node, 3))).tocsr()
     W = (rotation_operator(skin.vertices, skin.triangles, smooth=WARP_DIFFUSION, tangent=True, diffuse=True)
          if rotation else None)
     return energy, mass, K, W
@@ -427,7 +427,7 @@ def shell_stretch_mode(nodes: np.ndarray, bar: np.ndarray, modes: int = 8) -> tu
     used[tris.ravel()] = True
     used[:COLS] = False                                                   # the origin row is held
     free = (3 * np.nonzero(used)[0][:, None] + np.arange(3)).ravel()
-    K = energy.hessian(energy.rest).toarray()[np.ix_(free, free)]
+    K = energy.rest_stiffness().toarray()[np.ix_(free, free)]
     lam, e = eigh(K, np.diag(mass[free]), subset_by_index=[0, min(modes, len(free)) - 1])
     b = np.asarray(bar, float).ravel()[free]
     m = mass[free]
