@@ -256,9 +256,10 @@ class ShellEnergy:
 
     def rest_stiffness(self) -> sp.csr_matrix:
         """The Hessian at rest, d2E/dx2 at `rest`: every term's residual d is 0 there, so
-        Gauss-Newton's 2 w grad(d) grad(d)^T is the exact Hessian (on ICT's head within 4e-16 of
-        the largest entry of the hyper-dual one, in a tenth of its time), summed straight into
-        CSR without the reusable pattern a Newton solver builds (`hessian`).
+        Gauss-Newton's 2 w grad(d) grad(d)^T is the exact Hessian (on ICT's 11k head within 2e-16
+        of the largest entry of the hyper-dual one; 0.5 s against its 2.9 s with the pattern it
+        builds), summed straight into CSR without the reusable pattern a Newton solver needs
+        (`hessian`).
 
         Returns
         -------
