@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import ast
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -265,14 +266,20 @@ def test_the_tests_are_laid_out_by_module():
 DRIVE_THE_COMMAND = {"cli", "pipeline", "batch", "blender_addon"}
 
 
+# the command reached: its module (in process or `python -m`), or the installed `mimica` script
+DRIVES = re.compile(r'mimica\.cli|with_name\("mimica"\)|/ "mimica"')
+
+
 def test_only_the_command_line_tests_drive_the_command_line():
-    """A library's tests call the library: the command line (`mimica.cli`, in process or as a
-    child) is driven from tests/cli/ and the folders DRIVE_THE_COMMAND names."""
+    """A library's tests call the library: the command line (`mimica.cli` in process or as a
+    child, or the installed `mimica` script) is driven from tests/cli/ and the folders
+    DRIVE_THE_COMMAND names."""
     tests = Path(__file__).resolve().parent
     bad = [str(p.relative_to(tests)) for p in tests.rglob("test_*.py")
            if p.parent != tests and p.relative_to(tests).parts[0] not in DRIVE_THE_COMMAND
-           and "mimica.cli" in p.read_text(encoding="utf-8")]
+           and DRIVES.search(p.read_text(encoding="utf-8"))]
     assert not bad, f"drive the command line from tests/cli/: {bad}"
+    assert DRIVES.search('exe = Path(sys.executable).with_name("mimica")') and DRIVES.search('venv / "bin" / "mimica"')
 
 
 def test_no_module_takes_another_modules_private_names():
