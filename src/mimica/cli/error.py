@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MimicaError
+from ..validate import floats
 from ._common import _say
 
 
@@ -62,11 +63,8 @@ def _region(spec: str | None, n: int) -> slice | None:
 
 def _bins(spec: str) -> tuple:
     """--bins as three increasing fractions (given in percent)."""
-    try:
-        bins = tuple(float(x) / 100 for x in spec.split(","))
-    except ValueError:
-        bins = ()
-    if len(bins) != 3 or not np.isfinite(bins).all() or min(bins) <= 0 or list(bins) != sorted(bins):
+    bins = tuple(x / 100 for x in floats(spec, 3, "--bins"))
+    if min(bins) <= 0 or list(bins) != sorted(bins):
         raise MimicaError(f"--bins {spec!r}: expected three increasing positive percentages, e.g. 0.1,0.5,2")
     return bins
 

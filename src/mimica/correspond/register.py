@@ -130,6 +130,13 @@ def on_boundary(mesh: Mesh, triangle: np.ndarray, bary: np.ndarray, boundary=Non
     return (nz & b[mesh.triangles[triangle]]).sum(1) == nz.sum(1)
 
 
+def _normal_at(normals: np.ndarray, corners: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """Unit normals (k, 3) at surface points: the vertex normals (n, 3) of their triangles'
+    corners (k, 3) blended by the barycentrics (k, 3)."""
+    nt = np.einsum("ij,ijk->ik", bary, normals[corners])
+    return nt / np.maximum(np.linalg.norm(nt, axis=1, keepdims=True), 1e-300)
+
+
 class _NormalSpace:
     """The target's surface searched in (position, lambda normal) space, R^6: the target vertex
     nearest in R^6, then the point of its triangles nearest in R^6 (the vertex alone snaps a
@@ -149,8 +156,7 @@ class _NormalSpace:
         tri = self.around[np.repeat(self.start[j] - np.cumsum(count) + count, count) + np.arange(len(row))]
         v, tt = self.target.vertices, self.target.triangles[tri]
         p, b = closest_point_on_triangles(x[row], v[tt[:, 0]], v[tt[:, 1]], v[tt[:, 2]])
-        n = np.einsum("ij,ijk->ik", b, self.normals[tt])
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        n = _normal_at(self.normals, tt, b)
         cost = ((p - x[row]) ** 2).sum(1) + self.lam ** 2 * ((n - nx[row]) ** 2).sum(1)
         order = np.lexsort((cost, row))
         best = order[np.searchsorted(row[order], np.arange(len(x)))]   # the cheapest of each row
@@ -213,8 +219,7 @@ def register(source: Mesh, points: sp.spmatrix, target: Mesh, targets: np.ndarra
         for _ in range(iterations):
             x = v0 + d
             tri, bary, cp, dist = loc.closest(x, k=K, max_distance=EXACT * h)
-            nt = np.einsum("ij,ijk->ik", bary, t_normals[target.triangles[tri]])
-            nt /= np.maximum(np.linalg.norm(nt, axis=1, keepdims=True), 1e-300)
+            nt = _normal_at(t_normals, target.triangles[tri], bary)
             ns = source.vertex_normals(x)
             facing = np.einsum("ij,ij->i", ns, nt) > cos_max
             # no data where the closest point is on the target's edge (a part the target lacks)

@@ -131,6 +131,18 @@ def _local_gradient(fn, xs: np.ndarray, par) -> np.ndarray:
     return (2.0 * w * d)[:, None] * g
 
 
+def _gauss_newton(fn, xs: np.ndarray, par) -> np.ndarray:
+    """Gauss-Newton's Hessian of one term per element, 2 w grad(d) grad(d)^T, (m, k, k): PSD, and
+    the exact Hessian where the residual d is 0 (at rest)."""
+    w, _, g = _residual(fn, xs, par)
+    return (2.0 * w)[:, None, None] * g[:, :, None] * g[:, None, :]
+
+
+def _dofs(idx: np.ndarray) -> np.ndarray:
+    """The elements' vertices (m, j) as their dofs (m, 3 j): x, y, z of each in turn."""
+    return (3 * idx[:, :, None] + np.arange(3)).reshape(len(idx), -1)
+
+
 def _edge_hessian_psd(p, rest_len) -> np.ndarray:
     """The edge term's Hessian with its negative eigenvalues dropped, (m, 6, 6): in e = x1 - x0
     it is 2/l0 (t t^T + (l - l0)/l (I - t t^T)), negative across the edge only when compressed."""
@@ -235,7 +247,7 @@ class ShellEnergy:
             if k == 0 or len(idx) == 0:
                 continue
             gl = _local_gradient(fn, self._stack(x, idx), par)
-            dof = (3 * idx[:, :, None] + np.arange(3)).reshape(len(idx), -1)
+            dof = _dofs(idx)
             g += np.bincount(dof.ravel(), weights=(k * gl).ravel(), minlength=3 * self.n)
         return g.reshape(-1, 3)
 
@@ -246,7 +258,7 @@ class ShellEnergy:
         for k, idx, _, _ in self._terms():
             if k == 0 or len(idx) == 0:
                 continue
-            dof = (3 * idx[:, :, None] + np.arange(3)).reshape(len(idx), -1)
+            dof = _dofs(idx)
             m = dof.shape[1]
             keys.append((np.repeat(dof, m, axis=1) * (3 * self.n) + np.tile(dof, (1, m))).ravel())
         uniq, slot = np.unique(np.concatenate(keys), return_inverse=True)
@@ -270,12 +282,11 @@ class ShellEnergy:
         for k, idx, fn, par in self._terms():
             if k == 0 or len(idx) == 0:
                 continue
-            w, _, g = _residual(fn, self._stack(self.rest, idx), par)
-            dof = (3 * idx[:, :, None] + np.arange(3)).reshape(len(idx), -1)
+            dof = _dofs(idx)
             q = dof.shape[1]
             rows.append(np.repeat(dof, q, axis=1).ravel())
             cols.append(np.tile(dof, (1, q)).ravel())
-            vals.append(((2.0 * k * w)[:, None, None] * g[:, :, None] * g[:, None, :]).ravel())
+            vals.append((k * _gauss_newton(fn, self._stack(self.rest, idx), par)).ravel())
         n3 = 3 * self.n
         h = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n3, n3)).tocsr()
         return (0.5 * (h + h.T)).tocsr()            # the sums' order left (i, j) and (j, i) 1e-16 apart
@@ -296,9 +307,8 @@ class ShellEnergy:
                 continue
             if project and fn is _edge_term:
                 hl = _edge_hessian_psd(self._stack(x, idx).reshape(len(idx), 2, 3), par[0])
-            elif project:                                   # Gauss-Newton: 2 w grad(d) grad(d)^T
-                w, _, g = _residual(fn, self._stack(x, idx), par)
-                hl = (2.0 * w)[:, None, None] * g[:, :, None] * g[:, None, :]
+            elif project:
+                hl = _gauss_newton(fn, self._stack(x, idx), par)
             else:
                 _, _, hl = hd.local_derivatives(fn, self._stack(x, idx), par)
             vals.append((k * hl).ravel())
