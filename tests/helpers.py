@@ -1,7 +1,7 @@
 """What several test folders share (a library's tests and the command line's): heads made from ICT
 (held-out identities, a patch of skin, a remeshed scan, sealed lips), rendered frames of a jaw
 opening, a batch studio and its manifest, the Khronos glTF-Validator, a Live Link Face take, the
-Blenders the tests drive.  tests/ is on the path through its conftest."""
+Blenders the tests drive, the command run as a child.  tests/ is on the path through its conftest."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import json
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,11 @@ BLENDERS = {"4.5": ".venv-blender", "5.0": ".venv-blender5"}
 
 ROTATIONS = ["HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
              "RightEyeYaw", "RightEyePitch", "RightEyeRoll"]
+
+
+def run_mimica(*args) -> subprocess.CompletedProcess:
+    """`python -m mimica.cli ARGS` in a child process, its output captured as text."""
+    return subprocess.run([sys.executable, "-m", "mimica.cli", *map(str, args)], capture_output=True, text=True)
 
 
 def validate(paths) -> list[dict]:

@@ -5,10 +5,10 @@ and nothing written for what they refuse."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
+
+from helpers import run_mimica
 
 from mimica.data import data_dir
 from mimica.image import read_image
@@ -16,13 +16,9 @@ from mimica.image import read_image
 YALE = data_dir() / "yalefaces"
 
 
-def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "mimica.cli", *map(str, args)], capture_output=True, text=True)
-
-
 def test_cli_transfer_image_and_errors(tmp_path):
     out = tmp_path / "out"
-    r = _cli("transfer-image", YALE / "subject01.normal.gif", YALE / "subject01.happy.gif",
+    r = run_mimica("transfer-image", YALE / "subject01.normal.gif", YALE / "subject01.happy.gif",
              "--target", YALE / "subject03.normal.gif", "--out", out)
     assert r.returncode == 0, r.stderr
     res = read_image(out / "subject01.happy.png")
@@ -35,14 +31,14 @@ def test_cli_transfer_image_and_errors(tmp_path):
     junk = tmp_path / "junk.gif"
     junk.write_bytes(b"GIF89a nonsense")
     out2 = tmp_path / "out2"
-    r = _cli("transfer-image", junk, YALE / "subject01.happy.gif", "--target", YALE / "subject03.normal.gif",
+    r = run_mimica("transfer-image", junk, YALE / "subject01.happy.gif", "--target", YALE / "subject03.normal.gif",
              "--out", out2)
     assert r.returncode == 2 and "junk.gif" in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not out2.exists()
-    r = _cli("transfer-image", YALE / "subject01.normal.gif", YALE / "subject01.happy.gif",
+    r = run_mimica("transfer-image", YALE / "subject01.normal.gif", YALE / "subject01.happy.gif",
              "--target", YALE / "subject03.normal.gif", "--strength", "3", "--out", out2)
     assert r.returncode == 2 and "strength 3" in r.stderr and not out2.exists()
-    r = _cli("transfer-image", YALE / "subject01.normal.gif", YALE / "subject01.happy.gif",
+    r = run_mimica("transfer-image", YALE / "subject01.normal.gif", YALE / "subject01.happy.gif",
              "--target", YALE / "subject03.normal.gif", "--strength", "0.5", "--out", out2)
     half = read_image(out2 / "subject01.happy.png")
     # half the expression: about half the change from the target (warp and tents both halved)
@@ -52,7 +48,7 @@ def test_cli_transfer_image_and_errors(tmp_path):
 
 def test_cli_landmarks_and_driving_frames(tmp_path):
     lm = tmp_path / "s.landmarks.json"
-    r = _cli("landmarks", YALE / "subject02.normal.gif", "--out", lm, "--show", tmp_path / "s.png")
+    r = run_mimica("landmarks", YALE / "subject02.normal.gif", "--out", lm, "--show", tmp_path / "s.png")
     assert r.returncode == 0, r.stderr
     assert len(json.loads(lm.read_text())["points"]) == 68 and (tmp_path / "s.png").is_file()
     frames = tmp_path / "frames"
@@ -61,7 +57,7 @@ def test_cli_landmarks_and_driving_frames(tmp_path):
     for i, e in enumerate(["normal", "happy", "surprised"]):
         shutil.copy(YALE / f"subject02.{e}.gif", frames / f"f{i}.gif")
     clip = tmp_path / "clip.mp4"
-    r = _cli("transfer-image", YALE / "subject02.normal.gif", "--driving", frames,
+    r = run_mimica("transfer-image", YALE / "subject02.normal.gif", "--driving", frames,
              "--target", YALE / "subject05.normal.gif", "--out", clip)
     assert r.returncode == 0, r.stderr
     from mimica.image.video import frame_source
@@ -75,7 +71,7 @@ def test_a_faceless_target_writes_nothing(tmp_path):
     grey = tmp_path / "grey.png"
     Image.new("RGB", (200, 200), (128, 128, 128)).save(grey)
     out = tmp_path / "out"
-    r = _cli("transfer-image", YALE / "subject01.normal.gif", YALE / "subject01.happy.gif", "--target", grey,
+    r = run_mimica("transfer-image", YALE / "subject01.normal.gif", YALE / "subject01.happy.gif", "--target", grey,
              "--out", out)
     assert r.returncode == 2 and "grey.png" in r.stderr and "no face" in r.stderr
     assert not out.exists()
@@ -88,13 +84,13 @@ def test_cli_from_neutral_on_a_target_that_already_smiles(tmp_path):
     nothing written."""
     args = ("transfer-image", YALE / "subject03.normal.gif", YALE / "subject03.happy.gif",
             "--target", YALE / "subject03.happy.gif")
-    r = _cli(*args, "--out", tmp_path / "stacked")
+    r = run_mimica(*args, "--out", tmp_path / "stacked")
     assert r.returncode == 0, r.stderr
-    r = _cli(*args, "--from-neutral", YALE / "subject03.normal.gif", "--out", tmp_path / "rest")
+    r = run_mimica(*args, "--from-neutral", YALE / "subject03.normal.gif", "--out", tmp_path / "rest")
     assert r.returncode == 0, r.stderr
     tgt = read_image(YALE / "subject03.happy.gif")
     stacked, rest = (np.abs(read_image(tmp_path / d / "subject03.happy.png") - tgt).mean() for d in ("stacked", "rest"))
     assert rest < 0.15 * stacked, (rest, stacked)
-    r = _cli(*args, "--from-neutral", YALE / "subject03.normal.gif", "--method", "vtc", "--out", tmp_path / "no")
+    r = run_mimica(*args, "--from-neutral", YALE / "subject03.normal.gif", "--method", "vtc", "--out", tmp_path / "no")
     assert r.returncode == 2 and "method vtc" in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "no").exists()
