@@ -20,7 +20,7 @@ PACKAGE = Path(mimica.__file__).resolve().parent
 # facts) reads through it; image is io for pictures
 # (read, write, and the rasterizer every picture is drawn with); the users sit on top.
 LAYERS = [
-    {"errors", "_extras", "_memory", "outputs", "solver", "validate", "facts"},
+    {"errors", "_extras", "_memory", "outputs", "parallel", "solver", "validate", "facts"},
     {"mesh"},
     {"store"},
     {"data"},
@@ -187,8 +187,10 @@ print(json.dumps({{"same": [a == b for a, b in zip(before, after)], "mallopt": d
 
 # the package's own child processes, each with its reason: the Blender add-on runs inside Blender,
 # whose Python cannot import mimica (numpy < 2), so it calls the `mimica` command; FBX is read and
-# written by Blender's own importer and exporter, in Blender's Python
-CHILD_PROCESSES = {"mimica.blender_addon", "mimica.mesh.io.fbx"}
+# written by Blender's own importer and exporter, in Blender's Python; mimica.parallel's workers
+# are Python importing mimica's library alone (no command): CHOLMOD's factorization holds the GIL,
+# so only processes overlap a rig's systems
+CHILD_PROCESSES = {"mimica.blender_addon", "mimica.mesh.io.fbx", "mimica.parallel"}
 
 
 # the command line starts the other front ends (`mimica batch`, `mimica view`, `mimica demo`):

@@ -20,10 +20,10 @@ def _muscle_bar(desc):
     """A progress bar over the muscles' systems: yields progress(k, n, name)."""
     bar = _progress(range(1), 1, desc)
 
-    def progress(k, n, name):
+    def progress(k, n, name):                   # k of the n made
         bar.total = n
         bar.set_postfix_str(name)
-        bar.update(1 if k else 0)
+        bar.update(k - bar.n)
     try:
         yield progress
     finally:

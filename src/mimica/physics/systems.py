@@ -9,6 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import MimicaError
+from ..parallel import cores, run_jobs
 from ..rig.drives import jaw_open_factors
 from .drives import drive_load, drive_motions, strip_loads
 from .modal import ModalBasis, ModalWarpingSolver, rotation_operator, rotations
@@ -343,7 +344,7 @@ def skin_system(rig, rotation: bool = True):
     return energy, mass, K, W
 
 
-def precompute(rig, progress=None, only=None, skin=None):
+def precompute(rig, progress=None, only=None, skin=None, workers: int | None = None):
     """One modal system per force type on the rig (Kim §VI): each muscle's over its ROI (eq. 19),
     loaded at its spring nodes, and gravity's over the skin the skull does not hold; systems the
     rig already carries are kept (those loaded from a file are read back).
@@ -353,13 +354,18 @@ def precompute(rig, progress=None, only=None, skin=None):
     rig : Rig
         Changed in place: each muscle's `basis` and the rig's `gravity_basis` made.
     progress : callable, optional
-        Called as progress(k, n, name) before each muscle's system.
+        Called as progress(k, n, name) as each system is made: k of the n made, name the
+        muscle's or "gravity".
     only : collection of str, optional
         Make only these systems now (muscle names, "gravity"): a viewer makes each as it is
         first moved.
     skin : tuple, optional
         skin_system(rig), when the caller made it once for several calls (seconds on a whole
         head); None: made here.
+    workers : int or None
+        Processes that make the systems (mimica.parallel), each with one BLAS thread; None: one
+        a core, at most PRECOMPUTE_WORKERS; 1: in this process alone.  The systems come out
+        the same either way (one BLAS thread in this process too).
 
     Returns
     -------
@@ -377,29 +383,73 @@ def precompute(rig, progress=None, only=None, skin=None):
         return rig
     energy, mass, K, W = skin if skin is not None else skin_system(rig)
     p.update(k_area=energy.k_area, k_length=energy.k_length, k_bend=energy.k_bend)
-    modes = int(p.get("modes", 8))
-    def system(m):
+    for m in todo:
         if isinstance(m.basis, dict):
-            return ModalBasis.from_arrays(m.basis, W)
-        if m.kind == "drive":
-            # the drive's springs join the stiffness; its loads: the anchors' motion
-            Kd = (K + sp.diags(np.repeat(drive_springs(rig, m), 3))).tocsr()
-            loads = [drive_load(rig, m, motion) for motion in drive_motions(m)]
-            return ModalBasis.compute(energy, mass, ~m.roi, r=modes, stiffness=Kd, rotation=W,
-                                      load_shapes=np.stack([f.ravel() for f in loads], 1))
-        # its springs' loads, the Ritz vectors solved with the springs in (its static field exact)
-        Ks = (K + sp.diags(np.repeat(strip_springs(rig, m)[0], 3))).tocsr()
-        return ModalBasis.compute(energy, mass, ~m.roi, r=modes, load_shapes=strip_loads(rig, m),
-                                  stiffness=K, rotation=W, span=Ks)
-    for k, m in enumerate(todo):                   # (two threads measured slower: BLAS has both cores)
-        if progress:
-            progress(k, len(todo), m.name)
-        m.basis = system(m)
+            m.basis = ModalBasis.from_arrays(m.basis, W)
     if isinstance(rig.gravity_basis, dict):
         rig.gravity_basis = ModalBasis.from_arrays(rig.gravity_basis, W)
-    elif grav and rig.gravity_basis is None:
-        rig.gravity_basis = ModalBasis.compute(energy, mass, rig.held(), r=modes, stiffness=K, rotation=W)
+    jobs = [rig.muscles.index(m) for m in todo if m.basis is None]
+    if grav and rig.gravity_basis is None:
+        jobs.append(-1)
+    if not jobs:
+        return rig
+    # the costliest first (a factorization grows faster than its region): the workers finish together
+    jobs.sort(key=lambda k: -(rig.muscles[k].roi.sum() if k >= 0 else len(mass)))
+    shared = (_light(rig), energy, mass, K, int(p.get("modes", 8)))
+    workers = min(PRECOMPUTE_WORKERS, cores()) if workers is None else max(1, int(workers))
+    from threadpoolctl import threadpool_limits
+    with threadpool_limits(limits=1):
+        if workers > 1 and len(jobs) >= 2 * workers:
+            made = run_jobs(_system_job, shared, jobs, workers)
+        else:
+            made = ((i, _system_job(shared, k)) for i, k in enumerate(jobs))
+        for n_made, (i, arrays) in enumerate(made, 1):
+            k = jobs[i]
+            basis = ModalBasis(*arrays[:3], None, mass, energy.n, W)
+            if k < 0:
+                rig.gravity_basis = basis
+            else:
+                rig.muscles[k].basis = basis
+            if progress:
+                progress(n_made, len(jobs), rig.muscles[k].name if k >= 0 else "gravity")
     return rig
+
+
+# processes precompute makes the systems in at most: on this 2-core machine the library's 57
+# systems took 21 s in one process (one BLAS thread or two: the same), ~11 s in two
+PRECOMPUTE_WORKERS = 2
+
+
+def _light(rig):
+    """The rig without its systems (what a worker needs to make them)."""
+    import copy
+    light = copy.copy(rig)
+    light.muscles = [copy.copy(m) for m in rig.muscles]
+    for m in light.muscles:
+        m.basis = None
+    light.gravity_basis = None
+    return light
+
+
+def _system_job(shared, k: int) -> tuple:
+    """One system's (free, phi, lam): muscle k's over its ROI, or gravity's (k = -1)."""
+    rig, energy, mass, K, modes = shared
+    if k < 0:
+        b = ModalBasis.compute(energy, mass, rig.held(), r=modes, stiffness=K, rotation=False)
+        return b.free, b.phi, b.lam
+    m = rig.muscles[k]
+    if m.kind == "drive":
+        # the drive's springs join the stiffness; its loads: the anchors' motion
+        Kd = (K + sp.diags(np.repeat(drive_springs(rig, m), 3))).tocsr()
+        loads = [drive_load(rig, m, motion) for motion in drive_motions(m)]
+        b = ModalBasis.compute(energy, mass, ~m.roi, r=modes, stiffness=Kd, rotation=False,
+                               load_shapes=np.stack([f.ravel() for f in loads], 1))
+    else:
+        # its springs' loads, the Ritz vectors solved with the springs in (its static field exact)
+        Ks = (K + sp.diags(np.repeat(strip_springs(rig, m)[0], 3))).tocsr()
+        b = ModalBasis.compute(energy, mass, ~m.roi, r=modes, load_shapes=strip_loads(rig, m),
+                               stiffness=K, rotation=False, span=Ks)
+    return b.free, b.phi, b.lam
 
 
 def shell_stretch_mode(nodes: np.ndarray, bar: np.ndarray, modes: int = 8) -> tuple:

@@ -1,0 +1,154 @@
+"""Independent jobs in fresh Python worker processes, for work that holds the GIL (scikit-sparse's
+CHOLMOD factorization does: two threads run it no faster than one).
+
+Written here rather than taken from multiprocessing or concurrent.futures: their fork start
+is unsafe once GNU OpenMP (loaded with CHOLMOD) or BLAS threads have run in the parent, and
+their spawn start imports the caller's main script again in every worker, so a plain script
+without an `if __name__ == "__main__"` guard would fail.  A worker here is
+`python -c` importing mimica alone: it gets the shared state once, then jobs one at a time
+(the largest first, as the workers free up), each answered with its result or its exception,
+all pickled over the worker's pipes; its BLAS and OpenMP run one thread each.  Where a worker
+cannot start or dies, the jobs it did not answer run in the caller's process.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import queue
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+_ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OMP_THREAD_LIMIT": "1", "MKL_NUM_THREADS": "1"}
+
+
+def cores() -> int:
+    """The CPU cores this process may run on.
+
+    Returns
+    -------
+    int
+    """
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:                             # not Linux
+        return os.cpu_count() or 1
+
+
+def run_jobs(func, shared, jobs: list, workers: int):
+    """func(shared, job) for every job, in `workers` worker processes.
+
+    Parameters
+    ----------
+    func : callable
+        A module-level function, found again by its module and name in a worker (which imports
+        mimica's library, nothing of the caller's).
+    shared : object
+        Picklable; sent once to each worker.
+    jobs : list
+        Picklable, the costliest first (handed out in this order).
+    workers : int
+        Worker processes (at least 1).
+
+    Yields
+    ------
+    (int, object)
+        A job's index in `jobs` and func's result, in the order they finish.  A job's exception
+        is raised here as it arrives.
+    """
+    if not Path(sys.executable or "").name.lower().startswith("python"):
+        # an embedding program (Blender, a server) is not a Python to start workers with
+        yield from ((i, func(shared, job)) for i, job in enumerate(jobs))
+        return
+    todo = queue.SimpleQueue()
+    for i in range(len(jobs)):
+        todo.put(i)
+    done = queue.SimpleQueue()
+    root = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, **_ONE_THREAD}
+    # `python -c` puts the working directory first on the path: mimica's own place instead
+    code = f"import sys; sys.path[0] = {root!r}; from mimica.parallel import _serve; _serve()"
+    head = pickle.dumps((func.__module__, func.__qualname__, shared), protocol=pickle.HIGHEST_PROTOCOL)
+    threads = [threading.Thread(target=_feed, args=(code, env, head, jobs, todo, done), daemon=True)
+               for _ in range(workers)]
+    for t in threads:
+        t.start()
+    left = len(jobs)
+    try:
+        while left:
+            i, ok, value = done.get()
+            if i is None:                               # a worker gone: its job back to the caller
+                value = func(shared, jobs[ok])
+                i, ok = ok, True
+            left -= 1
+            if not ok:
+                raise value
+            yield i, value
+    finally:                                            # a job failed or the caller stopped: no more handed out
+        while True:
+            try:
+                todo.get_nowait()
+            except queue.Empty:
+                break
+        for t in threads:
+            t.join()
+
+
+def _feed(code, env, head, jobs, todo: queue.SimpleQueue, done: queue.SimpleQueue):
+    """One worker's thread: start it, hand it jobs while any are left, pass on its answers; where
+    it cannot start or dies, each job it holds or would take is done by the caller instead."""
+    try:
+        proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                stderr=subprocess.DEVNULL, env=env)
+        proc.stdin.write(head)
+        proc.stdin.flush()
+    except OSError:
+        proc = None
+    try:
+        while True:
+            try:
+                i = todo.get_nowait()
+            except queue.Empty:
+                break
+            if proc is None:
+                done.put((None, i, None))
+                continue
+            try:
+                pickle.dump((i, jobs[i]), proc.stdin, protocol=pickle.HIGHEST_PROTOCOL)
+                proc.stdin.flush()
+                k, ok, value = pickle.load(proc.stdout)
+            except (OSError, EOFError, pickle.UnpicklingError):
+                proc.kill()
+                proc = None
+                done.put((None, i, None))
+                continue
+            done.put((k, ok, value))
+    finally:
+        if proc is not None:
+            proc.stdin.close()
+            proc.wait()
+
+
+def _serve():
+    """A worker's loop: the shared state, then (index, job) -> (index, ok, result or exception)
+    until its input closes.  Its own stdout is the answers' pipe; anything printed goes to
+    stderr."""
+    import importlib
+    out = os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)
+    inp = sys.stdin.buffer
+    module, name, shared = pickle.load(inp)
+    func = getattr(importlib.import_module(module), name)
+    while True:
+        try:
+            i, job = pickle.load(inp)
+        except EOFError:
+            return
+        try:
+            answer = (i, True, func(shared, job))
+        except Exception as e:                          # the caller raises it
+            answer = (i, False, e)
+        pickle.dump(answer, out, protocol=pickle.HIGHEST_PROTOCOL)
+        out.flush()
