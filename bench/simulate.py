@@ -3,7 +3,7 @@
 Run from the project root: .venv/bin/python bench/simulate.py
 Skin: the ICT-FaceKit face area (9,409 vertices); Kim's 8 muscles, one system per muscle.
 
-Issue 18's figures: steps_per_s -- the whole library (its muscles, the jaw and the lids: 54
+Figures: steps_per_s -- the whole library (its muscles, the jaw and the lids: 54
 systems) with modal warping on and 8 channels active; precompute_s -- that library placed and
 precomputed on ICT's 11,248-vertex head; coverage_cosine_min / _median -- ICT's expression
 shapes (all but the eyeLook* gaze and PupilDilate) fitted by the whole library (`fit-muscles`:
@@ -379,7 +379,7 @@ def blink_gaps(rig, mf, expr, act, rest, d):
     equilibrium the forces' rotation moves a little); its lid opening left at the eye's middle
     (pairs open at least half the widest at rest) against the widest rest opening, and the
     smallest opening anywhere (negative: crossed).  A picture of each eye: at rest, ICT's blink,
-    the least squares alone held back evenly (before session 10), the fit now
+    the least squares alone held back evenly (no lid contact in the fit), the fit now
     (docs/figures/blink_fit.png)."""
     from mimica.physics.drives import lid_contact
     from mimica.rig.drives import lid_opening, open_pairs

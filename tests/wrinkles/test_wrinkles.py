@@ -221,7 +221,7 @@ def test_compression_raises_the_bulge_with_activation_and_age(layer, head_model)
 
 
 def test_a_wrinkle_deepens_with_the_muscles_its_mask_names(layer, head_model):
-    """Issue 18, part 4: the forehead lines name frontalis; with the same compression, frontalis
+    """The forehead lines name frontalis; with the same compression, frontalis
     at 0.5 and 1 deepens them by 1 + 0.5 MUSCLE_EMPHASIS and 1 + MUSCLE_EMPHASIS, other muscles
     (and relaxation) leave them as they were, and wrinkles naming other muscles do not change."""
     from mimica.wrinkles.layer import MUSCLE_EMPHASIS
