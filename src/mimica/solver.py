@@ -26,13 +26,14 @@ import scipy.sparse.linalg as spla
 from .errors import MimicaError
 from .parallel import cores
 
-# CHOLMOD's supernodal factorization (SuiteSparse 5, Debian's) opens its OpenMP regions on 4
-# threads whatever the machine has; on fewer cores they wait on one another (1.4 million futex
-# calls in the library's precompute on 2 cores: 19.9 s, 13.4 s with OpenMP held to the cores).
-# GNU OpenMP reads its thread limit when it loads, with CHOLMOD, just below; a limit the user
-# set is kept.
+# CHOLMOD's supernodal factorization (SuiteSparse 5, Debian's) opens many small OpenMP regions
+# on 4 threads whatever the machine has; on fewer cores the threads wait on one another (1.4
+# million futex calls in the library's precompute).  Measured on 2 cores, OpenMP limited to 1 /
+# 2 threads / not: the library's precompute in one process 13.4 / 13.3 / 19.9 s, the full
+# solver on a 945-node patch 17.0 / 3.2 / 5.6 steps/s.  GNU OpenMP reads its thread limit when
+# it loads, with CHOLMOD, just below; a limit the user set is kept.
 if "OMP_THREAD_LIMIT" not in os.environ and 0 < cores() < 4:
-    os.environ["OMP_THREAD_LIMIT"] = str(cores())
+    os.environ["OMP_THREAD_LIMIT"] = "1"
 try:  # pragma: no cover - depends on the machine
     from sksparse.cholmod import cholesky as _cholmod_cholesky
 except Exception:  # ImportError, or a broken shared library
