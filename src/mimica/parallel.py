@@ -99,13 +99,14 @@ def run_jobs(func, shared, jobs: list, workers: int):
 def _feed(code, env, head, jobs, todo: queue.SimpleQueue, done: queue.SimpleQueue):
     """One worker's thread: start it, hand it jobs while any are left, pass on its answers; where
     it cannot start or dies, each job it holds or would take is done by the caller instead."""
+    proc = None
     try:
         proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                 stderr=subprocess.DEVNULL, env=env)
         proc.stdin.write(head)
         proc.stdin.flush()
-    except OSError:
-        proc = None
+    except OSError:                                     # not started, or gone at once
+        proc = _gone(proc)
     try:
         while True:
             try:
@@ -119,9 +120,8 @@ def _feed(code, env, head, jobs, todo: queue.SimpleQueue, done: queue.SimpleQueu
                 pickle.dump((i, jobs[i]), proc.stdin, protocol=pickle.HIGHEST_PROTOCOL)
                 proc.stdin.flush()
                 k, ok, value = pickle.load(proc.stdout)
-            except (OSError, EOFError, pickle.UnpicklingError):
-                proc.kill()
-                proc = None
+            except Exception:                           # gone, or an answer that does not read back
+                proc = _gone(proc)
                 done.put((None, i, None))
                 continue
             done.put((k, ok, value))
@@ -129,6 +129,13 @@ def _feed(code, env, head, jobs, todo: queue.SimpleQueue, done: queue.SimpleQueu
         if proc is not None:
             proc.stdin.close()
             proc.wait()
+
+
+def _gone(proc):
+    """A worker that will not answer, ended (None: none was started)."""
+    if proc is not None:
+        proc.kill()
+        proc.wait()
 
 
 def _serve():

@@ -388,7 +388,8 @@ def precompute(rig, progress=None, only=None, skin=None, workers: int | None = N
             m.basis = ModalBasis.from_arrays(m.basis, W)
     if isinstance(rig.gravity_basis, dict):
         rig.gravity_basis = ModalBasis.from_arrays(rig.gravity_basis, W)
-    jobs = [rig.muscles.index(m) for m in todo if m.basis is None]
+    want = {id(m) for m in todo}
+    jobs = [k for k, m in enumerate(rig.muscles) if id(m) in want and m.basis is None]
     if grav and rig.gravity_basis is None:
         jobs.append(-1)
     if not jobs:
@@ -416,7 +417,7 @@ def precompute(rig, progress=None, only=None, skin=None, workers: int | None = N
 
 
 # processes precompute makes the systems in at most: on this 2-core machine the library's 57
-# systems took 21 s in one process (one BLAS thread or two: the same), ~11 s in two
+# systems take 13 s in one process, 8.4 s in two (docs/benchmarks.md)
 PRECOMPUTE_WORKERS = 2
 
 
