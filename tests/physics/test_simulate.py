@@ -75,7 +75,7 @@ def test_ritz_modes_with_springs_in_the_span_diagonalize_the_skin_and_hold_its_s
     loads[(3 * at[:, None] + np.arange(3)).ravel(), np.arange(3 * len(at))] = 1.0
     if repeat:
         loads = np.hstack([loads, loads[:, :3]])
-    b = ModalBasis.compute(E, mass, border, r=8, load_shapes=loads, stiffness=K, span=span)
+    b = ModalBasis.compute(E, mass, border, r=8, load_shapes=loads, stiffness=K, span_springs=np.repeat(k, 3))
     dof = (3 * b.free[:, None] + np.arange(3)).ravel()
     kk = b.phi.T @ (K[dof][:, dof] @ b.phi)
     np.testing.assert_allclose(kk, np.diag(b.lam), atol=1e-8 * b.lam.max())

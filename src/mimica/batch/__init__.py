@@ -29,6 +29,7 @@ from concurrent.futures import FIRST_COMPLETED, wait
 from pathlib import Path
 
 from ..errors import MimicaError
+from ..parallel import cores
 from .manifest import FileHashes, Job, key_jobs, plan
 from .work import marker_path, run_job, watch_parent
 
@@ -227,7 +228,7 @@ def run_batch(manifest, out, workers: int | None = None, ray: str | None = None,
     _write_json(meta / "plan.json", {"manifest": str(Path(manifest).resolve()), "planned": t0,
                                      "jobs": [{"id": j.id, "key": j.key, "kind": j.kind, "after": j.after,
                                                "output": str(j.outputs(out))} for j in jobs]})
-    workers = workers or os.cpu_count() or 1
+    workers = workers or cores()
     by_id = {j.id: j for j in jobs}
     groups: dict[str, deque] = {}
     for j in todo:                                  # a head's jobs, in the plan's order

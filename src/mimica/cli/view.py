@@ -67,8 +67,8 @@ def _one_blas_thread_when_made(bar, now: bool):
     """The progress callback of the systems made beside the page: the bar, then one BLAS thread
     once they are all made (`now`: at once).  A frame's products are small, and a second thread
     spinning for work takes the core the browser draws with (measured: 8.7 ms a frame's output
-    with two on a 2-core machine while Chromium draws, ~0.5 ms with one); the systems' sparse
-    factorizations take both while they are made (1.45x faster)."""
+    with two on a 2-core machine while Chromium draws, ~0.5 ms with one); the systems are made
+    with one BLAS thread each anyway (physics.precompute)."""
     from threadpoolctl import threadpool_limits
 
     def made(k, n, name):

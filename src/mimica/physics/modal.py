@@ -196,8 +196,8 @@ def _stiffness_products(V, G, loads, prevs, shift, extra) -> np.ndarray:
     """V^T K V for Ritz vectors V solved from (K + E - shift M) V = [loads, M V_prev...], read
     off the right-hand sides instead of a sparse product over every dof (2.6 of the library's
     25 s): K V = R + shift M V - E V, so V^T K V = V^T R + shift G - (E V)^T V, with G = V^T M V,
-    V^T M V_prev G's columns, and R's loads (a few nodes' patterns) and E (the span's extra
-    springs) nonzero on a few rows.
+    V^T M V_prev G's columns, and R's loads (a few nodes' patterns) and E (the span's springs,
+    diagonal) nonzero on a few rows.
 
     Parameters
     ----------
@@ -210,8 +210,8 @@ def _stiffness_products(V, G, loads, prevs, shift, extra) -> np.ndarray:
     prevs : list of int arrays
         For each later block, the columns of V it multiplied by M.
     shift : float
-    extra : (d, d) sparse matrix or None
-        E.
+    extra : (d,) float array or None
+        E's diagonal.
 
     Returns
     -------
@@ -225,11 +225,9 @@ def _stiffness_products(V, G, loads, prevs, shift, extra) -> np.ndarray:
         kr[:, at: at + len(cols)] = G[:, cols]
         at += len(cols)
     kr += shift * G
-    if extra is not None and extra.nnz:
-        ex = sp.csr_matrix(extra)
-        ex.eliminate_zeros()                               # K + E - K keeps K's pattern
-        rows, cols = np.flatnonzero(ex.getnnz(axis=1)), np.flatnonzero(ex.getnnz(axis=0))
-        kr -= V[rows].T @ (ex[rows][:, cols] @ V[cols])
+    if extra is not None:
+        rows = np.flatnonzero(extra)
+        kr -= V[rows].T @ (extra[rows, None] * V[rows])
     return kr
 
 
@@ -290,16 +288,16 @@ class ModalBasis:
     @classmethod
     def compute(cls, energy: ShellEnergy, mass: np.ndarray, fixed: np.ndarray, r: int = 20,
                 load_nodes=None, stiffness=None, rotation=None, load_shapes=None,
-                span=None) -> "ModalBasis":
+                span_springs=None) -> "ModalBasis":
         """Modes of the shell with `fixed` nodes removed, for forces on `load_nodes`, or of the
         given force patterns `load_shapes` (3n, k) (a drive's anchors moving, a muscle's fanned
         springs pulling).
 
         Without either, the loads are uniform body forces (gravity); r sets how many
-        Krylov vectors are added beyond the static load shapes.  span: the stiffness whose
-        solves make the Ritz vectors (default `stiffness`): a muscle's skin with its springs,
-        so that its static response lies in the span exactly, while the modes' eigenvalues
-        stay the skin's alone (the springs are the muscle system's own).
+        Krylov vectors are added beyond the static load shapes.  span_springs: per-dof
+        stiffness (3n,) added to `stiffness` in the solves that make the Ritz vectors (a
+        muscle's springs), so that its static response lies in the span exactly, while the
+        modes' eigenvalues stay the skin's alone (the springs are the muscle system's own).
         """
         n = energy.n
         fixed = np.asarray(fixed, bool)
@@ -309,8 +307,6 @@ class ModalBasis:
         K = energy.rest_stiffness() if stiffness is None else stiffness
         dof = (3 * free[:, None] + np.arange(3)).ravel()
         Kff = K[dof][:, dof].tocsc()
-        # the span's stiffness less the modes' (a muscle's springs: a few nodes), sliced alone
-        extra = None if span is None else (span - K)[dof][:, dof].tocsc()
         m = np.repeat(mass[free], 3)
         r = max(1, min(r, len(dof) - 2))
         # Load-dependent Ritz vectors (Wilson, Yuan & Dickens 1982) stand in for ARPACK: the
@@ -320,7 +316,8 @@ class ModalBasis:
         # force on the load nodes exact, which the lowest (bending) modes alone cannot give
         # for forces along the skin.
         shift = -1e-9 * float(np.abs(Kff.diagonal()).mean() / m.mean())   # keeps drifting parts solvable
-        Ks = Kff if extra is None else Kff + extra
+        extra = None if span_springs is None else np.asarray(span_springs, float)[dof]   # diagonal E
+        Ks = Kff if extra is None else Kff + sp.diags(extra)
         fac = SPDSolver((Ks - shift * sp.diags(m)).tocsc())
         if load_shapes is not None:
             loads = np.asarray(load_shapes, float).reshape(3 * n, -1)[dof]

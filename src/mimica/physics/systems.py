@@ -9,7 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import MimicaError
-from ..parallel import cores, run_jobs
+from ..parallel import cores, one_blas_thread, run_jobs
 from ..rig.drives import jaw_open_factors
 from .drives import drive_load, drive_motions, strip_loads
 from .modal import ModalBasis, ModalWarpingSolver, rotation_operator, rotations
@@ -29,6 +29,9 @@ WARP_DIFFUSION = 16.0
 # The library's placements were found on that softer skin (tools/calibrate_muscles.py --skin)
 # and kept: on this skin they fit better than those found on it before (docs/benchmarks.md).
 SKIN_AREA, SKIN_BEND = 1.0, 0.05
+# processes precompute makes the systems in at most: on this 2-core machine the library's 57
+# systems take 13 s in one process, 8.4 s in two (docs/benchmarks.md)
+PRECOMPUTE_WORKERS = 2
 
 
 def _dlyap(M, Q):
@@ -376,20 +379,19 @@ def precompute(rig, progress=None, only=None, skin=None, workers: int | None = N
         raise MimicaError("rig: built by an older mimica; rebuild it with `mimica rig`")
     p = rig.params
     gravity = p.get("gravity", True) or rig.gravity_basis is not None
-    left = [m for m in rig.muscles if not isinstance(m.basis, ModalBasis)]
-    todo = left if only is None else [m for m in left if m.name in only]
+    todo = [k for k, m in enumerate(rig.muscles)
+            if not isinstance(m.basis, ModalBasis) and (only is None or m.name in only)]
     grav = gravity and not isinstance(rig.gravity_basis, ModalBasis) and (only is None or "gravity" in only)
     if not todo and not grav and "k_length" in p:
         return rig
     energy, mass, K, W = skin if skin is not None else skin_system(rig)
     p.update(k_area=energy.k_area, k_length=energy.k_length, k_bend=energy.k_bend)
-    for m in todo:
-        if isinstance(m.basis, dict):
-            m.basis = ModalBasis.from_arrays(m.basis, W)
+    for k in todo:
+        if isinstance(rig.muscles[k].basis, dict):
+            rig.muscles[k].basis = ModalBasis.from_arrays(rig.muscles[k].basis, W)
     if isinstance(rig.gravity_basis, dict):
         rig.gravity_basis = ModalBasis.from_arrays(rig.gravity_basis, W)
-    want = {id(m) for m in todo}
-    jobs = [k for k, m in enumerate(rig.muscles) if id(m) in want and m.basis is None]
+    jobs = [k for k in todo if rig.muscles[k].basis is None]
     if grav and rig.gravity_basis is None:
         jobs.append(-1)
     if not jobs:
@@ -398,8 +400,7 @@ def precompute(rig, progress=None, only=None, skin=None, workers: int | None = N
     jobs.sort(key=lambda k: -(rig.muscles[k].roi.sum() if k >= 0 else len(mass)))
     shared = (_light(rig), energy, mass, K, int(p.get("modes", 8)))
     workers = min(PRECOMPUTE_WORKERS, cores()) if workers is None else max(1, int(workers))
-    from threadpoolctl import threadpool_limits
-    with threadpool_limits(limits=1):
+    with one_blas_thread():
         if workers > 1 and len(jobs) >= 2 * workers:
             made = run_jobs(_system_job, shared, jobs, workers)
         else:
@@ -414,11 +415,6 @@ def precompute(rig, progress=None, only=None, skin=None, workers: int | None = N
             if progress:
                 progress(n_made, len(jobs), rig.muscles[k].name if k >= 0 else "gravity")
     return rig
-
-
-# processes precompute makes the systems in at most: on this 2-core machine the library's 57
-# systems take 13 s in one process, 8.4 s in two (docs/benchmarks.md)
-PRECOMPUTE_WORKERS = 2
 
 
 def _light(rig):
@@ -447,9 +443,8 @@ def _system_job(shared, k: int) -> tuple:
                                load_shapes=np.stack([f.ravel() for f in loads], 1))
     else:
         # its springs' loads, the Ritz vectors solved with the springs in (its static field exact)
-        Ks = (K + sp.diags(np.repeat(strip_springs(rig, m)[0], 3))).tocsr()
         b = ModalBasis.compute(energy, mass, ~m.roi, r=modes, load_shapes=strip_loads(rig, m),
-                               stiffness=K, rotation=False, span=Ks)
+                               stiffness=K, rotation=False, span_springs=np.repeat(strip_springs(rig, m)[0], 3))
     return b.free, b.phi, b.lam
 
 

@@ -12,7 +12,6 @@ vertex order.
 
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields, replace
 
@@ -23,6 +22,7 @@ from ..correspond import Correspondence, correspond
 from ..errors import MimicaError
 from ..landmarks import Landmarks
 from ..mesh import Mesh
+from ..parallel import cores, one_blas_thread
 from .core import ANCHOR, DT_STABILIZER, METHODS, TransferSolver, static_vertices
 from .metrics import relative_error, song_vertex_error
 
@@ -348,13 +348,12 @@ class ExpressionTransfer:
         if out is None:
             out = np.empty((len(f), self.target.n_vertices, 3))
             starts = range(0, len(f), batch)
-            workers = min(workers or os.cpu_count() or 1, len(starts))
+            workers = min(workers or cores(), len(starts))
             if workers <= 1:
                 for i in starts:
                     self.solver.apply(f[i:i + batch], self._back, out=out[i:i + batch])
             else:
-                from threadpoolctl import threadpool_limits   # here: its import sets KMP_DUPLICATE_LIB_OK
-                with threadpool_limits(limits=1), ThreadPoolExecutor(workers) as ex:
+                with one_blas_thread(), ThreadPoolExecutor(workers) as ex:
                     jobs = [ex.submit(self.solver.apply, f[i:i + batch], self._back, out[i:i + batch])
                             for i in starts]
                     for j in jobs:

@@ -36,6 +36,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from .._memory import prefaulted
+from ..parallel import cores, one_blas_thread
 from ..errors import MimicaError
 from ..mesh import Mesh
 from .elements import Elements, dt_elements, gradient_operator, vtc_elements
@@ -119,19 +120,6 @@ def _coordinate_rows(frames: np.ndarray, S: np.ndarray, at: np.ndarray) -> np.nd
 
 
 _POOL = None
-_BLAS = None
-
-
-def _one_blas_thread():
-    """A context in which the BLAS libraries run on one thread (the work is spread on the cores
-    by _blocks), from a controller made once: threadpoolctl's threadpool_limits looks the loaded
-    libraries up on every call (1 ms, against 0.04 ms).  Made on first use, after numpy, SciPy
-    and CHOLMOD have loaded their BLAS."""
-    global _BLAS
-    if _BLAS is None:
-        from threadpoolctl import ThreadpoolController   # here: its import sets KMP_DUPLICATE_LIB_OK
-        _BLAS = ThreadpoolController()
-    return _BLAS.limit(limits=1, user_api="blas")
 
 
 def _blocks(work, n: int, size: int) -> None:
@@ -146,13 +134,13 @@ def _blocks(work, n: int, size: int) -> None:
     from concurrent.futures import ThreadPoolExecutor
     global _POOL
     starts = range(0, n, size)
-    cores = os.cpu_count() or 1
-    if min(cores, len(starts)) <= 1 or threading.current_thread().name.startswith("mimica-blocks"):
+    n_cores = cores()
+    if min(n_cores, len(starts)) <= 1 or threading.current_thread().name.startswith("mimica-blocks"):
         for i in starts:
             work(i)
         return
     if _POOL is None or _POOL[0] != os.getpid():
-        _POOL = (os.getpid(), ThreadPoolExecutor(cores, thread_name_prefix="mimica-blocks"))
+        _POOL = (os.getpid(), ThreadPoolExecutor(n_cores, thread_name_prefix="mimica-blocks"))
     list(_POOL[1].map(work, starts))
 
 
@@ -230,8 +218,7 @@ def _inner(a: np.ndarray, b: np.ndarray | None = None) -> np.ndarray:
     """a @ b (default a @ a.T, numpy's SYRK) for a wide (m, n) a: the n's in blocks on the cores
     (see _blocks), summed: the 192 x 11,248 tips' rows of bench/batch.py's basis path, a @ a.T
     11.1 -> 5.5 ms."""
-    import os
-    nb = max(1, min(os.cpu_count() or 1, a.shape[1] // 2048))
+    nb = max(1, min(cores(), a.shape[1] // 2048))
     size = -(-a.shape[1] // nb)
     parts = [None] * nb
 
@@ -478,7 +465,7 @@ class TransferSolver:
         block by frame block in the output's layout), into an output whose pages another thread
         maps while the solve runs.
         Exact but for the truncations, the interpolation and the GEMM's rounding (1e-7)."""
-        with _one_blas_thread():
+        with one_blas_thread():
             return self._apply_basis(frames, tol, similarity, check)
 
     def _apply_basis(self, frames, tol, similarity, check):
