@@ -1,8 +1,9 @@
 """Run inside Blender's Python (bpy), by tests/mesh/test_foreign_files.py and bench/foreign_files.py:
 Blender as the other tool a user's files come from and go back to.
 
-    python-with-bpy blender_files.py export HEAD.obj OUT.glb|OUT.fbx
-        Blender's OBJ importer, then its glTF or FBX exporter, both with their defaults.
+    python-with-bpy blender_files.py export HEAD.obj|HEAD.glb|HEAD.fbx OUT.glb|OUT.fbx
+        Blender's OBJ (glTF, FBX) importer, then its glTF or FBX exporter, all with their
+        defaults: a file as a user's round trip through Blender writes it back.
     python-with-bpy blender_files.py import FILE.glb|FILE.fbx OUT.json
         the file imported as a user imports it; OUT.json: each mesh object's name, world matrix,
         vertex count, world-space vertices (OUT.json's .npz beside it), materials, shape keys and
@@ -19,7 +20,12 @@ import numpy as np
 mode, src, out = sys.argv[-3:]
 bpy.ops.wm.read_factory_settings(use_empty=True)
 if mode == "export":
-    bpy.ops.wm.obj_import(filepath=src)
+    if src.lower().endswith((".glb", ".gltf")):
+        bpy.ops.import_scene.gltf(filepath=src)
+    elif src.lower().endswith(".fbx"):
+        bpy.ops.import_scene.fbx(filepath=src)
+    else:
+        bpy.ops.wm.obj_import(filepath=src)
     if out.lower().endswith(".fbx"):
         bpy.ops.export_scene.fbx(filepath=out)
     else:

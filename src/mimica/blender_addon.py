@@ -516,8 +516,9 @@ if bpy is not None:  # pragma: no cover - runs inside Blender (tests/blender_add
             fps = context.scene.render.fps / context.scene.render.fps_base
             start = context.scene.frame_start
             n = 0
+            plays = facts.arkit_targets(kb.name for kb in keys)      # other tools' names too (EyeBlinkLeft ...)
             for name, w in weights.items():
-                kb = keys.get(name)
+                kb = keys.get(plays.get(name, name))
                 if kb is None:
                     continue
                 n += 1

@@ -21,6 +21,60 @@ ARKIT_52 = (
     "mouthUpperUpRight", "browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft", "browOuterUpRight",
     "cheekPuff", "cheekSquintLeft", "cheekSquintRight", "noseSneerLeft", "noseSneerRight", "tongueOut")
 
+_ARKIT_LOWER = {n.lower(): n for n in ARKIT_52}
+_SIDES = {"l": "Left", "r": "Right", "left": "Left", "right": "Right"}
+
+
+def arkit_name(name: str):
+    """The ARKit shape a morph target or shape key of another tool's file stands for, or None:
+    the name compared without case ("EyeBlinkLeft", as Live Link and Unreal write it), after any
+    namespace ("blendShape1.eyeBlinkLeft" from Maya, "head:eyeBlinkLeft", "|head|eyeBlinkLeft"),
+    with a side written as a suffix ("eyeBlink_L" as ICT-FaceKit, "eyeBlink.L" as Blender) or a
+    copy's number ("eyeBlinkLeft.001") read as the name's own.
+
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    str or None
+        One of ARKIT_52.
+    """
+    s = name.replace("|", ":").split(":")[-1].strip()
+    while len(s) > 4 and s[-4] == "." and s[-3:].isdigit():        # Blender's copies: .001
+        s = s[:-4]
+    base, sep, side = max(s.rpartition("_"), s.rpartition("."), key=lambda p: len(p[0]))
+    if sep and side.lower() in _SIDES:
+        s = base.split(".")[-1] + _SIDES[side.lower()]
+    else:
+        s = s.split(".")[-1]
+    return _ARKIT_LOWER.get(s.lower())
+
+
+def arkit_targets(names) -> dict:
+    """Which of a head's morph targets plays each ARKit shape, as other tools name them
+    (arkit_name: without case, namespaces, side suffixes); a name that is the ARKit
+    name itself wins over one read as it.
+
+    Parameters
+    ----------
+    names : iterable of str
+        The head's morph-target names.
+
+    Returns
+    -------
+    dict
+        {ARKit name: the head's target name}.
+    """
+    out = {}
+    for n in names:
+        a = arkit_name(n)
+        if a is not None and (a not in out or n == a):
+            out[a] = n
+    return out
+
+
 # the head's rotation some takes carry beside the weights (radians)
 HEAD_ROTATION = ("headYaw", "headPitch", "headRoll")
 

@@ -98,6 +98,21 @@ report["muscles"] = list(bpy.ops.mimica.muscle_shape_keys(expressions={"happines
 km = keys(other)
 report["muscle_largest"] = float(np.linalg.norm(km["muscles_happiness"] - km["Basis"], axis=1).max())
 
+# keys another tool named (a Maya namespace and case, ICT's side suffix): the take keys them too
+named = bpy.data.objects.new("named", head.data.copy())
+bpy.context.collection.objects.link(named)
+named.shape_key_clear()
+named.shape_key_add(name="Basis", from_mix=False)
+for n in ("blendShape1.JawOpen", "eyeBlink_L"):
+    named.shape_key_add(name=n, from_mix=False)
+select(named)
+bpy.ops.mimica.live_link_take(filepath=take_csv)
+report["named_take_samples"] = {}
+for f in (1, 11, 31):
+    scene.frame_set(f)
+    report["named_take_samples"][str(f)] = {n: named.data.shape_keys.key_blocks[n].value
+                                            for n in ("blendShape1.JawOpen", "eyeBlink_L")}
+
 # an error: no shape keys on the active object -> a report, nothing changed
 bpy.ops.mesh.primitive_cube_add()
 cube = bpy.context.active_object

@@ -79,11 +79,11 @@ def test_the_cut_comes_with_the_arrays(tmp_path):
 def test_the_addon_inside_blender(tmp_path, full_model, head_glb, version):
     """Headless Blender (bpy 4.5 and 5.0): ARKit shape keys on an imported head (z up, as Blender has
     it: the jaw opens down Blender's z), a Live Link take keyed onto them (values at sampled
-    frames equal the CSV's), shape keys moved onto another mesh, muscle-simulated shape keys,
-    and an error as a Blender report.  And mimica's GLBs imported as a user imports them: ICT's
-    whole mesh smooth, with its uv and 12 materials, in metres, whole through FBX and back;
-    quantized morph targets as shape keys; an animated take with its head's armature, the shape
-    keys' values at sampled frames the take's."""
+    frames equal the CSV's; keys named as other tools name them too), shape keys moved onto
+    another mesh, muscle-simulated shape keys, and an error as a Blender report.  And mimica's
+    GLBs imported as a user imports them: ICT's whole mesh smooth, with its uv and 12 materials,
+    in metres, whole through FBX and back; quantized morph targets as shape keys; an animated
+    take with its head's armature, the shape keys' values at sampled frames the take's."""
     from mimica.mesh import write_glb, write_mesh
     from mimica.mesh.io import SPARSE_TOLERANCE
     exe = blender_python(version)
@@ -122,6 +122,10 @@ def test_the_addon_inside_blender(tmp_path, full_model, head_glb, version):
         t = (int(f) - 1) / 24
         for n in ("jawOpen", "eyeBlinkLeft"):
             assert got[n] == pytest.approx(np.interp(t, times, written[n]), abs=1e-4), (f, n)
+    for f, got in r["named_take_samples"].items():  # keys another tool named (blendShape1.JawOpen, eyeBlink_L)
+        t = (int(f) - 1) / 24
+        for n, a in (("blendShape1.JawOpen", "jawOpen"), ("eyeBlink_L", "eyeBlinkLeft")):
+            assert got[n] == pytest.approx(np.interp(t, times, written[a]), abs=1e-4), (f, n)
     assert r["transfer"] == ["FINISHED"] and r["transfer_keys"] == ["Basis", "jawOpen", "mouthSmileLeft"]
     assert 0.95 < r["transfer_ratio"] < 1.25 and r["transfer_jaw_down"] < -0.5
     assert r["muscles"] == ["FINISHED"] and r["muscle_largest"] > 0.05

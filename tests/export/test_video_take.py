@@ -90,3 +90,33 @@ def test_what_it_saw_turns_and_held_weights():
     assert saw["held"] == {"jawOpen": [(10, 39)]}
     assert saw["turned"] == [(60, 63)] and abs(saw["turn_max"] - TURN_TRUSTED - 5) < 1e-6
     assert saw["no_face"] == []
+
+
+def test_other_tools_names_play_the_arkit_shapes(head_glb, tmp_path):
+    """Morph targets as other tools name them -- Live Link's PascalCase, a Maya namespace, ICT's
+    and Blender's side suffixes, Blender's copies -- are read as the ARKit shapes, an exact name
+    winning; names of no ARKit shape are none.  A head whose targets are so named is played
+    whole (all 52 driven, each by its own shape's weights)."""
+    import pygltflib as gl
+    from mimica.export.take import animate_glb
+    from mimica.facts import arkit_name, arkit_targets
+    from mimica.mesh.io.gltf import read_accessor
+    for name, arkit in (("EyeBlinkLeft", "eyeBlinkLeft"), ("blendShape1.jawOpen", "jawOpen"),
+                        ("|head|mouthLeft", "mouthLeft"), ("head:cheekPuff", "cheekPuff"),
+                        ("mouthSmile_L", "mouthSmileLeft"), ("browDown.R", "browDownRight"),
+                        ("eyeWideRight.001", "eyeWideRight"), ("Basis", None), ("browInnerUp_L", None),
+                        ("smile", None)):
+        assert arkit_name(name) == arkit, name
+    assert arkit_targets(["JawOpen", "jawOpen", "Jaw_Open"]) == {"jawOpen": "jawOpen"}
+    g = gl.GLTF2().load(str(head_glb))
+    names = g.meshes[0].extras["targetNames"]
+    g.meshes[0].extras["targetNames"] = ["blendShape1." + n[0].upper() + n[1:] for n in names]
+    g.save_binary(str(tmp_path / "maya.glb"))
+    rng = np.random.default_rng(5)
+    weights = {n: rng.uniform(0, 1, 3) for n in ARKIT_52}
+    info = animate_glb(tmp_path / "maya.glb", tmp_path / "take.glb", np.arange(3) / 30, weights)
+    assert info["driven"] == 52
+    out = gl.GLTF2().load(str(tmp_path / "take.glb"))
+    anim = read_accessor(out, out.animations[0].samplers[0].output).reshape(3, len(names))
+    for j, n in enumerate(names):
+        np.testing.assert_allclose(anim[:, j], weights[n], atol=1e-6)

@@ -231,3 +231,36 @@ def test_a_clip_as_a_few_basis_shapes(head_model, tmp_path):
     assert (tmp_path / "c.glb").stat().st_size * 5 < (tmp_path / "d.glb").stat().st_size
     r = validate([tmp_path / "c.glb"])[0]
     assert r["errors"] == 0 and r["warnings"] == 0, r["messages"]
+
+
+def test_a_slit_that_moves_apart_is_not_welded(written, tmp_path):
+    """Read as another writer's file (mimica's vertex maps taken out), a head whose mouth
+    `blendshapes` cut keeps the cut: the lips' copies coincide at rest but move apart in its
+    morph targets, so they stay two vertices, each with its own target (the same rows as mimica's
+    own reading); without the targets the same copies are one surface's seam, welded."""
+    from mimica.mesh.io import UNITS, read_morph_targets
+    from mimica.mesh.io.gltf import UNITS_KEY, VERTEX_MAP, open_for_edit, save_edited
+    own, own_t, unit = read_morph_targets(written / "arkit.glb")
+    for keep_targets in (True, False):
+        _, doc, buf, _ = open_for_edit(written / "arkit.glb")
+        for mesh in doc["meshes"]:
+            for prim in mesh["primitives"]:
+                for key in (VERTEX_MAP, UNITS_KEY):
+                    prim.get("extras", {}).pop(key, None)
+                if not keep_targets:
+                    prim.pop("targets", None)
+            if not keep_targets:
+                mesh.get("extras", {}).pop("targetNames", None)
+                mesh.pop("weights", None)
+        save_edited(doc, buf, tmp_path / "other.glb")
+        if not keep_targets:
+            from mimica.mesh import read_mesh
+            assert read_mesh(tmp_path / "other.glb").n_vertices == 468          # the head's own, sealed
+            continue
+        back, back_t, back_unit = read_morph_targets(tmp_path / "other.glb")   # metres: the file's own
+        assert back.n_vertices == own.n_vertices == 479                       # 11 lip vertices cut
+
+        def rows(m, t, k):
+            r = k * np.c_[m.vertices, t["jawOpen"] - m.vertices]
+            return np.round(r[np.lexsort(r.T[::-1])], 5)
+        np.testing.assert_allclose(rows(back, back_t, UNITS[back_unit]), rows(own, own_t, UNITS[unit]), atol=2e-5)

@@ -28,14 +28,19 @@ def cmd_animate(a):
     """
     from ..pipeline import AnimateOptions, animate
     opts = AnimateOptions(head_rotation=a.head_rotation, pivot=tuple(floats(a.pivot, 3, "--pivot")) if a.pivot else None,
-                          fps=a.fps, rest_frame=a.rest_frame)
+                          fps=a.fps, rest_frame=a.rest_frame, landmarks=a.landmarks)
     if (a.arkit is None) == (a.video is None):
         raise MimicaError("animate: give the take as --arkit take.csv or as --video take.mp4 (one of them)")
+    if a.landmarks and a.video is None:
+        raise MimicaError("--landmarks places the points a video is fitted at: give --video")
     if a.preview and a.video is None:
         raise MimicaError("--preview shows the head beside the video it was fitted to: give --video")
     r = animate(a.head, a.out, a.arkit, a.video, opts, progress=_say, preview=a.preview)
     if r.video:
         v = r.video
+        if v["landmarks"] == "found":
+            _say(f"{a.head}: no landmarks stored in it (another tool's head, or written back by one): its 68 "
+                 "found on renders of it; give them with --landmarks where they miss")
         _say(f"{a.video}: {v['frames']} frames tracked ({v['track_fps']:.0f} frames/s) and fitted "
              f"({v['fit_fps']:.0f} frames/s); frame {a.rest_frame} taken as the performer's rest; "
              f"points misfit median {v['misfit_median'] * 100:.1f} % of the face's width; "
@@ -95,6 +100,8 @@ def add_args(sub) -> None:
                                     "also as a Live Link-style CSV beside --out")
     an.add_argument("--rest-frame", type=int, default=D.rest_frame,
                     help="with --video: a frame where the performer's face is at rest (default: the first)")
+    an.add_argument("--landmarks", help="with --video: the head's 68 landmarks (JSON) where its GLB stores none "
+                                        "(a head from another tool; default: found on renders of it)")
     an.add_argument("--fps", type=float, help="the frame rate of a Timecode column (default: from its frame numbers)")
     an.add_argument("--head-rotation", action="store_true",
                     help="also turn the head by the take's HeadYaw, HeadPitch, HeadRoll (radians)")

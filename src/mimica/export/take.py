@@ -146,7 +146,8 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: 
     Parameters
     ----------
     head_glb : str or Path
-        A GLB whose morph targets are named as ARKit shapes (`blendshapes` makes one).
+        A GLB whose morph targets are named as ARKit shapes (`blendshapes` makes one; other
+        tools' names are read as facts.arkit_targets reads them).
     out : str or Path
         The GLB to write.
     times : (F,) float array
@@ -174,7 +175,7 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: 
     shown = {}
     for node, mi, _, _ in placed_meshes(g, head_glb):
         names = list((doc["meshes"][mi].get("extras") or {}).get("targetNames") or [])
-        if any(n in weights for n in names):
+        if any(a in weights for a in facts.arkit_targets(names)):
             shown.setdefault(mi, []).append(node)
     if not shown:
         raise MimicaError(f"{head_glb}: no mesh with morph targets named as ARKit shapes (make them with "
@@ -185,10 +186,11 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: 
     samplers, channels, driven = [], [], set()
     for mi, nodes in shown.items():
         names = list(doc["meshes"][mi]["extras"]["targetNames"])
+        plays = {n: a for a, n in facts.arkit_targets(names).items() if a in weights}
         w = np.zeros((len(times), len(names)), np.float32)
         for j, n in enumerate(names):
-            if n in weights:
-                w[:, j] = weights[n]
+            if n in plays:
+                w[:, j] = weights[plays[n]]
                 driven.add(n)
         samplers.append({"input": it, "output": buf.add(w.reshape(-1), None, "SCALAR", FLOAT),
                          "interpolation": "LINEAR"})

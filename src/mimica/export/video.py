@@ -63,42 +63,63 @@ class LandmarkBasis:
         In names' order.
     names : list of str
         ARKIT_52.
+    landmarks : str
+        Where the landmarks came from: "stored" (by `blendshapes`), "given" (a landmark file),
+        "ICT-FaceKit's" (built in for its topology) or "found" (on renders of the head).
     """
     rest: np.ndarray
     motion: np.ndarray
     names: list
+    landmarks: str = "stored"
 
 
-def landmark_basis(head_glb) -> LandmarkBasis:
-    """Read the head's landmarks and their motion in its morph targets from a GLB written by
-    `blendshapes` (which stores the landmarks, LANDMARKS_KEY).
+def landmark_basis(head_glb, landmarks=None) -> LandmarkBasis:
+    """Read the head's landmarks and their motion in its ARKit morph targets (named as other
+    tools name them too: facts.arkit_targets): the landmarks a GLB written by `blendshapes`
+    stores (LANDMARKS_KEY); for a head from another tool, or one a DCC wrote back without
+    mimica's extras, those of a landmark file, else found as for any head
+    (landmarks.auto.landmarks_for: built in for ICT-FaceKit's topology, else on renders).
 
     Parameters
     ----------
     head_glb : str or Path
+        A glTF/GLB (or FBX) head with the 52 ARKit morph targets.
+    landmarks : str or Path or None
+        A landmark file for a head that stores none (JSON: landmarks.core.read_landmarks).
 
     Returns
     -------
     LandmarkBasis
-        MimicaError for a GLB without the 52 ARKit targets or without stored landmarks.
+        MimicaError for a head without the 52 ARKit targets, or one whose landmarks can be
+        neither read nor found.
     """
     from ..mesh.io import UNITS, read_morph_targets
+    from ..facts import arkit_targets
     head_glb = Path(head_glb)
     mesh, targets, unit = read_morph_targets(head_glb)
-    if not set(ARKIT_52) <= set(targets):
-        raise MimicaError(f"{head_glb}: not a head with the 52 ARKit morph targets (make it with `blendshapes`)")
-    stored = stored_landmarks(mesh.layout.extras, mesh.n_vertices, str(head_glb))
+    plays = arkit_targets(targets)
+    missing = [n for n in ARKIT_52 if n not in plays]
+    if missing:
+        raise MimicaError(f"{head_glb}: not a head with the 52 ARKit morph targets (none plays "
+                          f"{', '.join(missing[:3])}{' ...' if len(missing) > 3 else ''}; make them with `blendshapes`)")
+    stored = stored_landmarks(mesh.layout.extras, mesh.n_vertices, str(head_glb)) if landmarks is None else None
+    how = "stored"
     if stored is None:
-        raise MimicaError(f"{head_glb}: no landmarks stored (made by an older mimica, or the head's 68 landmarks "
-                          "were not all found): make it again with `blendshapes`, giving its landmarks")
+        from ..landmarks.auto import landmarks_for
+        lm = landmarks_for(mesh, landmarks, what=str(head_glb))
+        if not lm.present.all():
+            raise MimicaError(f"{head_glb}: {int((~lm.present).sum())} of its 68 landmarks missing; give all 68 "
+                              "in a landmark file")
+        how = "given" if landmarks is not None else "found" if lm.found else "ICT-FaceKit's"
+        stored = mesh.triangles[lm.triangle], lm.bary
     tri, bary = stored
     k = UNITS[unit]                                  # metres, as the file holds them
 
     def at(p):
         return k * np.einsum("ij,ijk->ik", bary, p[tri])
     rest = at(mesh.vertices)
-    motion = np.stack([at(targets[n]) - rest for n in ARKIT_52])
-    return LandmarkBasis(rest, motion, list(ARKIT_52))
+    motion = np.stack([at(targets[plays[n]]) - rest for n in ARKIT_52])
+    return LandmarkBasis(rest, motion, list(ARKIT_52), how)
 
 
 def _pose(model: np.ndarray, image: np.ndarray, rows=RIGID):
@@ -542,9 +563,11 @@ def write_preview(path, video, head_glb, weights: np.ndarray, rotations: np.ndar
     from ..image.raster import framing, render_mesh
     from ..image.video import VideoWriter, frame_source
     from ..mesh.io import read_morph_targets
+    from ..facts import arkit_targets
     mesh, targets, _ = read_morph_targets(head_glb)
     rest = mesh.vertices
-    deltas = np.stack([targets[n] - rest for n in ARKIT_52])           # (52, n, 3)
+    plays = arkit_targets(targets)
+    deltas = np.stack([targets[plays[n]] - rest if n in plays else np.zeros_like(rest) for n in ARKIT_52])
     centre = rest.mean(0)
     frame = framing(rest)
     frame = (frame[0], frame[1] * 1.15)                                  # room to turn

@@ -113,17 +113,24 @@ class Mesh:
                 m.__dict__[k] = self.__dict__[k]
         return m
 
-    def welded(self) -> tuple["Mesh", np.ndarray]:
+    def welded(self, same: np.ndarray | None = None) -> tuple["Mesh", np.ndarray]:
         """Coincident vertices made one (an unwelded seam: a uv or normal split saved as copies
         of a vertex) and, for each vertex, its index in the welded mesh; (self, arange) when no
         two coincide.  Only exact copies are welded, within one material (OBJ usemtl/group),
         and only where the surface stays a manifold: parts that merely touch (lashes rooted on
-        a lid, a shell on the eye's rim) stay apart; a slit meant to open is not welded."""
-        key = self.vertices
+        a lid, a shell on the eye's rim) stay apart; a slit meant to open is not welded.
+
+        Parameters
+        ----------
+        same : (n, k) float array or None
+            Values the copies must share too (a file's morph-target moves: copies that move
+            apart, as the two lips of a cut mouth, are a slit, not a seam).
+        """
+        key = self.vertices if same is None else np.c_[self.vertices, same]
         if self.groups is not None:               # copies in different materials are different parts
             vg = np.full(self.n_vertices, -1.0)
             vg[self.face_indices[::-1]] = np.repeat(self.groups, np.diff(self.face_starts))[::-1]
-            key = np.c_[self.vertices, vg]
+            key = np.c_[key, vg]
         uniq, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
         group = inv.ravel()
         if len(uniq) == self.n_vertices:

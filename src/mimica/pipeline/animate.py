@@ -29,11 +29,15 @@ class AnimateOptions:
         The rate of a take's Timecode column (None: read from the take).
     rest_frame : int
         A video's frame taken as the performer's rest face.
+    landmarks : str or Path or None
+        With a video: the head's 68 landmarks (a JSON file) where its GLB stores none (a head
+        from another tool, or written back by a DCC); None: found as for any head.
     """
     head_rotation: bool = False
     pivot: tuple | None = None
     fps: float | None = None
     rest_frame: int = 0
+    landmarks: str | Path | None = None
 
 
 @dataclass
@@ -61,7 +65,8 @@ class AnimateResult:
     video : dict
         A video's figures: {"frames", "track_fps", "fit_fps", "misfit_median" (of the face's width),
         "unseen" (shapes the points cannot see), "saw" (export.video.what_it_saw: frames without a
-        face, turned past what the fit trusts, weights held at 1), "fit" (the VideoFit)}.
+        face, turned past what the fit trusts, weights held at 1), "fit" (the VideoFit),
+        "landmarks" (where the head's came from)}.
     preview : Path or None
         The video beside the head playing its weights, where asked for.
     """
@@ -94,7 +99,8 @@ def _check(head: Path, out: Path, take, video, o: AnimateOptions) -> bool:
     return usd
 
 
-def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker: str | None = None):
+def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker: str | None = None,
+                       landmarks=None):
     """A video fitted through the head's blendshapes (export.video): the face's 68 points tracked
     (export.video.track_video: dlib's, or MediaPipe's face mesh), the ARKit weights and the
     head's angles fitted a frame.
@@ -102,7 +108,7 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
     Parameters
     ----------
     head : str or Path
-        A GLB `blendshapes` wrote (its landmarks stored).
+        A GLB with the 52 ARKit morph targets (`blendshapes` writes one, its landmarks stored).
     video : str or Path
         A video or a folder of frames.
     rest_frame : int
@@ -111,6 +117,8 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
         Called with a line of text as frames are tracked.
     tracker : str or None
         "dlib" or "mediapipe" (None: the default, export.video.trackers()).
+    landmarks : str or Path or None
+        The head's landmarks where its GLB stores none (export.video.landmark_basis).
 
     Returns
     -------
@@ -124,7 +132,7 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
     """
     from ..export import ARKIT_52
     from ..export.video import UNSEEN, fit_weights, head_angles, landmark_basis, track_video, what_it_saw
-    basis = landmark_basis(head)
+    basis = landmark_basis(head, landmarks)
     t0 = time.perf_counter()
     fps, pts = track_video(video, progress=progress, tracker=tracker)
     t1 = time.perf_counter()
@@ -135,7 +143,8 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
     weights.update(zip(HEAD_ANGLES, angles.T))
     figures = {"frames": len(pts), "track_fps": len(pts) / max(t1 - t0, 1e-9),
                "fit_fps": len(pts) / max(t2 - t1, 1e-9), "misfit_median": float(np.median(fit.residual)),
-               "unseen": len(UNSEEN), "saw": what_it_saw(fit, fps, angles=angles), "fit": fit}
+               "unseen": len(UNSEEN), "saw": what_it_saw(fit, fps, angles=angles), "fit": fit,
+               "landmarks": basis.landmarks}
     return np.arange(len(pts)) / fps, weights, fps, figures
 
 
@@ -151,7 +160,8 @@ def take_usd(head: Path, out, times, weights: dict, rate: float) -> dict:
         The .usd/.usda/.usdc to write.
     times : (F,) float array
     weights : dict
-        {ARKit name: (F,) float array}.
+        {ARKit name: (F,) float array}; the head's targets named as other tools name them
+        are played too (facts.arkit_targets).
     rate : float
         Frames a second.
 
@@ -160,15 +170,17 @@ def take_usd(head: Path, out, times, weights: dict, rate: float) -> dict:
     dict
         {"driven": targets the take drives, "pivot": None, "bending": 0}.
     """
+    from ..facts import arkit_targets
     from ..export.usd import write_usd
     from ..mesh.io import read_morph_targets
     mesh, targets, unit = read_morph_targets(head)
-    names = [n for n in targets if n in weights]
+    plays = {n: a for a, n in arkit_targets(targets).items() if a in weights}   # the head's names kept
+    names = [n for n in targets if n in plays]
     if not names:
         raise MimicaError(f"{head}: none of its morph targets is an ARKit shape")
     rate = rate if rate and rate > 0 else 30.0
     grid = np.arange(int(np.floor(times[-1] * rate + 1e-6)) + 1) / rate
-    w = np.stack([np.interp(grid, times, weights[n]) for n in names], 1)
+    w = np.stack([np.interp(grid, times, weights[plays[n]]) for n in names], 1)
     write_usd(out, mesh, {n: targets[n] for n in names}, w, rate, unit)
     return {"driven": len(names), "pivot": None, "bending": 0}
 
@@ -212,7 +224,8 @@ def animate(head, out, take=None, video=None, options: AnimateOptions | None = N
             raise MimicaError(f"{preview}: a preview is written as .mp4")
     csv_out, figures = None, {}
     if video is not None:
-        times, weights, rate, figures = weights_from_video(head, video, o.rest_frame, progress)
+        times, weights, rate, figures = weights_from_video(head, video, o.rest_frame, progress,
+                                                           landmarks=o.landmarks)
         csv_out = out.with_suffix(".csv")
     else:
         times, weights, rate = read_take(take, fps=o.fps)

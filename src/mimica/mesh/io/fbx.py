@@ -193,7 +193,18 @@ def _build(path: Path, objects: list, a: dict) -> tuple[Mesh, FbxLayout]:
     flat = np.concatenate(fi)
     st = np.r_[0, np.cumsum(np.concatenate(sizes))]
     set_of = np.repeat(np.arange(len(pieces)), [len(p) for p in pos])
-    label = weld_seams(raw, Mesh(raw, flat, st).half_edges, set_of, np.arange(len(raw)))
+    # the objects' seams welded where their sides also move alike in the shape keys (by name)
+    keys = sorted({k for ob in objects for k in ob["shape_keys"][1:]})
+    same = None
+    if keys:
+        moves = np.zeros((len(raw), 3 * len(keys)))
+        for i, (p, ob) in enumerate(zip(pieces, objects)):
+            rows = slice(p.vertex[0], p.vertex[0] + len(p.vertex))
+            for j, name in enumerate(ob["shape_keys"][1:], start=1):
+                c = keys.index(name)
+                moves[rows, 3 * c:3 * c + 3] = (a[f"k{i}_{j}"] - a[f"v{i}"]) @ p.world[:3, :3].T
+        same = moves @ np.random.default_rng(0).normal(size=(moves.shape[1], 2))   # equal moves, equal rows
+    label = weld_seams(raw, Mesh(raw, flat, st).half_edges, set_of, np.arange(len(raw)), same)
     uniq, first = np.unique(label, return_index=True)
     order = np.argsort(first, kind="stable")
     rank = np.empty(len(uniq), np.int64)

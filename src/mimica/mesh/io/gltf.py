@@ -381,12 +381,42 @@ def _labels(g, sets, raw, tris, piece) -> tuple[np.ndarray, bool]:
             for s in sets]
     if all(m is not None for m in maps):            # mimica's own file: its own vertices
         return np.concatenate(maps), True
-    # within each primitive: exact copies, where the surface stays a manifold (Mesh.welded)
+    # within each primitive: exact copies, where the surface stays a manifold (Mesh.welded),
+    # and where they move alike in every morph target (a cut mouth's lips stay two)
     m = Mesh.from_faces(raw, tris)
     m.groups, m.group_names = piece.astype(np.int32), tuple(range(int(piece.max()) + 1))
-    w, label = m.welded()
+    moves = _target_moves(g, sets, len(raw))
+    w, label = m.welded(moves)
     set_of = np.repeat(np.arange(len(sets)), [g.accessors[s.position].count for s in sets])
-    return weld_seams(w.vertices, label[m.half_edges], set_of, label), False
+    same = None
+    if moves is not None:
+        same = np.zeros((w.n_vertices, moves.shape[1]))
+        same[label] = moves
+    return weld_seams(w.vertices, label[m.half_edges], set_of, label, same), False
+
+
+def _target_moves(g, sets, n_raw: int):
+    """(n_raw, 2) per raw vertex: two fixed random projections of all its morph targets' moves
+    (equal for copies that move alike, apart, but for a chance of measure zero, for copies that
+    do not); None where no set has targets."""
+    rows = []
+    for s in sets:
+        prim = g.meshes[s.mesh].primitives[s.primitives[0]]
+        d = [read_accessor(g, t["POSITION"]).astype(np.float64).reshape(-1, 3) / s.scale @ s.world[:3, :3].T
+             for t in (prim.targets or []) if t.get("POSITION") is not None]
+        rows.append(d)
+    k = max((len(d) for d in rows), default=0)
+    if not k:
+        return None
+    proj = np.random.default_rng(0).normal(size=(3 * k, 2))
+    out = []
+    for s, d in zip(sets, rows):
+        n = g.accessors[s.position].count
+        full = np.zeros((n, 3 * k))
+        if d:
+            full[:, :3 * len(d)] = np.hstack(d)
+        out.append(full @ proj)
+    return np.vstack(out)
 
 
 def read_gltf(path) -> Mesh:

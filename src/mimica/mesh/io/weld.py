@@ -8,10 +8,10 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 
-def weld_seams(wpos, e, set_of, label) -> np.ndarray:
+def weld_seams(wpos, e, set_of, label, same=None) -> np.ndarray:
     """Across vertex sets: a boundary edge a -> b of one set that meets exactly one boundary edge
     b' -> a' of another at the same points (the two sides of a seam a writer split, one oriented
-    surface) has its ends made one.
+    surface), moving alike in `same`, has its ends made one.
 
     Parameters
     ----------
@@ -23,6 +23,9 @@ def weld_seams(wpos, e, set_of, label) -> np.ndarray:
         Each raw vertex's set.
     label : (raw,) int array
         Each raw vertex's label.
+    same : (n, k) float array or None
+        Per label, values the two sides must share too (their morph-target moves: a slit's
+        sides move apart, a seam's together).
 
     Returns
     -------
@@ -35,7 +38,7 @@ def weld_seams(wpos, e, set_of, label) -> np.ndarray:
     b = e[cnt[inv.ravel()] == 1]
     if not len(b) or len(np.unique(lab_set)) < 2:
         return label
-    _, pid = np.unique(wpos, axis=0, return_inverse=True)
+    _, pid = np.unique(wpos if same is None else np.c_[wpos, same], axis=0, return_inverse=True)
     pid = pid.ravel().astype(np.int64)
     n_p = int(pid.max()) + 1
     fwd = pid[b[:, 0]] * n_p + pid[b[:, 1]]
