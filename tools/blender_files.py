@@ -7,7 +7,8 @@ Blender as the other tool a user's files come from and go back to.
     python-with-bpy blender_files.py import FILE.glb|FILE.fbx OUT.json
         the file imported as a user imports it; OUT.json: each mesh object's name, world matrix,
         vertex count, world-space vertices (OUT.json's .npz beside it), materials, shape keys and
-        the largest move of each key.
+        the largest move of each key; the scene's rate and frame range, and where the shape keys
+        are animated, each key's value at every frame.
 """
 
 import json
@@ -55,5 +56,17 @@ for obj in bpy.data.objects:
     report["objects"].append({"name": obj.name, "matrix": m.tolist(), "vertices": len(co),
                               "materials": [s.material.name if s.material else None for s in obj.material_slots],
                               "shape_keys": keys})
+# an animation of the shape keys, as the file plays it: each key's value at every frame of the scene
+scene = bpy.context.scene
+report["fps"] = scene.render.fps / scene.render.fps_base
+report["frames"] = [scene.frame_start, scene.frame_end]
+animated = [o for o in bpy.data.objects if o.type == "MESH" and o.data.shape_keys
+            and o.data.shape_keys.animation_data and o.data.shape_keys.animation_data.action]
+report["key_values"] = {o.name: {kb.name: [] for kb in o.data.shape_keys.key_blocks[1:]} for o in animated}
+for f in range(scene.frame_start, scene.frame_end + 1) if animated else ():
+    scene.frame_set(f)
+    for o in animated:
+        for kb in o.data.shape_keys.key_blocks[1:]:
+            report["key_values"][o.name][kb.name].append(kb.value)
 np.savez(str(Path(out).with_suffix(".npz")), **arrays)
 Path(out).write_text(json.dumps(report))

@@ -197,12 +197,15 @@ def test_a_seam_not_found_is_said_with_what_to_do(tmp_path, capsys):
     assert (tmp_path / "show.png").is_file()
 
 
-def test_a_take_on_an_fbx_head_says_what_to_make(blender_fbx, tmp_path, capsys):
-    """A take plays on a glTF head's morph targets: an FBX head is told, in one line, the command
-    that makes one."""
-    (tmp_path / "take.csv").write_text("time,jawOpen\n0,0\n")
-    capsys.readouterr()
-    assert main(["animate", str(blender_fbx), "--arkit", str(tmp_path / "take.csv"), "--out",
-                 str(tmp_path / "t.glb")]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "blendshapes" in err[0] and not (tmp_path / "t.glb").exists()
+def test_a_take_on_an_fbx_head_without_arkit_keys_says_what_to_make(blender_fbx, tmp_path, capsys):
+    """A take on an FBX head is written into its FBX: one without ARKit shape keys is told, in one
+    line, the command that makes them; a .glb asked of it is refused in one line; nothing written."""
+    import numpy as np
+    from helpers import live_link_csv
+    live_link_csv(tmp_path / "take.csv", np.zeros((3, 52)))
+    for out, said in (("t.fbx", "blendshapes"), ("t.glb", "written as .fbx")):
+        capsys.readouterr()
+        assert main(["animate", str(blender_fbx), "--arkit", str(tmp_path / "take.csv"), "--out",
+                     str(tmp_path / out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and said in err[0] and not (tmp_path / out).exists(), err

@@ -246,3 +246,41 @@ def test_a_json_take_and_a_usd_take(head_glb, tmp_path):
     (tmp_path / "bad.json").write_text(json.dumps({"time": [0, 1], "jawOpen": [0.5]}))
     with pytest.raises(Exception, match="not one value per time"):
         read_take(tmp_path / "bad.json")
+
+
+def test_a_take_on_an_fbx_head_is_keyed_into_its_fbx(head_glb, tmp_path, capsys):
+    """An FBX head with ARKit shape keys (the head's GLB through Blender's FBX exporter):
+    `animate --arkit take.csv --out take.fbx` writes the head's FBX with the take keyed on its
+    shape keys; imported into Blender, every key's value at every frame is the take's (its start
+    at frame 1, where Blender's importer puts the file's time 0), the object and its 52 keys as
+    they were; a .glb from an FBX head, and an FBX from a glTF head, are refused in one line."""
+    import json
+    from helpers import blender_files
+    from mimica.export.take import read_take
+    blender_files("export", head_glb, tmp_path / "head.fbx")
+    frames = 40
+    w = np.zeros((frames, 52))
+    w[:, ARKIT_52.index("jawOpen")] = np.linspace(0, 1, frames)
+    w[:, ARKIT_52.index("eyeBlinkLeft")] = 0.5 - 0.5 * np.cos(np.arange(frames) / 5)
+    live_link_csv(tmp_path / "take.csv", w)
+    times, written, rate = read_take(tmp_path / "take.csv")
+    capsys.readouterr()
+    assert main(["animate", str(tmp_path / "head.fbx"), "--arkit", str(tmp_path / "take.csv"),
+                 "--out", str(tmp_path / "take.fbx")]) == 0
+    assert "drive 52 morph targets" in capsys.readouterr().err
+    blender_files("import", tmp_path / "head.fbx", tmp_path / "before.json")
+    blender_files("import", tmp_path / "take.fbx", tmp_path / "after.json")
+    before, after = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("before", "after"))
+    assert [(o["name"], o["vertices"], sorted(o["shape_keys"])) for o in after["objects"]] == \
+        [(o["name"], o["vertices"], sorted(o["shape_keys"])) for o in before["objects"]]
+    (name, values), = after["key_values"].items()
+    assert len(values) == 52
+    for n in ARKIT_52:
+        got = np.array(values[n][:frames])                  # frames 1 .. 40: the take's times
+        np.testing.assert_allclose(got, np.interp((np.arange(frames)) / rate, times, written[n]), atol=1e-4,
+                                   err_msg=n)
+    for head, out, said in ((tmp_path / "head.fbx", "t.glb", "written as .fbx"), (head_glb, "t.fbx", "written as .glb")):
+        capsys.readouterr()
+        assert main(["animate", str(head), "--arkit", str(tmp_path / "take.csv"), "--out", str(tmp_path / out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and said in err[0] and not (tmp_path / out).exists(), err

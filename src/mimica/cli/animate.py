@@ -57,7 +57,10 @@ def _head_line(r) -> str:
     """How the head moves in the take, as a part of its line."""
     w = r.weights
     if r.pivot is None:
-        return "; the head stays still (--head-rotation turns it)" if "headYaw" in w else ""
+        if "headYaw" not in w:
+            return ""
+        return "; the head stays still (--head-rotation turns it)" if r.out.suffix.lower() == ".glb" else \
+            "; the head stays still (its turn is in the take's HeadYaw, HeadPitch, HeadRoll)"
     turn = np.degrees(np.abs([w[n] for n in ("headYaw", "headPitch", "headRoll")]).max(1))
     return (f"; the head turns (up to yaw {turn[0]:.0f}, pitch {turn[1]:.0f}, roll {turn[2]:.0f} degrees) "
             f"about ({', '.join(f'{x:.3f}' for x in r.pivot)}) m, "
@@ -92,7 +95,7 @@ def add_args(sub) -> None:
         The parser's commands (ArgumentParser.add_subparsers).
     """
     an = sub.add_parser("animate", help="play an ARKit take (a Live Link Face CSV) on a head's ARKit blendshapes")
-    an.add_argument("head", help="the head's ARKit blendshapes, a .glb (as `mimica blendshapes` writes it)")
+    an.add_argument("head", help="the head's ARKit blendshapes, a .glb or .fbx (as `mimica blendshapes` writes it)")
     an.add_argument("--arkit", help="the take: a Live Link Face CSV (Timecode, BlendShapeCount, the "
                                     "52 weights ...), or a CSV or JSON of the 52 weights with a time column")
     an.add_argument("--video", help="or the take as a video (or a folder of frames) of a face: its 68 points are "
@@ -110,8 +113,9 @@ def add_args(sub) -> None:
                                     "bending below the chin)")
     an.add_argument("--preview", help="with --video: preview.mp4, the video beside the head playing the fitted "
                                       "weights, frame by frame")
-    an.add_argument("--out", required=True, help="take.glb: the head with the take as an animation (or take.usd / "
-                                                 ".usda / .usdc: its blend shapes and a SkelAnimation)")
+    an.add_argument("--out", required=True, help="take.glb (take.fbx for an FBX head): the head with the take as an "
+                                                 "animation (or take.usd / .usda / .usdc: its blend shapes and a "
+                                                 "SkelAnimation)")
     an.set_defaults(func=cmd_animate)
 
 

@@ -5,7 +5,8 @@ A take is a CSV as Apple's Live Link Face app writes it -- `Timecode` (HH:MM:SS:
 take's frame rate), `BlendShapeCount`, the 52 ARKit weights in PascalCase (`EyeBlinkLeft` ...),
 then head and eye rotations -- or any CSV of ARKit weights with a `time` column in seconds
 (camelCase or PascalCase names).  `animate_glb` copies the head's GLB and adds an animation of
-its morph target weights, one keyframe per row of the take.
+its morph target weights, one keyframe per row of the take; `animate_fbx` does the same for an
+FBX head's shape keys.
 """
 
 from __future__ import annotations
@@ -86,6 +87,44 @@ def read_take(path, fps: float | None = None) -> tuple[np.ndarray, dict, float]:
     if rate is None:
         rate = float(1.0 / np.median(np.diff(times))) if len(times) > 1 else 0.0
     return times, weights, rate
+
+
+def animate_fbx(head_fbx, out, times: np.ndarray, weights: dict, rate: float) -> dict:
+    """Write `out`: the head's FBX with the take keyed on its shape keys named as ARKit shapes
+    (facts.arkit_targets), one key a frame, linear between (through Blender, as every FBX
+    mimica writes: mesh.io.fbx.write_fbx_take); everything else of the file as Blender's
+    importer and exporter carry it.
+
+    Parameters
+    ----------
+    head_fbx : str or Path
+        An FBX head with ARKit shape keys (`blendshapes --out head.fbx` adds them).
+    out : str or Path
+        The FBX to write.
+    times : (F,) float array
+        Seconds.
+    weights : dict
+        {ARKit name: (F,) float array}.
+    rate : float
+        The take's frames a second (30 where unknown).
+
+    Returns
+    -------
+    dict
+        {"driven": how many shape keys the take drives, "pivot": None, "bending": 0}.
+    """
+    from ..mesh.io.fbx import read_fbx_layout, write_fbx_take
+    _, layout = read_fbx_layout(head_fbx)
+    keyed = {}
+    for p in layout.pieces:
+        plays = {n: a for a, n in facts.arkit_targets(p.keys).items() if a in weights}
+        if plays:
+            keyed[p.name] = {n: weights[a] for n, a in plays.items()}
+    if not keyed:
+        raise MimicaError(f"{head_fbx}: no object with shape keys named as ARKit shapes (make them with "
+                          "`blendshapes`)")
+    write_fbx_take(out, head_fbx, times, rate if rate and rate > 0 else 30.0, keyed)
+    return {"driven": len({n for k in keyed.values() for n in k}), "pivot": None, "bending": 0}
 
 
 def head_quaternions(yaw, pitch, roll) -> np.ndarray:

@@ -1,6 +1,7 @@
 """Play a take on a head with ARKit blendshapes: the take's weights from a file (Live Link Face
 CSV, weights CSV or JSON: export.take) or fitted to a video through the head's own shapes
-(export.video), written as an animated GLB (the head's own file, its weights keyed) or USD."""
+(export.video), written as an animated GLB or FBX (the head's own file, its weights keyed) or
+USD."""
 
 from __future__ import annotations
 
@@ -82,21 +83,30 @@ class AnimateResult:
     preview: Path | None = None
 
 
-def _check(head: Path, out: Path, take, video, o: AnimateOptions) -> bool:
+def _check(head: Path, out: Path, take, video, o: AnimateOptions) -> str:
+    """What `out` is ("glb", "usd" or "fbx"), or one line for a request that cannot be met."""
     from ..export.usd import USD_SUFFIXES
-    usd = out.suffix.lower() in USD_SUFFIXES
-    if out.suffix.lower() != ".glb" and not usd:
-        raise MimicaError(f"{out}: an animated take is written as .glb or as USD ({', '.join(USD_SUFFIXES)})")
-    if usd and o.head_rotation:
-        raise MimicaError(f"{out}: the head's rotation is written to .glb only (USD gets the blend shapes' weights)")
+    kind = "usd" if out.suffix.lower() in USD_SUFFIXES else out.suffix.lower().lstrip(".")
+    fbx_head = head.suffix.lower() == ".fbx"
+    if kind not in ("glb", "usd", "fbx"):
+        raise MimicaError(f"{out}: an animated take is written as .glb, .fbx or USD ({', '.join(USD_SUFFIXES)})")
+    if kind != "glb" and o.head_rotation:
+        raise MimicaError(f"{out}: the head's rotation is written to .glb only (USD and FBX get the blend shapes' "
+                          "weights)")
     if not head.is_file():
         raise MimicaError(f"{head}: no such file")
-    if head.suffix.lower() not in (".glb", ".gltf"):
-        raise MimicaError(f"{head}: a take plays on a glTF head with ARKit morph targets; make one with "
+    if head.suffix.lower() not in (".glb", ".gltf", ".fbx"):
+        raise MimicaError(f"{head}: a take plays on a glTF or FBX head with ARKit blend shapes; make one with "
                           f"`mimica blendshapes {head.name} --out {head.stem}_arkit.glb`")
+    if kind == "glb" and fbx_head:
+        raise MimicaError(f"{out}: a take on an FBX head is written as .fbx (the head's own file, its shape keys "
+                          "keyed) or USD")
+    if kind == "fbx" and not fbx_head:
+        raise MimicaError(f"{out}: a take on a glTF head is written as .glb (the head's own file, its morph targets "
+                          "keyed) or USD")
     if (take is None) == (video is None):
         raise MimicaError("animate: give the take as a take file or as a video (one of them)")
-    return usd
+    return kind
 
 
 def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker: str | None = None,
@@ -108,7 +118,8 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
     Parameters
     ----------
     head : str or Path
-        A GLB with the 52 ARKit morph targets (`blendshapes` writes one, its landmarks stored).
+        A GLB (or FBX) with the 52 ARKit morph targets (`blendshapes` writes one, its landmarks
+        stored in a GLB).
     video : str or Path
         A video or a folder of frames.
     rest_frame : int
@@ -192,9 +203,11 @@ def animate(head, out, take=None, video=None, options: AnimateOptions | None = N
     Parameters
     ----------
     head : str or Path
-        The head's GLB/glTF with ARKit morph targets (`blendshapes` writes it; other tools' too).
+        The head's GLB/glTF with ARKit morph targets, or its FBX with ARKit shape keys
+        (`blendshapes` writes either; other tools' too).
     out : str or Path
-        .glb (the head's own file with its weights keyed) or USD (.usd, .usda, .usdc).
+        .glb from a glTF head, .fbx from an FBX head (the head's own file with its weights
+        keyed), or USD (.usd, .usda, .usdc) from either.
     take : str or Path, optional
         A Live Link Face CSV, or weights as CSV/JSON (export.take.read_take).
     video : str or Path, optional
@@ -211,11 +224,11 @@ def animate(head, out, take=None, video=None, options: AnimateOptions | None = N
     AnimateResult
     """
     from ..export import ARKIT_52
-    from ..export.take import animate_glb, read_take
+    from ..export.take import animate_fbx, animate_glb, read_take
     from ..mesh import atomic_path
     o = options or AnimateOptions()
     head, out = Path(head), Path(out)
-    usd = _check(head, out, take, video, o)
+    kind = _check(head, out, take, video, o)
     if preview is not None:
         preview = Path(preview)
         if video is None:
@@ -243,7 +256,7 @@ def animate(head, out, take=None, video=None, options: AnimateOptions | None = N
                 except BaseException:
                     csv_out.unlink(missing_ok=True)
                     raise
-    if usd:                                     # write_usd is atomic by itself (its suffix names its format)
+    if kind == "usd":                           # write_usd is atomic by itself (its suffix names its format)
         info = take_usd(head, out, times, weights, rate)
         try:
             video_outputs()
@@ -252,8 +265,11 @@ def animate(head, out, take=None, video=None, options: AnimateOptions | None = N
             raise
     else:
         with atomic_path(out) as tmp:
-            info = animate_glb(head, tmp, times, weights, head_rotation=o.head_rotation,
-                               pivot=None if o.pivot is None else list(o.pivot))
+            if kind == "fbx":
+                info = animate_fbx(head, tmp, times, weights, rate)
+            else:
+                info = animate_glb(head, tmp, times, weights, head_rotation=o.head_rotation,
+                                   pivot=None if o.pivot is None else list(o.pivot))
             video_outputs()                     # inside: a failure leaves none of them
     return AnimateResult(out, times, rate, weights, info["driven"], info["pivot"], info["bending"], csv_out, figures,
                          preview)

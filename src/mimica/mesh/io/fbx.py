@@ -300,3 +300,31 @@ def write_fbx_layout(path, layout: FbxLayout, mesh: Mesh, targets: dict | None =
         np.savez(Path(d) / "edits.npz", **arrays)
         _blender(layout.path, "write", layout.path, Path(d) / "edits", Path(path), what="write")
     return {"appended": appended}
+
+
+def write_fbx_take(path, head, times: np.ndarray, rate: float, keyed: dict) -> None:
+    """The FBX `head` exported again through Blender to `path` with a take keyed on its shape
+    keys (one key a time, linear between; Blender's exporter bakes it into the FBX's animation).
+
+    Parameters
+    ----------
+    path : str or Path
+        The FBX to write.
+    head : str or Path
+        The FBX read.
+    times : (F,) float array
+        Seconds from the take's first frame.
+    rate : float
+        The take's frames a second (the scene's rate).
+    keyed : dict
+        {object name: {shape key name: (F,) values}}.
+    """
+    head = Path(head)
+    spec = {"fps": float(rate), "objects": [{"name": o, "keys": list(k)} for o, k in keyed.items()]}
+    arrays = {"t": np.asarray(times, np.float64)}
+    for i, k in enumerate(keyed.values()):
+        arrays[f"w{i}"] = np.stack([np.asarray(v, np.float64) for v in k.values()], 1)
+    with tempfile.TemporaryDirectory(prefix="mimica-fbx-") as d:
+        (Path(d) / "take.json").write_text(json.dumps(spec))
+        np.savez(Path(d) / "take.npz", **arrays)
+        _blender(head, "take", head, Path(d) / "take", Path(path), what="write a take into")

@@ -11,6 +11,10 @@ talk through files.)
                             move, local, the object's vertices then the added ones) and vertices to add
                             (a{i}: positions; r{i}: (polygon, corner, new vertex) rows re-pointing
                             corners to them); the file imported, edited and exported to OUT
+    take  FILE.fbx IN OUT   IN.json: the take's rate and, per object, the shape keys it keys;
+                            IN.npz: the times (t) and per object i the keys' values (w{i}: frames x
+                            keys); keyed at each time (linear between), exported to OUT with its
+                            animation
 """
 
 import json
@@ -137,9 +141,60 @@ def write(path, edits, out):
     bpy.ops.export_scene.fbx(filepath=out)
 
 
+def take(path, keyed, out):
+    """Key a take's weights on an FBX's shape keys and export it with the animation (the
+    module's `take`).
+
+    Parameters
+    ----------
+    path : str
+        The FBX read.
+    keyed : str
+        IN: IN.json ({"fps": rate, "objects": [{"name", "keys"}]}) and IN.npz (t, w{i}).
+    out : str
+        The FBX written.
+    """
+    import bpy
+    import_fbx(path)
+    spec = json.loads(Path(keyed + ".json").read_text())
+    z = np.load(keyed + ".npz")
+    scene = bpy.context.scene
+    rate = float(spec["fps"])
+    scene.render.fps = max(1, int(round(rate)))
+    scene.render.fps_base = scene.render.fps / rate
+    frames = z["t"] * rate                           # the take's start at the file's time 0
+    scene.frame_start, scene.frame_end = 0, int(round(frames[-1]))
+    obs = {o.name: o for o in objects()}
+    for i, ob in enumerate(spec["objects"]):
+        keys = obs[ob["name"]].data.shape_keys
+        w = z[f"w{i}"]
+        for j, name in enumerate(ob["keys"]):
+            kb = keys.key_blocks[name]
+            for f, x in zip(frames, w[:, j]):
+                kb.value = float(x)
+                kb.keyframe_insert("value", frame=float(f))
+        act = keys.animation_data.action if keys.animation_data else None
+        for fc in (_fcurves(act) if act is not None else []):          # linear, as glTF plays a take
+            for kp in fc.keyframe_points:
+                kp.interpolation = "LINEAR"
+    bpy.ops.export_scene.fbx(filepath=out, bake_anim=True, bake_anim_use_all_actions=False,
+                             bake_anim_use_nla_strips=False)
+
+
+def _fcurves(action):
+    """An action's F-curves: Blender 4.4+ keeps them in layers, strips and channel bags (as the
+    add-on reads them; neither script can import the other)."""
+    if hasattr(action, "layers") and len(action.layers):
+        return [fc for layer in action.layers for strip in layer.strips for bag in strip.channelbags
+                for fc in bag.fcurves]
+    return list(action.fcurves)
+
+
 if __name__ == "__main__":
     args = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
     if args[0] == "read":
         read(args[1], args[2])
+    elif args[0] == "take":
+        take(args[1], args[2], args[3])
     else:
         write(args[1], args[2], args[3])
