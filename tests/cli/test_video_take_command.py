@@ -64,7 +64,7 @@ def test_video_requests_that_cannot_be_met_say_one_line(head_glb, tmp_path, caps
              ([str(head_glb)], "one of them"),
              ([str(other), "--video", str(frames)], "not a head with the 52 ARKit morph targets"),
              ([str(head_glb), "--arkit", str(tmp_path / "w.csv"), "--landmarks", str(tmp_path / "w.csv")],
-              "give --video"),
+              "give a video"),
              ([str(head_glb), "--video", str(frames), "--landmarks", str(tmp_path / "none.json")], "none.json"),
              ([str(head_glb), "--video", str(frames)], "holds no image frames"),
              ([str(head_glb), "--video", str(tmp_path / "none.mp4")], "no such video")]

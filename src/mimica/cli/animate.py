@@ -31,8 +31,6 @@ def cmd_animate(a):
                           fps=a.fps, rest_frame=a.rest_frame, landmarks=a.landmarks)
     if (a.arkit is None) == (a.video is None):
         raise MimicaError("animate: give the take as --arkit take.csv or as --video take.mp4 (one of them)")
-    if a.landmarks and a.video is None:
-        raise MimicaError("--landmarks places the points a video is fitted at: give --video")
     if a.preview and a.video is None:
         raise MimicaError("--preview shows the head beside the video it was fitted to: give --video")
     r = animate(a.head, a.out, a.arkit, a.video, opts, progress=_say, preview=a.preview)
@@ -57,10 +55,8 @@ def _head_line(r) -> str:
     """How the head moves in the take, as a part of its line."""
     w = r.weights
     if r.pivot is None:
-        if "headYaw" not in w:
-            return ""
-        return "; the head stays still (--head-rotation turns it)" if r.out.suffix.lower() == ".glb" else \
-            "; the head stays still (its turn is in the take's HeadYaw, HeadPitch, HeadRoll)"
+        how = "--head-rotation turns it" if r.out.suffix.lower() == ".glb" else "its turn is in the take"
+        return f"; the head stays still ({how})" if "headYaw" in w else ""
     turn = np.degrees(np.abs([w[n] for n in ("headYaw", "headPitch", "headRoll")]).max(1))
     return (f"; the head turns (up to yaw {turn[0]:.0f}, pitch {turn[1]:.0f}, roll {turn[2]:.0f} degrees) "
             f"about ({', '.join(f'{x:.3f}' for x in r.pivot)}) m, "

@@ -106,6 +106,8 @@ def _check(head: Path, out: Path, take, video, o: AnimateOptions) -> str:
                           "keyed) or USD")
     if (take is None) == (video is None):
         raise MimicaError("animate: give the take as a take file or as a video (one of them)")
+    if o.landmarks is not None and video is None:
+        raise MimicaError(f"{o.landmarks}: the head's landmarks place the points a video is fitted at; give a video")
     return kind
 
 

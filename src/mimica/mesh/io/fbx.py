@@ -30,7 +30,7 @@ import numpy as np
 from ... import facts
 from ...errors import MimicaError
 from ..core import Mesh
-from .weld import weld_seams
+from .weld import move_key, weld_seams
 
 SCRIPT = Path(__file__).with_name("fbx_blender.py")
 # Blender's z up -> mimica's y up (facts.Z_UP_TO_Y_UP), as a 4 x 4 transform
@@ -203,7 +203,7 @@ def _build(path: Path, objects: list, a: dict) -> tuple[Mesh, FbxLayout]:
             for j, name in enumerate(ob["shape_keys"][1:], start=1):
                 c = keys.index(name)
                 moves[rows, 3 * c:3 * c + 3] = (a[f"k{i}_{j}"] - a[f"v{i}"]) @ p.world[:3, :3].T
-        same = moves @ np.random.default_rng(0).normal(size=(moves.shape[1], 2))   # equal moves, equal rows
+        same = move_key(moves)
     label = weld_seams(raw, Mesh(raw, flat, st).half_edges, set_of, np.arange(len(raw)), same)
     uniq, first = np.unique(label, return_index=True)
     order = np.argsort(first, kind="stable")

@@ -19,7 +19,7 @@ import numpy as np
 
 from ...errors import MimicaError
 from ..core import Mesh
-from .weld import weld_seams
+from .weld import move_key, weld_seams
 
 
 VERTEX_MAP = "mimica_vertex_of"     # primitive extras: buffer view of uint32, file vertex -> mesh vertex
@@ -234,8 +234,9 @@ def read_gltf_layout(path, g=None) -> tuple[Mesh, GltfLayout]:
     Faces are the primitives' triangles in file order; groups are their materials; uv (the first
     set) stays per face corner.  Vertices a writer split are welded: within a primitive every exact
     copy where the surface stays a manifold (Mesh.welded), across primitives the two sides of a
-    seam a writer split at a material (boundary edges that coincide, oriented opposite); a file
-    mimica wrote keeps its own vertices (VERTEX_MAP).
+    seam a writer split at a material (boundary edges that coincide, oriented opposite); either
+    only where the copies also move alike in every morph target (copies that move apart are a
+    slit, as a cut mouth's lips); a file mimica wrote keeps its own vertices (VERTEX_MAP).
 
     Parameters
     ----------
@@ -385,7 +386,7 @@ def _labels(g, sets, raw, tris, piece) -> tuple[np.ndarray, bool]:
     # and where they move alike in every morph target (a cut mouth's lips stay two)
     m = Mesh.from_faces(raw, tris)
     m.groups, m.group_names = piece.astype(np.int32), tuple(range(int(piece.max()) + 1))
-    moves = _target_moves(g, sets, len(raw))
+    moves = _target_moves(g, sets)
     w, label = m.welded(moves)
     set_of = np.repeat(np.arange(len(sets)), [g.accessors[s.position].count for s in sets])
     same = None
@@ -395,10 +396,9 @@ def _labels(g, sets, raw, tris, piece) -> tuple[np.ndarray, bool]:
     return weld_seams(w.vertices, label[m.half_edges], set_of, label, same), False
 
 
-def _target_moves(g, sets, n_raw: int):
-    """(n_raw, 2) per raw vertex: two fixed random projections of all its morph targets' moves
-    (equal for copies that move alike, apart, but for a chance of measure zero, for copies that
-    do not); None where no set has targets."""
+def _target_moves(g, sets):
+    """(n_raw, 2) per raw vertex: its morph targets' moves (weld.move_key); None where no set
+    has targets."""
     rows = []
     for s in sets:
         prim = g.meshes[s.mesh].primitives[s.primitives[0]]
@@ -408,15 +408,13 @@ def _target_moves(g, sets, n_raw: int):
     k = max((len(d) for d in rows), default=0)
     if not k:
         return None
-    proj = np.random.default_rng(0).normal(size=(3 * k, 2))
     out = []
     for s, d in zip(sets, rows):
-        n = g.accessors[s.position].count
-        full = np.zeros((n, 3 * k))
+        full = np.zeros((g.accessors[s.position].count, 3 * k))
         if d:
             full[:, :3 * len(d)] = np.hstack(d)
-        out.append(full @ proj)
-    return np.vstack(out)
+        out.append(full)
+    return move_key(np.vstack(out))
 
 
 def read_gltf(path) -> Mesh:
