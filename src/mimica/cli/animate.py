@@ -74,7 +74,7 @@ def _saw(saw: dict) -> str:
     from ..export.video import HELD_SECONDS, TURN_TRUSTED
     said = [f"no face in {_frames(saw['no_face'])}, fitted to points filled in from their neighbours"
             if saw["no_face"] else "a face in every frame"]
-    said.append(f"turned past {TURN_TRUSTED:g} degrees (the fit is measured within it) in {_frames(saw['turned'])}, "
+    said.append(f"turned past {TURN_TRUSTED:g} degrees (a turn past it reads as expression) in {_frames(saw['turned'])}, "
                 f"at most {saw['turn_max']:.0f}" if saw["turned"] else f"turned at most {saw['turn_max']:.0f} degrees")
     held = [f"{n} {_frames(s)}" for n, s in saw["held"].items()]
     said.append(f"held at full weight for {HELD_SECONDS:g} s or more: {'; '.join(held)}" if held
