@@ -6,16 +6,19 @@ nothing."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from helpers import jaw_frames, ramp, validate
 
 from mimica.cli import main
 from mimica.export import ARKIT_52
 
 
-def test_video_to_animation_and_live_link_csv(head_glb, tmp_path, capsys):
+@pytest.mark.parametrize("tracker", [None, "mediapipe"])
+def test_video_to_animation_and_live_link_csv(head_glb, tmp_path, capsys, tracker, mediapipe):
     """A folder of rendered frames (ICT's face opening its jaw) -> take.glb and take.csv: the
     GLB passes the validator, the CSV reads back as a take with the GLB's weights, and jawOpen
-    rises and falls with the rendered jaw."""
+    rises and falls with the rendered jaw; with either tracker (dlib's, the default, or
+    MediaPipe's face mesh)."""
     import pygltflib as gl
     from mimica.export.take import read_take
     from mimica.image.ictphotos import ICTPhotos
@@ -31,7 +34,8 @@ def test_video_to_animation_and_live_link_csv(head_glb, tmp_path, capsys):
         write_image(frames / f"f{f:03d}.png", img)
     out = tmp_path / "take.glb"
     capsys.readouterr()
-    assert main(["animate", str(head_glb), "--video", str(frames), "--out", str(out)]) == 0
+    assert main(["animate", str(head_glb), "--video", str(frames), "--out", str(out)]
+                + (["--tracker", tracker] if tracker else [])) == 0
     said = capsys.readouterr().err
     assert "14 frames tracked" in said and "frame 0 taken as the performer's rest" in said, said
     assert out.is_file() and out.with_suffix(".csv").is_file()
@@ -66,6 +70,7 @@ def test_video_requests_that_cannot_be_met_say_one_line(head_glb, tmp_path, caps
              ([str(head_glb), "--arkit", str(tmp_path / "w.csv"), "--landmarks", str(tmp_path / "w.csv")],
               "give a video"),
              ([str(head_glb), "--video", str(frames), "--landmarks", str(tmp_path / "none.json")], "none.json"),
+             ([str(head_glb), "--arkit", str(tmp_path / "w.csv"), "--tracker", "mediapipe"], "give a video"),
              ([str(head_glb), "--video", str(frames)], "holds no image frames"),
              ([str(head_glb), "--video", str(tmp_path / "none.mp4")], "no such video")]
     for args, said in cases:

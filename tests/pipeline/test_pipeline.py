@@ -146,7 +146,8 @@ def test_age_render_export_animate_defaults_are_the_pipelines():
     assert (e.fps, e.format, e.units, e.compact == "auto", e.quantize, e.rest) == \
         (x.fps, x.format, x.units, x.compact, x.quantize, x.rest)
     n = p.parse_args(["animate", "h.glb", "--arkit", "t.csv", "--out", "t.glb"])
-    assert (n.head_rotation, n.pivot, n.fps, n.rest_frame, n.landmarks) == tuple(vars(AnimateOptions()).values())
+    assert (n.head_rotation, n.pivot, n.fps, n.rest_frame, n.landmarks, n.tracker) == \
+        tuple(vars(AnimateOptions()).values())
 
 
 def test_the_demo_runs_on_the_pipeline_and_its_glb_plays(tmp_path):

@@ -28,7 +28,7 @@ def cmd_animate(a):
     """
     from ..pipeline import AnimateOptions, animate
     opts = AnimateOptions(head_rotation=a.head_rotation, pivot=tuple(floats(a.pivot, 3, "--pivot")) if a.pivot else None,
-                          fps=a.fps, rest_frame=a.rest_frame, landmarks=a.landmarks)
+                          fps=a.fps, rest_frame=a.rest_frame, landmarks=a.landmarks, tracker=a.tracker)
     if (a.arkit is None) == (a.video is None):
         raise MimicaError("animate: give the take as --arkit take.csv or as --video take.mp4 (one of them)")
     if a.preview and a.video is None:
@@ -101,6 +101,8 @@ def add_args(sub) -> None:
                     help="with --video: a frame where the performer's face is at rest (default: the first)")
     an.add_argument("--landmarks", help="with --video: the head's 68 landmarks (JSON) where its GLB stores none "
                                         "(a head from another tool; default: found on renders of it)")
+    an.add_argument("--tracker", choices=["dlib", "mediapipe"], help="with --video: the face's tracker (default dlib; "
+                    "mediapipe, the photo extra: a turning head's fewer false weights)")
     an.add_argument("--fps", type=float, help="the frame rate of a Timecode column (default: from its frame numbers)")
     an.add_argument("--head-rotation", action="store_true",
                     help="also turn the head by the take's HeadYaw, HeadPitch, HeadRoll (radians)")

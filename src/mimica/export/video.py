@@ -316,7 +316,8 @@ def track_video(path, progress=None, max_frames: int | None = None, tracker: str
     pixels against dlib's 6.5-78 (dlib's box loses the face on the turn) and it runs at 102
     frames/s against 78, but the fit -- its pulls tuned on dlib's points -- reads the weights no
     better from it (where they act: 0.361 / 0.390 against 0.393 / 0.407; on bench/export.py's
-    grey takes turning 8 degrees 0.327 / 0.332 against 0.256 / 0.275), so it is not the default.
+    grey takes turning 8 degrees 0.327 / 0.332 against 0.256 / 0.275), so it is not the default;
+    a still face's turn reads as expression far less through it (TURN_TRUSTED's measurement).
 
     Parameters
     ----------

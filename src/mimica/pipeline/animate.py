@@ -33,12 +33,16 @@ class AnimateOptions:
     landmarks : str or Path or None
         With a video: the head's 68 landmarks (a JSON file) where its GLB stores none (a head
         from another tool, or written back by a DCC); None: found as for any head.
+    tracker : str or None
+        With a video: "dlib" or "mediapipe" (export.video.track_video); None: the default
+        (export.video.trackers()).
     """
     head_rotation: bool = False
     pivot: tuple | None = None
     fps: float | None = None
     rest_frame: int = 0
     landmarks: str | Path | None = None
+    tracker: str | None = None
 
 
 @dataclass
@@ -108,6 +112,8 @@ def _check(head: Path, out: Path, take, video, o: AnimateOptions) -> str:
         raise MimicaError("animate: give the take as a take file or as a video (one of them)")
     if o.landmarks is not None and video is None:
         raise MimicaError(f"{o.landmarks}: the head's landmarks place the points a video is fitted at; give a video")
+    if o.tracker is not None and video is None:
+        raise MimicaError(f"tracker {o.tracker!r}: a tracker follows the face through a video; give a video")
     return kind
 
 
@@ -239,7 +245,7 @@ def animate(head, out, take=None, video=None, options: AnimateOptions | None = N
             raise MimicaError(f"{preview}: a preview is written as .mp4")
     csv_out, figures = None, {}
     if video is not None:
-        times, weights, rate, figures = weights_from_video(head, video, o.rest_frame, progress,
+        times, weights, rate, figures = weights_from_video(head, video, o.rest_frame, progress, o.tracker,
                                                            landmarks=o.landmarks)
         csv_out = out.with_suffix(".csv")
     else:
