@@ -20,23 +20,16 @@ import numpy as np
 
 mode, src, out = sys.argv[-3:]
 bpy.ops.wm.read_factory_settings(use_empty=True)
+# the file imported as a user imports it: Blender's importer for its suffix
+{".fbx": bpy.ops.import_scene.fbx, ".glb": bpy.ops.import_scene.gltf,
+ ".gltf": bpy.ops.import_scene.gltf}.get(Path(src).suffix.lower(), bpy.ops.wm.obj_import)(filepath=src)
 if mode == "export":
-    if src.lower().endswith((".glb", ".gltf")):
-        bpy.ops.import_scene.gltf(filepath=src)
-    elif src.lower().endswith(".fbx"):
-        bpy.ops.import_scene.fbx(filepath=src)
-    else:
-        bpy.ops.wm.obj_import(filepath=src)
     if out.lower().endswith(".fbx"):
         bpy.ops.export_scene.fbx(filepath=out)
     else:
         bpy.ops.export_scene.gltf(filepath=out)
     sys.exit(0)
 
-if src.lower().endswith(".fbx"):
-    bpy.ops.import_scene.fbx(filepath=src)
-else:
-    bpy.ops.import_scene.gltf(filepath=src)
 report, arrays = {"objects": []}, {}
 for obj in bpy.data.objects:
     if obj.type != "MESH":

@@ -113,18 +113,13 @@ def animate_fbx(head_fbx, out, times: np.ndarray, weights: dict, rate: float) ->
     dict
         {"driven": how many shape keys the take drives, "pivot": None, "bending": 0}.
     """
-    from ..mesh.io.fbx import read_fbx_layout, write_fbx_take
-    _, layout = read_fbx_layout(head_fbx)
-    keyed = {}
-    for p in layout.pieces:
-        plays = {n: a for a, n in facts.arkit_targets(p.keys).items() if a in weights}
-        if plays:
-            keyed[p.name] = {n: weights[a] for n, a in plays.items()}
+    from ..mesh.io.fbx import write_fbx_take
+    arkit = {n: w for n, w in weights.items() if n in facts.ARKIT_52}
+    keyed = write_fbx_take(out, head_fbx, times, rate if rate and rate > 0 else 30.0, arkit)
     if not keyed:
         raise MimicaError(f"{head_fbx}: no object with shape keys named as ARKit shapes (make them with "
                           "`blendshapes`)")
-    write_fbx_take(out, head_fbx, times, rate if rate and rate > 0 else 30.0, keyed)
-    return {"driven": len({n for k in keyed.values() for n in k}), "pivot": None, "bending": 0}
+    return {"driven": len(set(keyed)), "pivot": None, "bending": 0}
 
 
 def head_quaternions(yaw, pitch, roll) -> np.ndarray:
@@ -211,10 +206,12 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: 
     head_glb = Path(head_glb)
     g, doc, buf, _ = open_for_edit(head_glb)
     # every node of the scene showing a mesh with morph targets named like the take's shapes
-    shown = {}
+    shown, plays = {}, {}                # mesh -> its placing nodes; mesh -> {its target: ARKit name}
     for node, mi, _, _ in placed_meshes(g, head_glb):
-        names = list((doc["meshes"][mi].get("extras") or {}).get("targetNames") or [])
-        if any(a in weights for a in facts.arkit_targets(names)):
+        if mi not in plays:
+            names = list((doc["meshes"][mi].get("extras") or {}).get("targetNames") or [])
+            plays[mi] = {n: a for a, n in facts.arkit_targets(names).items() if a in weights}
+        if plays[mi]:
             shown.setdefault(mi, []).append(node)
     if not shown:
         raise MimicaError(f"{head_glb}: no mesh with morph targets named as ARKit shapes (make them with "
@@ -225,11 +222,10 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: 
     samplers, channels, driven = [], [], set()
     for mi, nodes in shown.items():
         names = list(doc["meshes"][mi]["extras"]["targetNames"])
-        plays = {n: a for a, n in facts.arkit_targets(names).items() if a in weights}
         w = np.zeros((len(times), len(names)), np.float32)
         for j, n in enumerate(names):
-            if n in plays:
-                w[:, j] = weights[plays[n]]
+            if n in plays[mi]:
+                w[:, j] = weights[plays[mi][n]]
                 driven.add(n)
         samplers.append({"input": it, "output": buf.add(w.reshape(-1), None, "SCALAR", FLOAT),
                          "interpolation": "LINEAR"})

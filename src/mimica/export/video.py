@@ -77,7 +77,7 @@ class LandmarkBasis:
     landmarks: str = "stored"
 
 
-def landmark_basis(head_glb, landmarks=None) -> LandmarkBasis:
+def landmark_basis(head_glb, landmarks=None, read=None) -> LandmarkBasis:
     """Read the head's landmarks and their motion in its ARKit morph targets (named as other
     tools name them too: facts.arkit_targets): the landmarks a GLB written by `blendshapes`
     stores (LANDMARKS_KEY); for a head from another tool, or one a DCC wrote back without
@@ -90,6 +90,9 @@ def landmark_basis(head_glb, landmarks=None) -> LandmarkBasis:
         A glTF/GLB (or FBX) head with the 52 ARKit morph targets.
     landmarks : str or Path or None
         A landmark file for a head that stores none (JSON: landmarks.core.read_landmarks).
+    read : tuple or None
+        The head as mesh.io.read_morph_targets read it, where the caller has it (an FBX is read
+        through Blender: seconds); None: read here.
 
     Returns
     -------
@@ -100,7 +103,7 @@ def landmark_basis(head_glb, landmarks=None) -> LandmarkBasis:
     from ..mesh.io import UNITS, read_morph_targets
     from ..facts import arkit_targets
     head_glb = Path(head_glb)
-    mesh, targets, unit = read_morph_targets(head_glb)
+    mesh, targets, unit = read_morph_targets(head_glb) if read is None else read
     plays = arkit_targets(targets)
     missing = [n for n in ARKIT_52 if n not in plays]
     if missing:
@@ -536,7 +539,7 @@ def what_it_saw(fit: VideoFit, fps: float, names=ARKIT_52, angles: np.ndarray | 
 
 
 def write_preview(path, video, head_glb, weights: np.ndarray, rotations: np.ndarray, fps: float,
-                  missing: np.ndarray | None = None, height: int = 360, progress=None) -> Path:
+                  missing: np.ndarray | None = None, height: int = 360, progress=None, read=None) -> Path:
     """An MP4 of the video beside the head playing the fitted weights, frame by frame (the head
     turned as the fit found the performer's head; frames without a face marked red).
 
@@ -559,6 +562,8 @@ def write_preview(path, video, head_glb, weights: np.ndarray, rotations: np.ndar
         The preview's height, pixels.
     progress : callable, optional
         Called with a line of text every 30 frames.
+    read : tuple or None
+        The head as mesh.io.read_morph_targets read it, where the caller has it; None: read here.
 
     Returns
     -------
@@ -570,7 +575,7 @@ def write_preview(path, video, head_glb, weights: np.ndarray, rotations: np.ndar
     from ..image.video import VideoWriter, frame_source
     from ..mesh.io import read_morph_targets
     from ..facts import arkit_targets
-    mesh, targets, _ = read_morph_targets(head_glb)
+    mesh, targets, _ = read_morph_targets(head_glb) if read is None else read
     rest = mesh.vertices
     plays = arkit_targets(targets)
     deltas = np.stack([targets[plays[n]] - rest if n in plays else np.zeros_like(rest) for n in ARKIT_52])

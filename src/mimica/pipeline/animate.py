@@ -118,7 +118,7 @@ def _check(head: Path, out: Path, take, video, o: AnimateOptions) -> str:
 
 
 def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker: str | None = None,
-                       landmarks=None):
+                       landmarks=None, read=None):
     """A video fitted through the head's blendshapes (export.video): the face's 68 points tracked
     (export.video.track_video: dlib's, or MediaPipe's face mesh), the ARKit weights and the
     head's angles fitted a frame.
@@ -138,6 +138,8 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
         "dlib" or "mediapipe" (None: the default, export.video.trackers()).
     landmarks : str or Path or None
         The head's landmarks where its GLB stores none (export.video.landmark_basis).
+    read : tuple or None
+        The head as mesh.io.read_morph_targets read it, where the caller has it.
 
     Returns
     -------
@@ -151,7 +153,7 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
     """
     from ..export import ARKIT_52
     from ..export.video import UNSEEN, fit_weights, head_angles, landmark_basis, track_video, what_it_saw
-    basis = landmark_basis(head, landmarks)
+    basis = landmark_basis(head, landmarks, read)
     t0 = time.perf_counter()
     fps, pts = track_video(video, progress=progress, tracker=tracker)
     t1 = time.perf_counter()
@@ -167,7 +169,7 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
     return np.arange(len(pts)) / fps, weights, fps, figures
 
 
-def take_usd(head: Path, out, times, weights: dict, rate: float) -> dict:
+def take_usd(head: Path, out, times, weights: dict, rate: float, read=None) -> dict:
     """The take as USD: the head's blend shapes (read from its GLB) and a SkelAnimation of their
     weights, resampled on the take's own rate (USD keys whole time codes).
 
@@ -183,6 +185,8 @@ def take_usd(head: Path, out, times, weights: dict, rate: float) -> dict:
         are played too (facts.arkit_targets).
     rate : float
         Frames a second.
+    read : tuple or None
+        The head as mesh.io.read_morph_targets read it, where the caller has it.
 
     Returns
     -------
@@ -192,7 +196,7 @@ def take_usd(head: Path, out, times, weights: dict, rate: float) -> dict:
     from ..facts import arkit_targets
     from ..export.usd import write_usd
     from ..mesh.io import read_morph_targets
-    mesh, targets, unit = read_morph_targets(head)
+    mesh, targets, unit = read_morph_targets(head) if read is None else read
     plays = {n: a for a, n in arkit_targets(targets).items() if a in weights}   # the head's names kept
     names = [n for n in targets if n in plays]
     if not names:
@@ -244,9 +248,13 @@ def animate(head, out, take=None, video=None, options: AnimateOptions | None = N
         if preview.suffix.lower() != ".mp4":
             raise MimicaError(f"{preview}: a preview is written as .mp4")
     csv_out, figures = None, {}
+    # the head read once for what reads it (the video's basis, the preview, USD): an FBX is read
+    # through Blender, seconds a time
+    from ..mesh.io import read_morph_targets
+    read = read_morph_targets(head) if video is not None or kind == "usd" else None
     if video is not None:
         times, weights, rate, figures = weights_from_video(head, video, o.rest_frame, progress, o.tracker,
-                                                           landmarks=o.landmarks)
+                                                           landmarks=o.landmarks, read=read)
         csv_out = out.with_suffix(".csv")
     else:
         times, weights, rate = read_take(take, fps=o.fps)
@@ -260,12 +268,12 @@ def animate(head, out, take=None, video=None, options: AnimateOptions | None = N
                 try:
                     fit = figures["fit"]
                     write_preview(preview, video, head, fit.weights, fit.rotations, rate, fit.missing,
-                                  progress=progress)
+                                  progress=progress, read=read)
                 except BaseException:
                     csv_out.unlink(missing_ok=True)
                     raise
     if kind == "usd":                           # write_usd is atomic by itself (its suffix names its format)
-        info = take_usd(head, out, times, weights, rate)
+        info = take_usd(head, out, times, weights, rate, read)
         try:
             video_outputs()
         except BaseException:

@@ -302,29 +302,34 @@ def write_fbx_layout(path, layout: FbxLayout, mesh: Mesh, targets: dict | None =
     return {"appended": appended}
 
 
-def write_fbx_take(path, head, times: np.ndarray, rate: float, keyed: dict) -> None:
+def write_fbx_take(path, head, times: np.ndarray, rate: float, weights: dict) -> list:
     """The FBX `head` exported again through Blender to `path` with a take keyed on its shape
-    keys (one key a time, linear between; Blender's exporter bakes it into the FBX's animation).
+    keys named as ARKit shapes (facts.arkit_targets, matched inside Blender: one run), one key a
+    time, linear between (Blender's exporter bakes it into the FBX's animation).
 
     Parameters
     ----------
     path : str or Path
-        The FBX to write.
+        The FBX to write (written only where some shape key is keyed).
     head : str or Path
         The FBX read.
     times : (F,) float array
         Seconds from the take's first frame.
     rate : float
         The take's frames a second (the scene's rate).
-    keyed : dict
-        {object name: {shape key name: (F,) values}}.
+    weights : dict
+        {ARKit name: (F,) values}.
+
+    Returns
+    -------
+    list of str
+        The shape keys keyed (empty: nothing written).
     """
     head = Path(head)
-    spec = {"fps": float(rate), "objects": [{"name": o, "keys": list(k)} for o, k in keyed.items()]}
-    arrays = {"t": np.asarray(times, np.float64)}
-    for i, k in enumerate(keyed.values()):
-        arrays[f"w{i}"] = np.stack([np.asarray(v, np.float64) for v in k.values()], 1)
+    names = list(weights)
     with tempfile.TemporaryDirectory(prefix="mimica-fbx-") as d:
-        (Path(d) / "take.json").write_text(json.dumps(spec))
-        np.savez(Path(d) / "take.npz", **arrays)
+        (Path(d) / "take.json").write_text(json.dumps({"fps": float(rate), "names": names}))
+        np.savez(Path(d) / "take.npz", t=np.asarray(times, np.float64),
+                 w=np.stack([np.asarray(weights[n], np.float64) for n in names], 1))
         _blender(head, "take", head, Path(d) / "take", Path(path), what="write a take into")
+        return json.loads((Path(d) / "take.keyed.json").read_text())

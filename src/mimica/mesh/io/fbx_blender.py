@@ -11,10 +11,10 @@ talk through files.)
                             move, local, the object's vertices then the added ones) and vertices to add
                             (a{i}: positions; r{i}: (polygon, corner, new vertex) rows re-pointing
                             corners to them); the file imported, edited and exported to OUT
-    take  FILE.fbx IN OUT   IN.json: the take's rate and, per object, the shape keys it keys;
-                            IN.npz: the times (t) and per object i the keys' values (w{i}: frames x
-                            keys); keyed at each time (linear between), exported to OUT with its
-                            animation
+    take  FILE.fbx IN OUT   IN.json: the take's rate and its weights' ARKit names; IN.npz: the
+                            times (t) and the weights (w: frames x names); each object's shape keys
+                            named as ARKit shapes keyed at each time (linear between), exported to
+                            OUT with its animation; IN.keyed.json: the keys keyed
 """
 
 import json
@@ -142,43 +142,61 @@ def write(path, edits, out):
 
 
 def take(path, keyed, out):
-    """Key a take's weights on an FBX's shape keys and export it with the animation (the
-    module's `take`).
+    """Key a take's ARKit weights on an FBX's shape keys named as ARKit shapes (mimica's
+    facts.arkit_targets) and export it with the animation (the module's `take`).
 
     Parameters
     ----------
     path : str
         The FBX read.
     keyed : str
-        IN: IN.json ({"fps": rate, "objects": [{"name", "keys"}]}) and IN.npz (t, w{i}).
+        IN: IN.json ({"fps": rate, "names": the weights' ARKit names}) and IN.npz (t: seconds,
+        w: frames x names); IN.keyed.json written: the shape keys keyed.
     out : str
-        The FBX written.
+        The FBX written (where any key was).
     """
     import bpy
+    facts = _facts()
     import_fbx(path)
     spec = json.loads(Path(keyed + ".json").read_text())
     z = np.load(keyed + ".npz")
+    column = {n: j for j, n in enumerate(spec["names"])}
     scene = bpy.context.scene
     rate = float(spec["fps"])
     scene.render.fps = max(1, int(round(rate)))
     scene.render.fps_base = scene.render.fps / rate
     frames = z["t"] * rate                           # the take's start at the file's time 0
     scene.frame_start, scene.frame_end = 0, int(round(frames[-1]))
-    obs = {o.name: o for o in objects()}
-    for i, ob in enumerate(spec["objects"]):
-        keys = obs[ob["name"]].data.shape_keys
-        w = z[f"w{i}"]
-        for j, name in enumerate(ob["keys"]):
+    done = []
+    for o in objects():
+        keys = o.data.shape_keys
+        plays = facts.arkit_targets(kb.name for kb in keys.key_blocks) if keys is not None else {}
+        for arkit, name in plays.items():
+            if arkit not in column:
+                continue
             kb = keys.key_blocks[name]
-            for f, x in zip(frames, w[:, j]):
+            for f, x in zip(frames, z["w"][:, column[arkit]]):
                 kb.value = float(x)
                 kb.keyframe_insert("value", frame=float(f))
-        act = keys.animation_data.action if keys.animation_data else None
+            done.append(name)
+        act = keys.animation_data.action if keys is not None and keys.animation_data else None
         for fc in (_fcurves(act) if act is not None else []):          # linear, as glTF plays a take
             for kp in fc.keyframe_points:
                 kp.interpolation = "LINEAR"
-    bpy.ops.export_scene.fbx(filepath=out, bake_anim=True, bake_anim_use_all_actions=False,
-                             bake_anim_use_nla_strips=False)
+    Path(keyed + ".keyed.json").write_text(json.dumps(done))
+    if done:
+        bpy.ops.export_scene.fbx(filepath=out, bake_anim=True, bake_anim_use_all_actions=False,
+                                 bake_anim_use_nla_strips=False)
+
+
+def _facts():
+    """mimica's facts.py (the ARKit names), loaded by its path: Blender's Python cannot import
+    mimica (numpy < 2 there), and facts imports nothing of it."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("mimica_facts", Path(__file__).resolve().parents[2] / "facts.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def _fcurves(action):
