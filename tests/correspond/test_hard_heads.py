@@ -53,12 +53,34 @@ def test_eyes_that_are_one_surface_are_cut_loose_and_blink(eyes_head):
     assert np.abs(d1 - d0).max() < 1e-6 * np.ptp(mesh.vertices)
 
 
-@pytest.mark.parametrize("seed, closes", [(14, 0.6), (42, 0.4)])
-def test_found_landmarks_are_slid_onto_a_sealed_eyes_margin(seed, closes):
+def test_a_template_eye_fitted_to_its_own_face_lands_on_its_landmarks():
+    """fit_margin on the template's own face, its found eye points thrown 0.3 of the eye's width
+    up: the eye comes back to its true landmarks (the found eye points are not used)."""
+    from mimica.align import face_cylinder
+    from mimica.correspond.eyes import RIMS, fit_margin
+    from mimica.landmarks import ict_landmarks
+    from mimica.mesh import read_mesh
+    from mimica.store import default_store
+    from mimica.transfer import _eye_template
+    src = read_mesh(default_store().path("generic_neutral_mesh"))
+    lm = ict_landmarks(src)
+    truth = lm.positions(src)
+    template = _eye_template(src, lm)
+    up = face_cylinder(truth).axes[1]
+    for side, rim in RIMS.items():
+        width = np.linalg.norm(truth[rim[3]] - truth[rim[0]])
+        off = truth.copy()
+        off[rim] += 0.3 * width * up
+        got = fit_margin(src, off, side, template)
+        assert np.linalg.norm(got - truth[rim], axis=1).max() < 0.02 * width, side
+
+
+@pytest.mark.parametrize("seed, closes", [(14, 0.65), (42, 0.4)])
+def test_found_landmarks_are_put_on_a_sealed_eyes_margin(seed, closes):
     """Landmarks found on renders sit above a sealed eye's margin (the detector reads its
-    shading): they are slid onto the valley between lid and eyeball before the eye is cut, so
-    the lids close over it -- on seed 42 past the deeper fold above the lid (heads the eyes' cut
-    was developed on)."""
+    shading): the source's eye, fitted to the surface, puts them on the margin before the eye
+    is cut, so the lids close over it (heads the eyes' cut was developed on)."""
+    from mimica.align import face_cylinder
     from mimica.landmarks.auto import landmarks_for
     mesh, truth, _ = one_surface_eyes(seed)
     found = landmarks_for(mesh)
@@ -71,6 +93,11 @@ def test_found_landmarks_are_slid_onto_a_sealed_eyes_margin(seed, closes):
     before = np.linalg.norm(found.positions(mesh)[eyes] - rest[eyes], axis=1).mean()
     after = np.linalg.norm(cut.landmarks[eyes] - rest[eyes], axis=1).mean()
     assert after < 0.6 * before, (before, after)
+    up = np.cross(face_cylinder(rest).axes[2], rest[45] - rest[42])      # across the eyes
+    for rim in ([36, 37, 38, 39], [42, 43, 44, 45]):       # the upper lid's middle points on the margin
+        width = np.linalg.norm(rest[rim[3]] - rest[rim[0]])
+        across = (cut.landmarks[rim[1:3]] - rest[rim[1:3]]) @ (up / np.linalg.norm(up))
+        assert np.abs(across).max() < 0.1 * width, across / width
     for side, key in (("left", "eyeBlinkLeft"), ("right", "eyeBlinkRight")):
         assert closure(rest, truth.positions(shapes.mesh, shapes[key]), side) >= closes, side
 

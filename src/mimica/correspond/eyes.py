@@ -9,16 +9,19 @@ the lid was tried first: on remeshed heads it ran below the upper lid's landmark
 rode with the eye; the blink closed 0.07-0.84 of the gap.)  That inside is then the eye, a rigid part the lids close
 over (correspond.parts: `eyes`).  The user's vertices keep their order; copies are appended.
 
-Landmarks found on renders sit off such an eye (dlib reads a sealed eye's shading, not its
-margin: 0.18-0.26 of the eye's width above it on held-out heads; on the dev heads the blink closed
--0.08-0.15 of the gap), so where they were found, not given, each sealed eye's six points are
-first slid onto the margin (`on_margin`): the offset, in the eye's plane, at which the upper
-lid's arc runs along the surface's valley between lid and eyeball (the lowest such valley, the
-fold above the lid running deeper on some heads, but not the lower lid's); and the inside is
-cut along a loop of valley edges within BAND of the slid outline (`_loop_faces`), not at the
-polygon, since a tenth of the width off the margin puts the lid's last ring on the eye.  Given
-landmarks are kept: the deepest-valley search slid a dev head's true ones 0.17-0.22 of the width up, onto
-the fold above the lid, where its margin shows no valley at 20k vertices.
+Landmarks found on renders sit off such an eye: the detector reads a sealed eye's shading, not
+its margin, and puts the whole eye 0.1-0.3 of its width high (corners too; the rest of the face
+within 0.03 of the eyes' distance).  So where they were found, not given, each sealed eye's six
+points come from the source face's eye as a template (`fit_margin`): the template face put on
+this one by the landmarks off the eyes, its skin and eye near the eye moved to where this
+surface lies closest to them, its six points carried along -- within 0.05 of the width of the
+true margin across on most held-out eyes (0.12 worst).  The inside is then cut along a loop of
+valley edges within BAND of that outline (`_loop_faces`), not at the polygon: at 20k vertices
+the eye is three edges tall, and a polygon a twentieth of the width off puts a lid's last ring
+on the eye.  (Before, found points were slid to the valley between lid and eyeball deepest
+along the upper lid's arc: the fold above the lid runs deeper on some heads, the lower lid's on
+others; worst held-out blink 0.40, against 0.68 through the template: bench/real_heads.py.)
+Given landmarks are kept.
 """
 
 from __future__ import annotations
@@ -39,18 +42,14 @@ INSIDE = 3                # ... and resolved: at least this many vertices inside
 # (ICT's identities remeshed at 20k vertices: gap 0.27-0.31 of the width, 4-9 vertices inside;
 # the shared 468-vertex head's sealed eyes: one vertex inside, a fan in front of the lids which,
 # cut loose, stood out of every blink with the void behind it showing)
-SLIDE_UP = 0.45           # on_margin searches this far (of the eye's width) across the eye ...
-SLIDE_ALONG = 0.06        # ... and this far along it (the margin's valley runs along the eye)
-TRUSTED = 0.1             # found landmarks within this (across) of the margin found are kept
-PEAK_SHARE = 0.4          # a valley this deep (of the deepest) below the deepest is taken as the margin
-# ... but not where a valley this far above it (of the width) runs LOWER_LID_DEEPER times deeper:
-# the upper arc caught on the lower lid's valley (dev heads 13-30 and 42, 38 eyes: 3 such, the
-# slide's error max 0.17 -> 0.09 of the width, no other eye moved)
-LOWER_LID_GAP = (0.1, 0.2)
-LOWER_LID_DEEPER = 1.1
-REFINE = np.arange(-0.1, 0.1001, 0.02)   # then the upper lid's middle points, each this far
-BAND = 0.1                # the margin's loop runs within this (of the width) of the slid outline
-# (dev heads 13-16, landmarks found on renders: blink 0.51-0.72 at 0.1, 0.16-0.77 at 0.25; the
+NOT_EYES = np.r_[0:36, 48:68]      # the landmarks that put a template face on this one
+TEMPLATE_REACH = 1.3      # a template eye: its face's front within this (of the eye's width) of it
+TEMPLATE_SAMPLES = 4      # ... sampled this many steps along each triangle's edge
+FIT_REACH = 0.9           # fit_margin fits the vertices within this of where the template's eye lands
+FIT_CAP = 0.1             # ... each one's distance counted up to this (the rest of the face differs)
+SEARCH = [(0.1, 4, 2), (0.025, 2, 2), (0.00625, 2, 2)]   # (step of the width, half-spans in steps: in the eye's plane, in depth)
+BAND = 0.1                # the margin's loop runs within this (of the width) of the fitted outline
+# (dev heads 13-16, landmarks found and slid to a valley: blink 0.51-0.72 at 0.1, 0.16-0.77 at 0.25; the
 # loop's crease weight, the mouth's CREASE or twice it, made no difference)
 
 
@@ -71,14 +70,14 @@ class EyeCut:
     why : dict
         Side -> why a sealed eye was left whole.
     landmarks : (68, 3) float array or None
-        The landmarks given, those of each cut eye slid onto its margin where they were found.
+        The landmarks given, those of each cut eye put on its margin where they were found.
     """
     mesh: Mesh                         # the cut mesh: the input's vertices first, then the copies
     copies_of: np.ndarray              # (k,) for each appended vertex, the vertex it copies
     eyes: dict = field(default_factory=dict)      # side -> vertices of its eye (the copies included)
     rims: dict = field(default_factory=dict)      # side -> the lid margin's loop (the lids' vertices)
     why: dict = field(default_factory=dict)       # side -> why a sealed eye was left whole
-    landmarks: np.ndarray | None = None           # (68, 3) as given, found ones slid onto the margins
+    landmarks: np.ndarray | None = None           # (68, 3) as given, found ones put on the margins
 
     @property
     def cut(self) -> bool:
@@ -159,101 +158,105 @@ def _eye_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | Non
     return _piece_around(mesh, inside, cent, centre)     # the one piece around the centre
 
 
-def valley(mesh: Mesh) -> np.ndarray:
-    """How deep each vertex lies in a valley of the surface.
+@dataclass
+class EyeTemplate:
+    """A face's eyes as templates for a sealed eye's margin (fit_margin): per side, dense samples
+    of the front of its skin near the eye and of its eye's part showing between the lids.
+
+    Attributes
+    ----------
+    landmarks : (68, 3) float array
+        The template face's landmarks.
+    samples : dict
+        Side -> a cKDTree of the samples.
+    """
+    landmarks: np.ndarray
+    samples: dict = field(default_factory=dict)
+
+
+def eye_template(mesh: Mesh, landmarks: np.ndarray, skin: np.ndarray, eyes: dict) -> EyeTemplate:
+    """A face's eyes as templates: its skin's front within TEMPLATE_REACH of each eye's width,
+    and the faces of its eye (`eyes[side]`, where it has one) seen within the eye's landmarks.
 
     Parameters
     ----------
     mesh : Mesh
+    landmarks : (68, 3) float array
+    skin : (n,) bool array
+        Its skin's vertices.
+    eyes : dict
+        Side -> its eye's vertices ((n,) bool), where the face has eyes of their own.
 
     Returns
     -------
-    (n,) float array
-        Its neighbours' mean minus itself along its normal, over the mean edge length (> 0 in a
-        valley, < 0 on a ridge).
+    EyeTemplate
     """
-    deg = np.maximum(np.asarray(mesh.adjacency.sum(1)).ravel(), 1)
-    lap = (mesh.adjacency @ mesh.vertices) / deg[:, None] - mesh.vertices
-    return np.einsum("ij,ij->i", lap, mesh.vertex_normals()) / max(mesh.mean_edge_length(), 1e-300)
+    from ..align import face_cylinder
+    lm = np.asarray(landmarks, float)
+    fwd = face_cylinder(lm).axes[2]
+    tri, v = mesh.triangles, mesh.vertices
+    cen = v[tri].mean(1)
+    front = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]]) @ fwd > 0
+    uu, vv = np.meshgrid(np.arange(TEMPLATE_SAMPLES + 1), np.arange(TEMPLATE_SAMPLES + 1))
+    on = uu + vv <= TEMPLATE_SAMPLES                   # barycentric samples over each triangle
+    bu, bv = uu[on] / TEMPLATE_SAMPLES, vv[on] / TEMPLATE_SAMPLES
+    out = EyeTemplate(lm)
+    for side, rim in RIMS.items():
+        pts = lm[rim]
+        centre, width, ex, ey = _eye_frame(pts, fwd)
+        rel = cen - centre
+        eye = np.zeros(len(tri), bool)
+        if side in eyes:                               # the eye between the lids
+            poly = np.stack([(pts - centre) @ ex, (pts - centre) @ ey], 1)
+            eye = eyes[side][tri].all(1) & inside_polygon(np.stack([rel @ ex, rel @ ey], 1), poly)
+        keep = (skin[tri].all(1) | eye) & front & (np.linalg.norm(rel, axis=1) < TEMPLATE_REACH * width)
+        t = tri[keep]
+        if len(t):
+            p = (v[t[:, 0], None] * (1 - bu - bv)[None, :, None] + v[t[:, 1], None] * bu[None, :, None]
+                 + v[t[:, 2], None] * bv[None, :, None])
+            out.samples[side] = cKDTree(p.reshape(-1, 3))
+    return out
 
 
-def on_margin(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray, depth: np.ndarray | None = None,
-              step: float = 0.02, locator=None) -> np.ndarray:
-    """An eye's six landmarks slid onto the lids' margin of a one-surface eye: together, to the
-    offset in the eye's plane (up to SLIDE_UP of its width across, SLIDE_ALONG along) at which
-    the upper lid's arc, seen from the front, runs along the valley between lid and eyeball
-    (of the valleys it meets going across, the lowest at least PEAK_SHARE as deep as the
-    deepest, unless a deeper one lies just above it: LOWER_LID_GAP); then the upper lid's two
-    middle points each on its own (REFINE).
+def fit_margin(mesh: Mesh, landmarks: np.ndarray, side: str, template: EyeTemplate,
+               locator=None) -> np.ndarray:
+    """A sealed eye's six landmarks from a template eye fitted to its surface: the template face
+    put on this one by their other landmarks (a similarity), then its eye moved (a translation,
+    coarse to fine: SEARCH) to where this face's vertices near it lie closest to it (each
+    distance counted up to FIT_CAP of the eye's width), and its six landmarks carried along.
 
     Parameters
     ----------
     mesh : Mesh
-    pts : (6, 3) float array
-        The eye's landmarks (iBUG 36-41 or 42-47).
-    fwd : (3,) float array
-        The face's forward direction.
-    depth : (n,) float array or None
-        valley(mesh), where already computed.
-    step : float
-        The search's step, of the eye's width.
+    landmarks : (68, 3) float array
+        This face's landmarks (the eye's own are not used: found ones sit off a sealed eye).
+    side : str
+        "left" or "right"; the template has that eye.
+    template : EyeTemplate
     locator : TriangleLocator or None
-        Of the mesh, where already made (both eyes of a head share one).
+        Of the mesh, where already made.
 
     Returns
     -------
     (6, 3) float array
-        The slid landmarks on the surface; `pts` itself where they lie within TRUSTED of where
-        the search would put them.
+        On the surface.
     """
-    depth = valley(mesh) if depth is None else depth
-    centre, width, ex, ey = _eye_frame(pts, fwd)
-    rel = mesh.vertices - centre
-    near = np.nonzero((np.linalg.norm(rel, axis=1) < 1.2 * width) & (mesh.vertex_normals() @ fwd > 0.3))[0]
-    if len(near) < 3:
-        return pts
-    tree = cKDTree(np.stack([rel[near] @ ex, rel[near] @ ey], 1) / width)
-
-    def depth_at(q):                                   # (..., 2) -> the valley's depth there
-        d, j = tree.query(q.reshape(-1, 2), k=3)
-        w = 1.0 / np.maximum(d, 1e-9)
-        return ((depth[near[j]] * w).sum(1) / w.sum(1)).reshape(q.shape[:-1])
-
-    poly = np.stack([(pts - centre) @ ex, (pts - centre) @ ey], 1) / width
-    t = np.linspace(0, 1, 8, endpoint=False)[None, :, None]
-    # the upper lid's arc (36-37-38-39): it overhangs the eyeball, a deep valley; the whole
-    # outline slid a dev head's true landmarks 0.23 of the width up (the upper arc: 0-0.1 down)
-    arc = (poly[:3, None] * (1 - t) + poly[1:4, None] * t).reshape(-1, 2)
-    along = np.arange(-SLIDE_ALONG, SLIDE_ALONG + 1e-9, step)
-    across = np.arange(-SLIDE_UP, SLIDE_UP + 1e-9, step)
-    shifts = np.stack(np.meshgrid(along, across, indexing="ij"), -1).reshape(-1, 2)
-    score = depth_at(arc[None] + shifts[:, None]).mean(1)
-    # the lid's fold above the margin can run deeper than the margin itself: of the valleys the
-    # arc meets going across, the lowest that is at least PEAK_SHARE as deep as the deepest ...
-    prof = score.reshape(len(along), len(across))
-    col = prof.argmax(0)
-    top = prof[col, np.arange(len(across))]
-    ks = np.nonzero(np.r_[False, (top[1:-1] > top[:-2]) & (top[1:-1] >= top[2:]), False]
-                    & (top >= PEAK_SHARE * top.max()) & (top > 0))[0]
-    if len(ks):
-        # ... unless that is the lower lid's valley, caught by the arc's ends: a deeper valley
-        # lies above it by less than the lids' gap
-        rise = across[ks] - across[ks[0]]
-        up = ks[(rise >= LOWER_LID_GAP[0] - 1e-9) & (rise <= LOWER_LID_GAP[1] + 1e-9)
-                & (top[ks] >= LOWER_LID_DEEPER * top[ks[0]])]
-        k = int(up[0] if len(up) else ks[0])
-        best = np.array([along[col[k]], across[k]])
-    else:                                              # no valley met: the deepest place, ties the least move
-        best = shifts[np.lexsort((np.linalg.norm(shifts, axis=1), -np.round(score, 9)))[0]]
-    if abs(best[1]) < TRUSTED:
-        return pts
-    poly0, poly = poly, poly + best
-    for k in (1, 2):
-        cand = np.repeat(poly[None], len(REFINE), 0)
-        cand[:, k, 1] += REFINE
-        part = (cand[:, k - 1:k + 1, None] * (1 - t[None]) + cand[:, k:k + 2, None] * t[None]).reshape(len(REFINE), -1, 2)
-        poly[k, 1] += REFINE[np.argmax(depth_at(part).mean(1) - 1e-9 * np.abs(REFINE))]
-    moved = pts + width * ((poly - poly0)[:, :1] * ex + (poly - poly0)[:, 1:] * ey)
+    from ..align import face_cylinder, fit_similarity
+    lm, ls = np.asarray(landmarks, float), template.landmarks
+    to_t = fit_similarity(lm[NOT_EYES], ls[NOT_EYES], what="landmarks")
+    fwd = face_cylinder(ls).axes[2]
+    centre, width, ex, ey = _eye_frame(ls[RIMS[side]], fwd)
+    v = to_t.apply(mesh.vertices)
+    near = (np.linalg.norm(v - centre, axis=1) < FIT_REACH * width) & (mesh.vertex_normals() @ to_t.rotation.T @ fwd > 0)
+    p = v[near]
+    tree, best = template.samples[side], np.zeros(3)
+    for step, span, deep in SEARCH:
+        g, d = np.arange(-span, span + 1) * step, np.arange(-deep, deep + 1) * step
+        a, b, c = (x.reshape(-1, 1) for x in np.meshgrid(g, g, d, indexing="ij"))
+        shifts = best + width * (a * ex + b * ey + c * fwd)
+        dist = tree.query((p[None] - shifts[:, None]).reshape(-1, 3))[0].reshape(len(shifts), -1)
+        best = shifts[np.argmin((np.minimum(dist, FIT_CAP * width) ** 2).mean(1))]
+    moved = to_t.inverse().apply(ls[RIMS[side]] + best)
     if locator is None:
         locator = TriangleLocator(mesh.vertices, mesh.triangles)
     return locator.closest(moved)[2]
@@ -347,7 +350,7 @@ def _closed_over(mesh: Mesh, lm: np.ndarray) -> list[str]:
     return out
 
 
-def cut_eyes(mesh: Mesh, landmarks, found: bool = False) -> EyeCut:
+def cut_eyes(mesh: Mesh, landmarks, found: bool = False, template=None) -> EyeCut:
     """A head with each sealed eye's inside cut loose from its lids along their margin; unchanged
     where the eyes open already (a boundary at the lids) or the landmarks are missing.
 
@@ -356,7 +359,11 @@ def cut_eyes(mesh: Mesh, landmarks, found: bool = False) -> EyeCut:
     mesh : Mesh
     landmarks : (68, 3) float array
     found : bool
-        Found on renders, not given: each sealed eye's slid onto its margin first (on_margin).
+        Found on renders, not given: each sealed eye's put on its margin first by `template`
+        (fit_margin), where one is given.
+    template : EyeTemplate, a function making one, or None
+        The eyes of the face the shapes come from (eye_template); a function is called only
+        where a sealed eye's found landmarks need it.
 
     Returns
     -------
@@ -369,8 +376,9 @@ def cut_eyes(mesh: Mesh, landmarks, found: bool = False) -> EyeCut:
     if not shut:
         return out
     fwd = face_cylinder(lm).axes[2]
-    depth = valley(mesh) if found else None
-    locator = TriangleLocator(mesh.vertices, mesh.triangles) if found else None   # both eyes' slides
+    if found and callable(template):
+        template = template()
+    locator = TriangleLocator(mesh.vertices, mesh.triangles) if found and template is not None else None
     slid = lm.copy()
     fi, st = mesh.face_indices.copy(), mesh.face_starts
     face_of = np.repeat(np.arange(mesh.n_faces), np.diff(st))
@@ -381,8 +389,9 @@ def cut_eyes(mesh: Mesh, landmarks, found: bool = False) -> EyeCut:
         gap = 0.5 * (np.linalg.norm(pts[1] - pts[5]) + np.linalg.norm(pts[2] - pts[4]))
         if gap < OPEN * np.linalg.norm(pts[3] - pts[0]):
             continue                               # a shut eye: nothing to open
-        moved = on_margin(mesh, pts, fwd, depth, locator=locator) if found else pts
-        if moved is not pts:                       # along the margin's valley near them
+        fit = found and template is not None and side in template.samples
+        moved = fit_margin(mesh, lm, side, template, locator) if fit else pts
+        if fit:                                    # along the margin's valley near them
             inside = _loop_faces(Mesh(np.vstack(verts), fi, st), moved, fwd)
         else:
             inside = _eye_faces(Mesh(np.vstack(verts), fi, st), pts, fwd)

@@ -185,7 +185,7 @@ class ExpressionTransfer:
                     target_landmarks = Landmarks.snap(welded, target_landmarks.positions(target))
                 target, self._copies = welded, index
         if not same and target_landmarks is not None:
-            target, target_landmarks, inward = self._cut(target, target_landmarks, inward)
+            target, target_landmarks, inward = self._cut(target, target_landmarks, inward, source_landmarks)
         self._mouth_appended = self._appended - (0 if self.eye_cut is None else len(self.eye_cut.copies_of))
         self.target = target
         if s.parts and not same and source_landmarks is not None and target_landmarks is not None:
@@ -226,8 +226,9 @@ class ExpressionTransfer:
         # the source's landmarks, now on the same topology
         return source.with_vertices(target.vertices[at]), (None if target_landmarks is None else source_landmarks), True
 
-    def _cut(self, target, target_landmarks, inward):
-        """A target's sealed lips cut apart and its one-surface eyes cut loose, as settings say."""
+    def _cut(self, target, target_landmarks, inward, source_landmarks=None):
+        """A target's sealed lips cut apart and its one-surface eyes cut loose, as settings say
+        (found landmarks put on a sealed eye's margin by the source's eyes as templates)."""
         if self.settings.cut_mouth:
             from ..correspond.mouth import cut_mouth as cut
             mc = cut(target, target_landmarks.positions(target))
@@ -240,7 +241,10 @@ class ExpressionTransfer:
                 target = mc.mesh
         if self.settings.cut_eyes:
             from ..correspond.eyes import cut_eyes as cut_e
-            ec = cut_e(target, target_landmarks.positions(target), found=target_landmarks.found)
+            template = None                    # made only where a sealed eye needs it
+            if target_landmarks.found and source_landmarks is not None:
+                template = lambda: _eye_template(self.source, source_landmarks)  # noqa: E731
+            ec = cut_e(target, target_landmarks.positions(target), found=target_landmarks.found, template=template)
             self.eyes_uncut = ec.why
             if ec.cut:
                 self.eye_cut = ec
@@ -248,7 +252,7 @@ class ExpressionTransfer:
                 self.output_mesh = _user_cut(self.output_mesh, target, ec)
                 if inward is not None:
                     inward = np.vstack([inward, np.zeros((len(ec.copies_of), 3))])
-                target_landmarks = _off_the_eyes(ec, ec.landmarks)   # found ones slid onto the margins
+                target_landmarks = _off_the_eyes(ec, ec.landmarks)   # found ones put on the margins
                 target = ec.mesh
         return target, target_landmarks, inward
 
@@ -454,6 +458,18 @@ def _longest(d: np.ndarray) -> float:
     6.8 against 0.4 ms on 16 frames)."""
     d = d * d
     return float(np.sqrt((d[..., 0] + d[..., 1] + d[..., 2]).max())) if d.size else 0.0
+
+
+def _eye_template(source, source_landmarks):
+    """The source's eyes as templates for a target's sealed ones: its skin, and its eyes where
+    it has them as parts (correspond.parts)."""
+    from ..correspond.eyes import eye_template
+    from ..correspond.parts import EYE_LEFT, EYE_RIGHT, split_parts
+    ls = source_landmarks.positions(source)
+    ps = split_parts(source, ls)
+    eyes = {side: np.isin(np.arange(source.n_vertices), ps.of(role))
+            for side, role in (("left", EYE_LEFT), ("right", EYE_RIGHT)) if len(ps.of(role))}
+    return eye_template(source, ls, ps.skin, eyes)
 
 
 def _off_the_eyes(ec, points) -> Landmarks:
