@@ -207,3 +207,17 @@ def blender_files(*args, timeout=600, version="4.5"):
                          stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=timeout)
     assert run.returncode == 0, run.stderr[-3000:] + run.stdout[-2000:]
 
+
+def same_objects(a, b, path="gltf"):
+    """Where two of pygltflib's object trees differ (None: nowhere): dataclasses field by field,
+    Attributes by their dicts, everything else by type and value."""
+    import dataclasses
+    import pygltflib as gl
+    if dataclasses.is_dataclass(a) and dataclasses.is_dataclass(b):
+        return next((d for f in dataclasses.fields(a)
+                     if (d := same_objects(getattr(a, f.name), getattr(b, f.name), f"{path}.{f.name}"))), None)
+    if isinstance(a, gl.Attributes) or isinstance(b, gl.Attributes):
+        return None if type(a) is type(b) and a.__dict__ == b.__dict__ else f"{path}: {a!r} != {b!r}"
+    if isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
+        return next((d for i, (x, y) in enumerate(zip(a, b)) if (d := same_objects(x, y, f"{path}[{i}]"))), None)
+    return None if type(a) is type(b) and a == b else f"{path}: {a!r} != {b!r}"

@@ -13,7 +13,7 @@ import pytest
 
 from mimica.mesh import read_mesh
 from mimica.mesh.io.gltf import open_for_edit, read_gltf_layout, read_morph_targets, save_edited, write_gltf_layout
-from helpers import validate
+from helpers import same_objects, validate
 
 DATA = Path(os.environ["MIMICA_DATA"])
 SAMPLES = DATA / "gltf-samples"
@@ -44,6 +44,21 @@ def test_the_khronos_samples_read_whole():
 
     tri = read_mesh(SAMPLES / "SimpleMorph" / "SimpleMorph.gltf")    # geometry in a .bin of its own
     assert tri.n_vertices == 3 and tri.n_faces == 1
+
+
+def test_the_json_is_decoded_as_pygltflib_decodes_it(blender_head):
+    """mesh.io.gltf_decode makes the objects pygltflib's own decoding makes, on files other tools
+    wrote (and tests/mesh/test_gltf.py on mimica's own)."""
+    import pygltflib as gl
+    from mimica.mesh.io.gltf_decode import fast_gltf_class
+    files = sorted(SAMPLES.glob("*/*.gltf")) + [blender_head]
+    for f in files:
+        assert same_objects(fast_gltf_class()().load(str(f)), gl.GLTF2().load(str(f))) is None, f
+    # pygltflib's own: a list's floats as floats, morph targets as dicts, attributes as objects
+    g = fast_gltf_class()().load(str(SAMPLES / "AnimatedMorphCube" / "AnimatedMorphCube.gltf"))
+    assert isinstance(g.meshes[0].primitives[0].targets[0], dict)
+    assert isinstance(g.meshes[0].primitives[0].attributes, gl.Attributes)
+    assert all(isinstance(x, float) for x in g.accessors[0].max)
 
 
 def test_a_sample_written_back_keeps_the_file(tmp_path):

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import validate
+from helpers import same_objects, validate
 from mimica.mesh import Mesh, write_glb, write_mesh
 from mimica.pipeline import ExportOptions, export_sequence, make_blendshapes
 
@@ -64,6 +64,17 @@ def test_every_kind_passes_the_validator(written):
     for r in validate(files):
         assert r["errors"] == 0 and r["warnings"] == 0, (r["path"], r["messages"])
         assert r["info"]["maxAttributes"] >= 2                       # POSITION and NORMAL
+
+
+def test_the_json_is_decoded_as_pygltflib_decodes_it(written):
+    """mimica's own files (sparse, quantized, clips with animations, .gltf beside its .bin): the
+    same objects as pygltflib's own decoding (tests/mesh/test_foreign_files.py: other tools')."""
+    import pygltflib as gl
+    from mimica.mesh.io.gltf_decode import fast_gltf_class
+    files = sorted(written.glob("*.gl*"))
+    assert len(files) >= 9
+    for f in files:
+        assert same_objects(fast_gltf_class()().load(str(f)), gl.GLTF2().load(str(f))) is None, f
 
 
 def test_normals_are_smooth_and_targets_carry_their_change(written, head_model):

@@ -1,5 +1,5 @@
 """Mesh files, one module a format: `obj` (mimica's own reader and writer), `ply` (plyfile),
-`gltf` (glTF and GLB, pygltflib).
+`gltf` (glTF and GLB, pygltflib; its JSON decoded by `gltf_decode`), `fbx`.
 
 Every failure a user can cause raises `MimicaError` naming the file and the problem.
 Writes are atomic: the file appears complete or not at all.

@@ -1,4 +1,4 @@
-"""glTF 2.0 and GLB: pygltflib parses the JSON and the buffers; the scene is read here, whole.
+"""glTF 2.0 and GLB: pygltflib reads the file (its JSON decoded by gltf_decode); the scene is read here, whole.
 
 Reading (`read_gltf_layout`): every node of the default scene that holds a mesh, every
 primitive, taken to world space through the node hierarchy (TRS or matrix); vertices a writer
@@ -126,9 +126,9 @@ class GltfLayout:
 
 
 def _load(path: Path):
-    import pygltflib as gl
+    from .gltf_decode import fast_gltf_class
     try:
-        g = gl.GLTF2().load(str(path))
+        g = fast_gltf_class()().load(str(path))
     except Exception as e:
         raise MimicaError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
     if g is None:
@@ -396,13 +396,23 @@ def _labels(g, sets, raw, tris, piece) -> tuple[np.ndarray, bool]:
     return weld_seams(w.vertices, label[m.half_edges], set_of, label, same), False
 
 
+def _target_rows(g, index) -> np.ndarray:
+    """A morph target's POSITION rows (n, 3) float64, decoded once per parsed file: the weld
+    (_target_moves) and morph_targets both read them (read-only)."""
+    done = g.__dict__.setdefault("_mimica_target_rows", {})
+    if index not in done:
+        done[index] = read_accessor(g, index).astype(np.float64).reshape(-1, 3)
+        done[index].flags.writeable = False
+    return done[index]
+
+
 def _target_moves(g, sets):
     """(n_raw, 2) per raw vertex: its morph targets' moves (weld.move_key); None where no set
     has targets."""
     rows = []
     for s in sets:
         prim = g.meshes[s.mesh].primitives[s.primitives[0]]
-        d = [read_accessor(g, t["POSITION"]).astype(np.float64).reshape(-1, 3) / s.scale @ s.world[:3, :3].T
+        d = [_target_rows(g, t["POSITION"]) / s.scale @ s.world[:3, :3].T
              for t in (prim.targets or []) if t.get("POSITION") is not None]
         rows.append(d)
     k = max((len(d) for d in rows), default=0)
@@ -460,7 +470,7 @@ def morph_targets(g, layout: GltfLayout, mesh: Mesh) -> dict:
         for name, t in zip(names(s), prim.targets or []):
             if t.get("POSITION") is None:
                 continue
-            d = read_accessor(g, t["POSITION"]).astype(np.float64).reshape(-1, 3) / s.scale @ s.world[:3, :3].T
+            d = _target_rows(g, t["POSITION"]) / s.scale @ s.world[:3, :3].T
             out[name][s.vertex[::-1]] = d[::-1]
     return {n: mesh.vertices + d for n, d in out.items()}
 
