@@ -154,3 +154,19 @@ def test_ply_keeps_the_uv(head_model, tmp_path):
     PlyData([PlyElement.describe(v, "vertex"), PlyElement.describe(f, "face")]).write(str(tmp_path / "st.ply"))
     tri = read_mesh(tmp_path / "st.ply")
     np.testing.assert_allclose(tri.uv[tri.face_uv_indices], [[0.1, 0.2], [0.9, 0.2], [0.1, 0.8]], atol=1e-6)
+
+
+def test_unique_rows_groups_as_numpy_does():
+    """mesh.core.unique_rows: the groups, first rows and counts of np.unique(axis=0), on floats with
+    -0.0 and NaN rows and on integer pairs."""
+    from mimica.mesh.core import unique_rows
+    rng = np.random.default_rng(0)
+    for trial in range(60):
+        n, k = int(rng.integers(1, 300)), int(rng.integers(1, 6))
+        key = rng.integers(0, 4, (n, k)).astype(float) if trial % 2 else rng.integers(0, 5, (n, k))
+        if key.dtype.kind == "f":
+            key[rng.integers(0, n, 3)] = -0.0
+            key[rng.integers(0, n, 2), 0] = np.nan
+        _, first, inverse, counts = np.unique(key, axis=0, return_index=True, return_inverse=True, return_counts=True)
+        got = unique_rows(key)
+        assert all(np.array_equal(a, b) for a, b in zip((first, inverse.ravel(), counts), got)), trial

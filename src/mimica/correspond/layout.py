@@ -12,10 +12,13 @@ registration finds 93.5 % of such a head's skin; Blender's GLB of an ICT identit
 
 from __future__ import annotations
 
+from itertools import chain
+
 import numpy as np
 from scipy.spatial import cKDTree
 
 from ..mesh import Mesh
+from ..mesh.core import unique_rows
 
 UV_TOLERANCE = 2e-5          # of the uv square: a float32 file and a text file agree within it
 
@@ -63,15 +66,20 @@ def _vertex_by_uv(source: Mesh, target: Mesh) -> np.ndarray | None:
     (corners whose uv several source vertices share -- a collapsed iris pole -- decided by the
     nearest place once the unambiguous ones have aligned the two)."""
     s_uv = source.uv[source.face_uv_indices]
-    t_uv, t_of = np.unique(target.uv[target.face_uv_indices], axis=0, return_inverse=True)
-    near = cKDTree(s_uv).query_ball_point(t_uv, UV_TOLERANCE)
-    cand_of_uv = [np.unique(source.face_indices[c]) for c in near]
-    if any(len(c) == 0 for c in cand_of_uv):
+    corner_uvs = target.uv[target.face_uv_indices]
+    uv_first, t_of, _ = unique_rows(corner_uvs)
+    near = cKDTree(s_uv).query_ball_point(corner_uvs[uv_first], UV_TOLERANCE)
+    lens = np.fromiter((len(c) for c in near), np.int64, len(near))
+    if (lens == 0).any():
         return None
-    count = np.array([len(c) for c in cand_of_uv])
-    one = count == 1
-    first = np.array([c[0] for c in cand_of_uv])
-    t_of = t_of.ravel()
+    # each distinct uv's source vertices, sorted: (uv, vertex) pairs made one integer each
+    n_s = source.n_vertices
+    pairs = np.unique(np.repeat(np.arange(len(near)), lens) * n_s
+                      + source.face_indices[np.fromiter(chain.from_iterable(near), np.int64, int(lens.sum()))])
+    pair_uv, pair_v = np.divmod(pairs, n_s)
+    start = np.searchsorted(pair_uv, np.arange(len(near) + 1))
+    one = np.diff(start) == 1
+    first = pair_v[start[:-1]]
     corner_one = one[t_of]
     out = np.full(target.n_vertices, -1)
     lo = np.full(target.n_vertices, np.iinfo(np.int64).max)
@@ -97,6 +105,6 @@ def _vertex_by_uv(source: Mesh, target: Mesh) -> np.ndarray | None:
         corner_uv = np.full(target.n_vertices, -1)
         corner_uv[target.face_indices] = t_of
         for k, v in enumerate(rest):
-            c = cand_of_uv[corner_uv[v]]
+            c = pair_v[start[corner_uv[v]]:start[corner_uv[v] + 1]]
             out[v] = c[np.argmin(np.linalg.norm(source.vertices[c] - placed[k], axis=1))]
     return out

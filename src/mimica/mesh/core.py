@@ -131,9 +131,8 @@ class Mesh:
             vg = np.full(self.n_vertices, -1.0)
             vg[self.face_indices[::-1]] = np.repeat(self.groups, np.diff(self.face_starts))[::-1]
             key = np.c_[key, vg]
-        uniq, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
-        group = inv.ravel()
-        if len(uniq) == self.n_vertices:
+        first, group, _ = unique_rows(key)
+        if len(first) == self.n_vertices:
             return self, np.arange(self.n_vertices)
         for _ in range(8):                         # un-weld where an edge would get a third face
             a = group[self.face_indices]
@@ -141,8 +140,8 @@ class Mesh:
             last = self.face_starts[1:] - 1        # each polygon's closing edge
             b[last] = group[self.face_indices[self.face_starts[:-1]]]
             e = np.sort(np.stack([a, b], 1), axis=1)
-            _, eid, cnt = np.unique(e, axis=0, return_inverse=True, return_counts=True)
-            bad = np.unique(e[cnt[eid.ravel()] > 2])
+            _, eid, cnt = unique_rows(e)
+            bad = np.unique(e[cnt[eid] > 2])
             sizes = np.bincount(group)
             bad = bad[sizes[bad] > 1]              # only welds can be undone
             if not len(bad):
@@ -340,6 +339,37 @@ class Mesh:
     def bounding_box_diagonal(self) -> float:
         v = self.vertices
         return float(np.linalg.norm(v.max(0) - v.min(0))) if len(v) else 0.0
+
+
+def unique_rows(key: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The distinct rows of a 2D array as np.unique(key, axis=0, return_index=True,
+    return_inverse=True, return_counts=True) gives them -- the same groups in the same order
+    (rows sorted column by column; -0.0 equal to 0.0, NaN rows each their own) -- by one stable
+    lexsort: numpy sorts the rows as structured records, 10-20x slower on a head's vertices.
+
+    Parameters
+    ----------
+    key : (n, k) array
+
+    Returns
+    -------
+    first : (u,) int array
+        Each distinct row's first occurrence.
+    inverse : (n,) int array
+        Each row's group.
+    counts : (u,) int array
+    """
+    key = np.asarray(key)
+    key = key.reshape(len(key), -1)
+    if not len(key):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    order = np.lexsort(key.T[::-1])
+    s = key[order]
+    new = np.r_[True, (s[1:] != s[:-1]).any(1)]
+    inverse = np.empty(len(key), np.int64)
+    inverse[order] = np.cumsum(new) - 1
+    starts = np.nonzero(new)[0]
+    return order[starts], inverse, np.diff(np.r_[starts, len(key)])
 
 
 def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:

@@ -7,6 +7,8 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from ..core import unique_rows
+
 
 def move_key(moves: np.ndarray) -> np.ndarray:
     """Each vertex's morph-target moves (n, m), all targets side by side, as two fixed random
@@ -50,12 +52,11 @@ def weld_seams(wpos, e, set_of, label, same=None) -> np.ndarray:
     """
     lab_set = np.zeros(len(wpos), np.int64)
     lab_set[label] = set_of
-    _, inv, cnt = np.unique(np.sort(e, 1), axis=0, return_inverse=True, return_counts=True)
-    b = e[cnt[inv.ravel()] == 1]
+    _, inv, cnt = unique_rows(np.sort(e, 1))
+    b = e[cnt[inv] == 1]
     if not len(b) or len(np.unique(lab_set)) < 2:
         return label
-    _, pid = np.unique(wpos if same is None else np.c_[wpos, same], axis=0, return_inverse=True)
-    pid = pid.ravel().astype(np.int64)
+    _, pid, _ = unique_rows(wpos if same is None else np.c_[wpos, same])
     n_p = int(pid.max()) + 1
     fwd = pid[b[:, 0]] * n_p + pid[b[:, 1]]
     rev = pid[b[:, 1]] * n_p + pid[b[:, 0]]
