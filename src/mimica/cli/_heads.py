@@ -58,10 +58,10 @@ def _warn_sealed_eyes(xfer, mesh, lm, what, found_flag=None):
              f"the lids: cut loose along the lid margins, {len(ec.copies_of)} vertices added after the others "
              "(--cut-eyes off to keep them whole)")
         if found_flag:
-            _say(f"note: {what}: the eyes were cut where the landmarks found on its renders put them, and a render "
-                 "barely shows the lids of an eye that is one surface with them (on made heads the points sat "
-                 f"0.1-0.25 of the eye's width above the margin and blinks failed): look with --show, and give the "
-                 f"head's 68 landmarks ({found_flag}) if the cut is not at the lids' margin")
+            _say(f"note: {what}: a render barely shows the lids of an eye that is one surface with them, so the "
+                 "eyes were cut where the source face's eye, fitted to the surface, puts their margin (on made heads "
+                 f"blinks then close 0.68-0.80 of the gap, 0.80-0.87 with the true landmarks): look with --show, "
+                 f"and give the head's 68 landmarks ({found_flag}) if the cut is not at the lids' margin")
     if xfer.eyes_uncut:
         whys = "; ".join(dict.fromkeys(xfer.eyes_uncut.values()))
         sides = " and ".join(xfer.eyes_uncut)

@@ -464,12 +464,11 @@ def _eye_template(source, source_landmarks):
     """The source's eyes as templates for a target's sealed ones: its skin, and its eyes where
     it has them as parts (correspond.parts)."""
     from ..correspond.eyes import eye_template
-    from ..correspond.parts import EYE_LEFT, EYE_RIGHT, split_parts
+    from ..correspond.parts import EYE_LEFT, EYE_RIGHT, ROLES, split_parts
     ls = source_landmarks.positions(source)
     ps = split_parts(source, ls)
-    eyes = {side: np.isin(np.arange(source.n_vertices), ps.of(role))
-            for side, role in (("left", EYE_LEFT), ("right", EYE_RIGHT)) if len(ps.of(role))}
-    return eye_template(source, ls, ps.skin, eyes)
+    eyes = {side: ps.role == ROLES.index(role) for side, role in (("left", EYE_LEFT), ("right", EYE_RIGHT))}
+    return eye_template(source, ls, ps.skin, {side: on for side, on in eyes.items() if on.any()})
 
 
 def _off_the_eyes(ec, points) -> Landmarks:
