@@ -126,7 +126,10 @@ def one_surface_eyes(seed: int, n_vertices: int = 20000, watertight: bool = Fals
     """(a head whose eyes are one surface with its lids, shaped open, its landmarks, the
     identity's vertices): a held-out ICT identity's head and eyeballs remeshed together, the
     triangulation running on from the lids over the eyeball's front (as Basel- or Surrey-style
-    morphable models have it); lips sealed; the back capped too where `watertight`."""
+    morphable models have it); lips sealed; the back capped too where `watertight`.  The eyes'
+    twelve landmarks are vertices of the new mesh at the identity's own points (pinned), so the
+    blink's truth pairs (37-41, 38-40, ...) lie across each other as on ICT: snapped to the
+    nearest remeshed vertex they sat up to 0.13 of the eye's width along the lid from them."""
     from mimica.correspond.parts import ICT_PARTS
     full = ICTModel()
     tv = full.identity(np.random.default_rng(1000 + seed).normal(0, 0.8, 20))
@@ -138,6 +141,7 @@ def one_surface_eyes(seed: int, n_vertices: int = 20000, watertight: bool = Fals
     faces = np.nonzero(np.add.reduceat(~keep[full.mesh.face_indices], full.mesh.face_starts[:-1]) == 0)[0]
     part, old = full.mesh.with_vertices(tv).submesh(faces)
     lm = tv[ICT_LANDMARKS_68]
-    rs = resample_face(part, lm, n_vertices=n_vertices, seed=seed, nostril_holes=False, seal=("mouth", "eyes"))
+    rs = resample_face(part, lm, n_vertices=n_vertices, seed=seed, nostril_holes=False, seal=("mouth", "eyes"),
+                       pins=range(36, 48))
     mesh = capped(rs.mesh) if watertight else rs.mesh
     return mesh, carried_landmarks(rs, part), tv

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import Delaunay
+from scipy.spatial import Delaunay, cKDTree
 
 from ..align import face_cylinder
 from ..mesh.core import Mesh
@@ -51,7 +51,7 @@ SEALS = {"mouth": [list(range(60, 68)) + [48, 54]], "eyes": [list(range(36, 42))
 
 
 def resample_face(mesh: Mesh, landmarks: np.ndarray, n_vertices: int = 12000, seed: int = 0,
-                  nostril_holes: bool = True, rings: int = 6, seal=()) -> Resampled:
+                  nostril_holes: bool = True, rings: int = 6, seal=(), pins=()) -> Resampled:
     """A face remeshed to another topology of about `n_vertices` (for tests and benchmarks with a
     known truth): points spread evenly on its cylinder map, triangulated, lifted onto the surface.
 
@@ -68,6 +68,10 @@ def resample_face(mesh: Mesh, landmarks: np.ndarray, n_vertices: int = 12000, se
     seal : tuple of str
         Openings ("mouth", "eyes") bridged by the new triangulation instead of cut, as scans and
         game heads have them: the lips (or lids) joined by a membrane of triangles.
+    pins : sequence of int
+        Landmarks (indices into `landmarks`, points on the surface) that become vertices, the
+        samples within half a step of each giving way: a truth carried to the new mesh then sits
+        where the original's does, not up to half an edge beside it.
 
     Returns
     -------
@@ -86,12 +90,20 @@ def resample_face(mesh: Mesh, landmarks: np.ndarray, n_vertices: int = 12000, se
     gx, gy = np.meshgrid(np.arange(lo[0], hi[0], h), np.arange(lo[1], hi[1], h * np.sqrt(3) / 2))
     gx = gx + (np.arange(gx.shape[0])[:, None] % 2) * h / 2          # hexagonal grid
     pts = np.stack([gx.ravel(), gy.ravel()], 1) + rng.uniform(-0.2, 0.2, (gx.size, 2)) * h
+    if len(pins):
+        pin_uv = cyl.project(np.asarray(landmarks, float)[list(pins)])[0]
+        near = cKDTree(pin_uv).query(pts)[0] < 0.5 * h
+        pts = np.vstack([pts[~near], pin_uv])
 
     def outermost(q):
         """Outermost original triangle under 2D points q: (triangle, bary, found)."""
         return smap.locate(q, k=24)
 
     t_of, b_of, keep = outermost(pts)
+    if len(pins):                           # a pin on its own point, not the outermost surface under it
+        from ..mesh.query import TriangleLocator
+        at = TriangleLocator(mesh.vertices, tri).closest(np.asarray(landmarks, float)[list(pins)])
+        t_of[-len(pins):], b_of[-len(pins):], keep[-len(pins):] = at[0], at[1], True
     pts, t_of, b_of = pts[keep], t_of[keep], b_of[keep]
     v3 = np.einsum("ij,ijk->ik", b_of, mesh.vertices[tri[t_of]])
     # triangulate in the cylinder map; a triangle whose centroid or edge midpoints fall where
