@@ -20,8 +20,9 @@ vertices shuffled, for the rigid parts.  Figures (the issue's):
   remeshed, lips and lids sealed, nostrils and the back capped: tools/hard_heads.py), and the
   shared real head capped the same way
 - closed_eye_blink_min: blink (as above) on heads whose eyes are one surface with the lids,
-  shaped open (held-out identities' heads and eyeballs remeshed together at 20k vertices, one
-  of them also watertight); none of their seeds was used to develop the eyes' cut (13-16 were)
+  shaped open (held-out identities' heads and eyeballs remeshed together at 20k vertices, seeds
+  33-35 and 43-44, 35 also watertight; the eyes' landmarks pinned as vertices at the identity's
+  points); none of their seeds was used to develop the eyes' cut (13-16, 20, 24, 30 and 42 were)
 - detected_jaw_min, detected_blink_min, detected_closed_eye_blink_min: the same heads, their
   landmarks found on renders by the core detector (what `pip install mimica` does without a
   landmark file), measured at their true landmarks
@@ -185,7 +186,9 @@ def main():
             ("shared real head, capped", wt_shared, Landmarks(sh[2].triangle, sh[2].bary), False),
             ("one-surface eyes, seed 33", *one_surface_eyes(33)[:2], True),
             ("one-surface eyes, seed 34", *one_surface_eyes(34)[:2], True),
-            ("one-surface eyes, watertight, seed 35", *one_surface_eyes(35, watertight=True)[:2], True)]
+            ("one-surface eyes, watertight, seed 35", *one_surface_eyes(35, watertight=True)[:2], True),
+            ("one-surface eyes, seed 43", *one_surface_eyes(43)[:2], True),
+            ("one-surface eyes, seed 44", *one_surface_eyes(44)[:2], True)]
     for name, mesh, lm, eyes in hard:
         t = time.perf_counter()
         shapes = arkit_blendshapes(mesh, lm)

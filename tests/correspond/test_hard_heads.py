@@ -31,6 +31,16 @@ def eyes_head():
     return one_surface_eyes(42)
 
 
+def test_a_made_heads_eye_truth_sits_at_the_identitys_points(eyes_head):
+    """The remesher's pins: the eyes' twelve truth landmarks are vertices at the identity's own
+    landmark points (the nearest remeshed vertex sat up to 0.13 of the eye's width off)."""
+    from mimica.data import ICT_LANDMARKS_68
+    mesh, lm, tv = eyes_head
+    own = tv[np.asarray(ICT_LANDMARKS_68)[36:48]]
+    assert np.linalg.norm(lm.positions(mesh)[36:48] - own, axis=1).max() < 1e-9 * np.ptp(tv)
+    assert np.linalg.norm(mesh.vertices[:, None] - own[None], axis=2).min(0).max() < 1e-9 * np.ptp(tv)
+
+
 def test_eyes_that_are_one_surface_are_cut_loose_and_blink(eyes_head):
     """The skin runs on from the lids over the eyeballs: each eye is cut loose along its lid
     margin (copies after the user's vertices), becomes a rigid eye, and the lids close over it."""
@@ -44,7 +54,7 @@ def test_eyes_that_are_one_surface_are_cut_loose_and_blink(eyes_head):
     rest = lm.positions(mesh)
     assert np.array_equal(cut.landmarks, rest)                  # given landmarks are not moved
     for side, key in (("left", "eyeBlinkLeft"), ("right", "eyeBlinkRight")):
-        assert closure(rest, lm.positions(shapes.mesh, shapes[key]), side) >= 0.7, side
+        assert closure(rest, lm.positions(shapes.mesh, shapes[key]), side) >= 0.8, side      # ICT's own: 0.865
     # the eye moves rigidly: its vertices keep their distances in a look up
     eye = cut.eyes["left"]
     look = shapes["eyeLookUpLeft"][eye]
@@ -55,7 +65,9 @@ def test_eyes_that_are_one_surface_are_cut_loose_and_blink(eyes_head):
 
 def test_a_template_eye_fitted_to_its_own_face_lands_on_its_landmarks():
     """fit_margin on the template's own face, its found eye points thrown 0.3 of the eye's width
-    up: the eye comes back to its true landmarks (the found eye points are not used)."""
+    up: the eye comes back to its true landmarks (the found eye points are not used), within
+    0.035 of the eye's width (the lower lid's own shift reads 0.02-0.03 low on this open eye,
+    its lashes and the eyeball's edge under the lid in front of the surface it fits)."""
     from mimica.align import face_cylinder
     from mimica.correspond.eyes import RIMS, fit_margin
     from mimica.landmarks import ict_landmarks
@@ -72,10 +84,42 @@ def test_a_template_eye_fitted_to_its_own_face_lands_on_its_landmarks():
         off = truth.copy()
         off[rim] += 0.3 * width * up
         got = fit_margin(src, off, side, template)
-        assert np.linalg.norm(got - truth[rim], axis=1).max() < 0.02 * width, side
+        assert np.linalg.norm(got - truth[rim], axis=1).max() < 0.035 * width, side
 
 
-@pytest.mark.parametrize("seed, closes", [(14, 0.65), (42, 0.4)])
+def test_a_template_eye_follows_a_lower_lid_that_sits_lower():
+    """fit_margin on the template's own face with its lower lids pulled 0.1 of the eye's width
+    down (a taller eye than the template's): the lower lid's points follow them, the upper
+    ones stay (a rigid template leaves the lower ones 0.1 off, or splits the difference)."""
+    from mimica.align import face_cylinder
+    from mimica.correspond.eyes import RIMS, fit_margin
+    from mimica.landmarks import ict_landmarks
+    from mimica.mesh import read_mesh
+    from mimica.store import default_store
+    from mimica.transfer import _eye_template
+    src = read_mesh(default_store().path("generic_neutral_mesh"))
+    lm = ict_landmarks(src)
+    truth = lm.positions(src)
+    template = _eye_template(src, lm)
+    up = face_cylinder(truth).axes[1]
+    v, moved = src.vertices.copy(), truth.copy()
+    for rim in RIMS.values():
+        centre, width = truth[rim].mean(0), np.linalg.norm(truth[rim[3]] - truth[rim[0]])
+        def pull(p):
+            below = np.clip((-(p - centre) @ up / width - 0.06) / 0.06, 0, 1)      # the corners left
+            near = np.clip((1.0 - np.linalg.norm(p - centre, axis=1) / width) / 0.3, 0, 1)
+            return -0.1 * width * (below * near)[:, None] * up
+        v += pull(src.vertices)
+        moved[rim] += pull(truth[rim])
+    face = src.with_vertices(v)
+    for side, rim in RIMS.items():
+        width = np.linalg.norm(truth[rim[3]] - truth[rim[0]])
+        assert np.abs((moved[rim[4:]] - truth[rim[4:]]) @ up).min() > 0.09 * width      # the pull reached them
+        got = fit_margin(face, moved, side, template)
+        assert np.linalg.norm(got - moved[rim], axis=1).max() < 0.03 * width, side
+
+
+@pytest.mark.parametrize("seed, closes", [(14, 0.75), (42, 0.65)])
 def test_found_landmarks_are_put_on_a_sealed_eyes_margin(seed, closes):
     """Landmarks found on renders sit above a sealed eye's margin (the detector reads its
     shading): the source's eye, fitted to the surface, puts them on the margin before the eye

@@ -14,13 +14,14 @@ its margin, and puts the whole eye 0.1-0.3 of its width high (corners too; the r
 within 0.03 of the eyes' distance).  So where they were found, not given, each sealed eye's six
 points come from the source face's eye as a template (`fit_margin`): the template face put on
 this one by the landmarks off the eyes, its skin and eye near the eye moved to where this
-surface lies closest to them, its six points carried along -- within 0.05 of the width of the
-true margin across on most held-out eyes (0.12 worst).  The inside is then cut along a loop of
-valley edges within BAND of that outline (`_loop_faces`), not at the polygon: at 20k vertices
+surface lies closest to them and its lower lid shifted across on its own (a rigid eye cannot fit
+both lids of every face), its six points carried along -- within 0.05 of the width of the true
+margin across on most held-out eyes.  The inside is then cut along a loop of valley edges within
+BAND of that outline and drawn to it (`_loop_faces`), not at the polygon: at 20k vertices
 the eye is three edges tall, and a polygon a twentieth of the width off puts a lid's last ring
 on the eye.  (Before, found points were slid to the valley between lid and eyeball deepest
 along the upper lid's arc: the fold above the lid runs deeper on some heads, the lower lid's on
-others; worst held-out blink 0.40, against 0.68 through the template: bench/real_heads.py.)
+others; worst held-out blink 0.40, against 0.75 through the template: bench/real_heads.py.)
 Given landmarks are kept.
 """
 
@@ -51,7 +52,17 @@ SEARCH = [(0.1, 4, 2), (0.025, 2, 2), (0.00625, 2, 2)]   # (step of the width, h
 # (these four set once on dev heads 14-16 and 20, not swept; a scale across the eye searched as well,
 # 0.7-1.3, took the fit's mean error across from 0.052 to 0.033 of the width on 16 dev eyes, their
 # blinks as they were)
+LOWER_REACH = 0.3         # then the lower lid's own shift across: the template's part this far (of the
+                          # width) below the eye's line moves whole, fading to none at the line
+LOWER_SEARCH = [(0.04, 5), (0.01, 4), (0.0025, 4)]       # (step of the width, half-span in steps)
+SEEN = 0.05               # ... fitted to the surface seen from the front: the front-most within this
+                          # (of the width) in cells this wide
+# (dev heads 13-16, 20, 24, 30, 42, landmarks found, with LOOP_PULL: blink mean 0.76 -> 0.81 over 16
+# eyes, worst 0.56 -> 0.57; both lids shifted each its own way 0.77 (20R 0.48); reach 0.2 / 0.4 as 0.3)
 BAND = 0.1                # the margin's loop runs within this (of the width) of the fitted outline
+LOOP_PULL = 0.05          # ... an edge costing (1 + (its distance from the outline / this)^2) times more
+# (dev heads as above, landmarks found: blink mean 0.75 -> 0.76 alone, 13R 0.71 -> 0.77, 15R 0.69 -> 0.79,
+# 30R 0.71 -> 0.88; 0.08 as none; the band narrowed to 0.06 instead left eyes with no loop)
 # (dev heads 13-16, landmarks found and slid to a valley: blink 0.51-0.72 at 0.1, 0.16-0.77 at 0.25; the
 # loop's crease weight, the mouth's CREASE or twice it, made no difference)
 
@@ -226,7 +237,8 @@ def fit_margin(mesh: Mesh, landmarks: np.ndarray, side: str, template: EyeTempla
     """A sealed eye's six landmarks from a template eye fitted to its surface: the template face
     put on this one by their other landmarks (a similarity), then its eye moved (a translation,
     coarse to fine: SEARCH) to where this face's vertices near it lie closest to it (each
-    distance counted up to FIT_CAP of the eye's width), and its six landmarks carried along.
+    distance counted up to FIT_CAP of the eye's width), its lower lid then shifted across on its
+    own the same way (LOWER_SEARCH), and its six landmarks carried along.
 
     Parameters
     ----------
@@ -259,10 +271,36 @@ def fit_margin(mesh: Mesh, landmarks: np.ndarray, side: str, template: EyeTempla
         shifts = best + width * (a * ex + b * ey + c * fwd)
         dist = tree.query((p[None] - shifts[:, None]).reshape(-1, 3))[0].reshape(len(shifts), -1)
         best = shifts[np.argmin((np.minimum(dist, FIT_CAP * width) ** 2).mean(1))]
-    moved = to_t.inverse().apply(ls[RIMS[side]] + best)
+    # the lower lid's own shift across (a rigid eye cannot fit both lids of every face): the
+    # template's lower part warped by lower x its weight, each vertex compared unwarped
+    # what is seen from the front only: an open eye's eyeball under the lids pulled the warp
+    # (ICT's own face fitted its lower lid 0.09 of the width low)
+    ps = p[_front_layer(p - centre, ex, ey, fwd, SEEN * width)]
+    fall = np.clip(-((ps - centre - best) @ ey) / (LOWER_REACH * width), 0, 1)
+    lower = 0.0
+    for step, span in LOWER_SEARCH:
+        tries = lower + step * np.arange(-span, span + 1)
+        q = ps[None] - best - width * tries[:, None, None] * fall[None, :, None] * ey
+        dist = tree.query(q.reshape(-1, 3))[0].reshape(len(tries), -1)
+        lower = tries[np.argmin((np.minimum(dist, FIT_CAP * width) ** 2).mean(1))]
+    shift = np.zeros((6, 3))
+    shift[4:] = width * lower * ey                  # 40, 41 (46, 47): the lower lid's points
+    moved = to_t.inverse().apply(ls[RIMS[side]] + best + shift)
     if locator is None:
         locator = TriangleLocator(mesh.vertices, mesh.triangles)
     return locator.closest(moved)[2]
+
+
+def _front_layer(rel: np.ndarray, ex, ey, fwd, cell: float) -> np.ndarray:
+    """(m,) bool: the points (rel: (m, 3) from the eye's centre) within `cell` of the front-most
+    in their cell of the eye's plane (`cell` square): what is seen from the front."""
+    ij = np.floor(np.stack([rel @ ex, rel @ ey], 1) / cell).astype(np.int64)
+    _, key = np.unique(ij, axis=0, return_inverse=True)
+    key = key.ravel()
+    depth = rel @ fwd
+    front = np.full(key.max() + 1, -np.inf)
+    np.maximum.at(front, key, depth)
+    return depth >= front[key] - cell
 
 
 def polyline_distance(q: np.ndarray, line: np.ndarray) -> np.ndarray:
@@ -288,7 +326,8 @@ def _loop_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | No
     """The faces of the eye inside the lids' margin, found as a loop of valley edges near the
     landmarks' outline: corner to corner over the upper lid and back under the lower, each by
     Dijkstra within BAND of its arc, an edge costing exp(-CREASE x its concave angle) of its
-    length (correspond.mouth's seam).  None where no loop closes."""
+    length (correspond.mouth's seam) times 1 + (its distance from the arc / LOOP_PULL)^2.  None
+    where no loop closes."""
     from scipy.sparse import coo_matrix
     from ..mesh.query import concave_angles, shortest_path
     from .mouth import CREASE
@@ -305,10 +344,12 @@ def _loop_faces(mesh: Mesh, pts: np.ndarray, fwd: np.ndarray) -> np.ndarray | No
     c3 = int(cand[np.argmin(np.linalg.norm(v[cand] - pts[3], axis=1))])
     loop = []
     for a, b, arc in ((c0, c3, poly[[0, 1, 2, 3]]), (c3, c0, poly[[3, 4, 5, 0]])):
-        ok = front & (polyline_distance(q, arc) < BAND)
+        off = polyline_distance(q, arc)
+        ok = front & (off < BAND)
         ok[[c0, c3]] = True
         keep = ok[e].all(1)
-        g = coo_matrix((np.r_[cost[keep], cost[keep]], (np.r_[e[keep, 0], e[keep, 1]], np.r_[e[keep, 1], e[keep, 0]])),
+        pulled = cost * (1 + (off[e].mean(1) / LOOP_PULL) ** 2)         # the valley nearest the outline
+        g = coo_matrix((np.r_[pulled[keep], pulled[keep]], (np.r_[e[keep, 0], e[keep, 1]], np.r_[e[keep, 1], e[keep, 0]])),
                        shape=(mesh.n_vertices,) * 2).tocsr()
         seg = shortest_path(g, a, b)
         if seg is None:
