@@ -272,9 +272,9 @@ def fit_margin(mesh: Mesh, landmarks: np.ndarray, side: str, template: EyeTempla
         dist = tree.query((p[None] - shifts[:, None]).reshape(-1, 3))[0].reshape(len(shifts), -1)
         best = shifts[np.argmin((np.minimum(dist, FIT_CAP * width) ** 2).mean(1))]
     # the lower lid's own shift across (a rigid eye cannot fit both lids of every face): the
-    # template's lower part warped by lower x its weight, each vertex compared unwarped
-    # what is seen from the front only: an open eye's eyeball under the lids pulled the warp
-    # (ICT's own face fitted its lower lid 0.09 of the width low)
+    # template's lower part warped by `lower` x its weight `fall` (the vertices moved back instead),
+    # fitted to what is seen from the front only (an open eye's eyeball under the lids pulled the
+    # warp: ICT's own face fitted its lower lid 0.09 of the width low)
     ps = p[_front_layer(p - centre, ex, ey, fwd, SEEN * width)]
     fall = np.clip(-((ps - centre - best) @ ey) / (LOWER_REACH * width), 0, 1)
     lower = 0.0
