@@ -294,9 +294,8 @@ def fit_margin(mesh: Mesh, landmarks: np.ndarray, side: str, template: EyeTempla
 def _front_layer(rel: np.ndarray, ex, ey, fwd, cell: float) -> np.ndarray:
     """(m,) bool: the points (rel: (m, 3) from the eye's centre) within `cell` of the front-most
     in their cell of the eye's plane (`cell` square): what is seen from the front."""
-    ij = np.floor(np.stack([rel @ ex, rel @ ey], 1) / cell).astype(np.int64)
-    _, key = np.unique(ij, axis=0, return_inverse=True)
-    key = key.ravel()
+    from ..mesh.core import unique_rows
+    _, key, _ = unique_rows(np.floor(np.stack([rel @ ex, rel @ ey], 1) / cell).astype(np.int64))
     depth = rel @ fwd
     front = np.full(key.max() + 1, -np.inf)
     np.maximum.at(front, key, depth)
