@@ -66,8 +66,8 @@ def test_eyes_that_are_one_surface_are_cut_loose_and_blink(eyes_head):
 def test_a_template_eye_fitted_to_its_own_face_lands_on_its_landmarks():
     """fit_margin on the template's own face, its found eye points thrown 0.3 of the eye's width
     up: the eye comes back to its true landmarks (the found eye points are not used), within
-    0.035 of the eye's width (the lower lid's own shift reads 0.02-0.03 low on this open eye,
-    its lashes and the eyeball's edge under the lid in front of the surface it fits)."""
+    0.035 of the eye's width (the lower lid's own shift reads 0.02-0.03 of it low on this open
+    eye: a sealed one is what it fits)."""
     from mimica.align import face_cylinder
     from mimica.correspond.eyes import RIMS, fit_margin
     from mimica.landmarks import ict_landmarks
