@@ -57,11 +57,12 @@ LOWER_REACH = 0.3         # then the lower lid's own shift across: the template'
 LOWER_SEARCH = [(0.04, 5), (0.01, 4), (0.0025, 4)]       # (step of the width, half-span in steps)
 SEEN = 0.05               # ... fitted to the surface seen from the front: the front-most within this
                           # (of the width) in cells this wide
-# (dev heads 13-16, 20, 24, 30, 42, landmarks found, with LOOP_PULL: blink mean 0.76 -> 0.81 over 16
-# eyes, worst 0.56 -> 0.57; both lids shifted each its own way 0.77 (20R 0.48); reach 0.2 / 0.4 as 0.3)
+# (dev heads 13-16, 20, 24, 30, 42, landmarks found, with LOOP_PULL: blink mean 0.76 -> 0.78 over 16
+# eyes, worst 0.56 -> 0.58, 16R 0.56 -> 0.86, 20R 0.68 -> 0.83; both lids shifted each its own way
+# 0.74 (20R 0.48); reach 0.2 / 0.4 as 0.3)
 BAND = 0.1                # the margin's loop runs within this (of the width) of the fitted outline
 LOOP_PULL = 0.05          # ... an edge costing (1 + (its distance from the outline / this)^2) times more
-# (dev heads as above, landmarks found: blink mean 0.75 -> 0.76 alone, 13R 0.71 -> 0.77, 15R 0.69 -> 0.79,
+# (dev heads as above, landmarks found: blink mean 0.74 -> 0.76 alone, 13R 0.71 -> 0.77, 15R 0.69 -> 0.79,
 # 30R 0.71 -> 0.88; 0.08 as none; the band narrowed to 0.06 instead left eyes with no loop)
 # (dev heads 13-16, landmarks found and slid to a valley: blink 0.51-0.72 at 0.1, 0.16-0.77 at 0.25; the
 # loop's crease weight, the mouth's CREASE or twice it, made no difference)

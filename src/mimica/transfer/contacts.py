@@ -30,7 +30,7 @@ REACH = 1.2                  # the correction's region: within REACH x the eye's
 BAND = 0.2                   # the lid margin that moves with the rim, in eye widths ...
 WHOLE = 0.1                  # ... wholly within this of it (the lid's tarsal plate), fading to none at BAND
 # (one-surface dev heads 13-16, 20, 24, 30, 42, landmarks found: the cut's rim runs up to 0.1 of the
-# width below a lid's landmarks (the crease lies under the margin); blink mean 0.81 -> 0.82, 20L 0.67
+# width below a lid's landmarks (the crease lies under the margin); blink mean 0.78 -> 0.80, 20L 0.67
 # -> 0.73, 14L 0.80 -> 0.87, 15L 0.77 -> 0.73, against a band fading from the rim out to 0.12;
 # 0.3 / 0.15 as 0.2 / 0.1)
 
