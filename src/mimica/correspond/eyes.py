@@ -33,6 +33,7 @@ import numpy as np
 from scipy.sparse.csgraph import connected_components
 
 from ..mesh import Mesh
+from ..mesh.core import unique_rows
 from ..mesh.query import TriangleLocator
 from scipy.spatial import cKDTree
 
@@ -270,8 +271,7 @@ def fit_margin(mesh: Mesh, landmarks: np.ndarray, side: str, template: EyeTempla
         g, d = np.arange(-span, span + 1) * step, np.arange(-deep, deep + 1) * step
         a, b, c = (x.reshape(-1, 1) for x in np.meshgrid(g, g, d, indexing="ij"))
         shifts = best + width * (a * ex + b * ey + c * fwd)
-        dist = tree.query((p[None] - shifts[:, None]).reshape(-1, 3))[0].reshape(len(shifts), -1)
-        best = shifts[np.argmin((np.minimum(dist, FIT_CAP * width) ** 2).mean(1))]
+        best = shifts[np.argmin(_capped_fit(tree, p[None] - shifts[:, None], FIT_CAP * width))]
     # the lower lid's own shift across (a rigid eye cannot fit both lids of every face): the
     # template's lower part warped by `lower` x its weight `fall` (the vertices moved back instead),
     # fitted to what is seen from the front only (an open eye's eyeball under the lids pulled the
@@ -282,8 +282,7 @@ def fit_margin(mesh: Mesh, landmarks: np.ndarray, side: str, template: EyeTempla
     for step, span in LOWER_SEARCH:
         tries = lower + step * np.arange(-span, span + 1)
         q = ps[None] - best - width * tries[:, None, None] * fall[None, :, None] * ey
-        dist = tree.query(q.reshape(-1, 3))[0].reshape(len(tries), -1)
-        lower = tries[np.argmin((np.minimum(dist, FIT_CAP * width) ** 2).mean(1))]
+        lower = tries[np.argmin(_capped_fit(tree, q, FIT_CAP * width))]
     shift = np.zeros((6, 3))
     shift[4:] = width * lower * ey                  # 40, 41 (46, 47): the lower lid's points
     moved = to_t.inverse().apply(ls[RIMS[side]] + best + shift)
@@ -292,10 +291,16 @@ def fit_margin(mesh: Mesh, landmarks: np.ndarray, side: str, template: EyeTempla
     return locator.closest(moved)[2]
 
 
+def _capped_fit(tree, q: np.ndarray, cap: float) -> np.ndarray:
+    """(k,) each try's misfit: q (k, m, 3) the vertices as each of k tries moves them, their
+    squared distances to the template's samples (`tree`) capped at `cap`, averaged."""
+    dist = tree.query(q.reshape(-1, 3))[0].reshape(len(q), -1)
+    return (np.minimum(dist, cap) ** 2).mean(1)
+
+
 def _front_layer(rel: np.ndarray, ex, ey, fwd, cell: float) -> np.ndarray:
     """(m,) bool: the points (rel: (m, 3) from the eye's centre) within `cell` of the front-most
     in their cell of the eye's plane (`cell` square): what is seen from the front."""
-    from ..mesh.core import unique_rows
     _, key, _ = unique_rows(np.floor(np.stack([rel @ ex, rel @ ey], 1) / cell).astype(np.int64))
     depth = rel @ fwd
     front = np.full(key.max() + 1, -np.inf)
