@@ -119,7 +119,7 @@ def test_a_template_eye_follows_a_lower_lid_that_sits_lower():
         assert np.linalg.norm(got - moved[rim], axis=1).max() < 0.03 * width, side
 
 
-@pytest.mark.parametrize("seed, closes", [(14, 0.75), (42, 0.65)])
+@pytest.mark.parametrize("seed, closes", [(14, 0.85), (42, 0.75)])     # measured 0.91 / 0.79 at worst
 def test_found_landmarks_are_put_on_a_sealed_eyes_margin(seed, closes):
     """Landmarks found on renders sit above a sealed eye's margin (the detector reads its
     shading): the source's eye, fitted to the surface, puts them on the margin before the eye
