@@ -170,3 +170,5 @@ def test_unique_rows_groups_as_numpy_does():
         _, first, inverse, counts = np.unique(key, axis=0, return_index=True, return_inverse=True, return_counts=True)
         got = unique_rows(key)
         assert all(np.array_equal(a, b) for a, b in zip((first, inverse.ravel(), counts), got)), trial
+    for empty in (np.zeros((0, 2), np.int64), np.zeros((0, 3))):       # no rows: no groups
+        assert all(len(a) == 0 for a in unique_rows(empty))

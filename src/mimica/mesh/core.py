@@ -360,9 +360,9 @@ def unique_rows(key: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     counts : (u,) int array
     """
     key = np.asarray(key)
-    key = key.reshape(len(key), -1)
     if not len(key):
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    key = key.reshape(len(key), -1)
     order = np.lexsort(key.T[::-1])
     s = key[order]
     new = np.r_[True, (s[1:] != s[:-1]).any(1)]

@@ -22,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..mesh import Mesh
+from ..mesh.core import unique_rows
 from . import hyperdual as hd
 
 
@@ -203,7 +204,8 @@ class ShellEnergy:
         self.n = len(x)
         self.rest_area = 0.5 * np.linalg.norm(np.cross(x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]]), axis=1)
         e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-        self.edges = np.unique(np.sort(e, axis=1), axis=0)
+        e = np.sort(e, axis=1)
+        self.edges = e[unique_rows(e)[0]]
         self.rest_len = np.linalg.norm(x[self.edges[:, 1]] - x[self.edges[:, 0]], axis=1)
         self.hinges = hinges_of(t)
         h = self.hinges

@@ -19,6 +19,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from ..mesh import Mesh
+from ..mesh.core import unique_rows
 from .surface import cardinal_spline
 
 
@@ -113,7 +114,8 @@ def refine_along(mesh: Mesh, mask, edge_fraction: float = 0.3, reach: float = 1.
     for _ in range(max_passes):
         e = np.stack([tris, np.roll(tris, -1, 1)], 2).reshape(-1, 2)     # (F*3, 2): v_i -> v_i+1
         key = np.sort(e, 1)
-        uniq, inv = np.unique(key, axis=0, return_inverse=True)
+        first, inv, _ = unique_rows(key)
+        uniq = key[first]
         inv = inv.reshape(-1)
         mid = 0.5 * (V[uniq[:, 0]] + V[uniq[:, 1]])
         length = np.linalg.norm(V[uniq[:, 0]] - V[uniq[:, 1]], axis=1)
@@ -134,7 +136,8 @@ def refine_along(mesh: Mesh, mask, edge_fraction: float = 0.3, reach: float = 1.
             ue = np.stack([tuv, np.roll(tuv, -1, 1)], 2).reshape(-1, 2)
             ukey = np.sort(ue, 1)
             sel = marked.reshape(-1)
-            uu, uinv = np.unique(ukey[sel], axis=0, return_inverse=True)
+            first, uinv, _ = unique_rows(ukey[sel])
+            uu = ukey[sel][first]
             umid = np.full(len(ue), -1)
             umid[np.nonzero(sel)[0]] = len(UV) + uinv.reshape(-1)
             UV = np.vstack([UV, 0.5 * (UV[uu[:, 0]] + UV[uu[:, 1]])])

@@ -23,6 +23,7 @@ from scipy.spatial import Delaunay, cKDTree
 from ..align import fit_similarity
 from ..errors import MimicaError
 from ..mesh import Mesh
+from ..mesh.core import unique_rows
 from .cylinder import fit_cylinder, flatten, radial_distance
 from .mask import Wrinkle, WrinkleMask, boundary_anchors
 from ..mesh.query import SurfaceMap, TriangleLocator
@@ -185,7 +186,8 @@ def transfer_mask(mask: WrinkleMask, reference: Mesh, target: Mesh, target_landm
         idx = np.arange(off, off + s)
         edges = np.vstack([edges, np.stack([idx[:-1], idx[1:]], 1)])
         off += s
-    edges = np.unique(np.sort(edges, 1), axis=0)
+    edges = np.sort(edges, 1)
+    edges = edges[unique_rows(edges)[0]]
     x, iters, resid = relax(rest2d, start, fixed, edges)
     # back onto the new surface: the outermost skin under each flattened point
     flat_t = flatten(Vt, cyl_t, forward=fwd)

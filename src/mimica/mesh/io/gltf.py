@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import MimicaError
-from ..core import Mesh
+from ..core import Mesh, unique_rows
 from .weld import move_key, weld_seams
 
 
@@ -663,7 +663,9 @@ def _corners(s: VertexSet, tri: np.ndarray, n_read: int):
     whole = (lo == hi) & (hi >= n_read)
     work[whole] = hi[whole]
     split = moved & ~whole[corners]
-    pairs, inv = np.unique(np.stack([corners[split], w_out[split]], 1), axis=0, return_inverse=True)
+    pairs = np.stack([corners[split], w_out[split]], 1)
+    first, inv, _ = unique_rows(pairs)
+    pairs = pairs[first]
     new_corners = corners.copy()
     new_corners[split] = count + inv.ravel()
     tris, at = [], 0
@@ -998,7 +1000,9 @@ def _gltf_vertices(mesh: Mesh):
     uvt = mesh.uv_triangles
     if uvt is None:
         return np.arange(mesh.n_vertices), None, tri
-    pairs, inv = np.unique(np.stack([tri.reshape(-1), uvt.reshape(-1)], 1), axis=0, return_inverse=True)
+    pairs = np.stack([tri.reshape(-1), uvt.reshape(-1)], 1)
+    first, inv, _ = unique_rows(pairs)
+    pairs = pairs[first]
     unused = np.setdiff1d(np.arange(mesh.n_vertices), pairs[:, 0])
     v_of = np.r_[pairs[:, 0], unused]
     uv_of = np.r_[pairs[:, 1], np.full(len(unused), -1)]
