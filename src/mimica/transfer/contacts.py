@@ -10,8 +10,8 @@ gap, its landmark pairs 37-41, 38-40, 43-47, 44-46) closes each pair by c x its 
 gap, or the lid's gap at the target's landmarks where that is wider: a rim cut inside the margin
 moves as the margin does), the rims meeting at most; the rim moves along the pair (the upper lid
 UPPER_SHARE of the way, as lids do), and the correction spreads over the lid by harmonic
-interpolation (zero at the edge of the eye's region), one factorization per target.  Our own step, not the paper's: Song et al. carry
-gradients only; measured in bench/real_heads.py.
+interpolation (zero at the edge of the eye's region), one factorization per target.  Our own
+step, not the paper's: Song et al. carry gradients only; measured in bench/real_heads.py.
 """
 
 from __future__ import annotations
@@ -26,7 +26,9 @@ from ..solver import SPDSolver
 
 EYES = {"right": (slice(36, 42), [(37, 41), (38, 40)], 36, 39),
         "left": (slice(42, 48), [(43, 47), (44, 46)], 42, 45)}
-UPPER_SHARE = 0.8            # the upper lid makes most of a blink's travel
+UPPER_SHARE = 0.8            # the upper lid makes most of a blink's travel (ICT's own blink: 0.96 of
+# it at the landmarks; that share taken from the source per frame read worse on the made heads with
+# found landmarks, e.g. one-surface 34L 0.78 -> 0.74, the remeshed head with holes 0.90 -> 0.87)
 REACH = 1.2                  # the correction's region: within REACH x the eye's width of its centre
 BAND = 0.2                   # the lid margin that moves with the rim, in eye widths ...
 WHOLE = 0.1                  # ... wholly within this of it (the lid's tarsal plate), fading to none at BAND
