@@ -90,8 +90,9 @@ def resample_face(mesh: Mesh, landmarks: np.ndarray, n_vertices: int = 12000, se
     gx, gy = np.meshgrid(np.arange(lo[0], hi[0], h), np.arange(lo[1], hi[1], h * np.sqrt(3) / 2))
     gx = gx + (np.arange(gx.shape[0])[:, None] % 2) * h / 2          # hexagonal grid
     pts = np.stack([gx.ravel(), gy.ravel()], 1) + rng.uniform(-0.2, 0.2, (gx.size, 2)) * h
+    pinned = np.asarray(landmarks, float)[list(pins)]
     if len(pins):
-        pin_uv = cyl.project(np.asarray(landmarks, float)[list(pins)])[0]
+        pin_uv = cyl.project(pinned)[0]
         near = cKDTree(pin_uv).query(pts)[0] < 0.5 * h
         pts = np.vstack([pts[~near], pin_uv])
 
@@ -102,7 +103,7 @@ def resample_face(mesh: Mesh, landmarks: np.ndarray, n_vertices: int = 12000, se
     t_of, b_of, keep = outermost(pts)
     if len(pins):                           # a pin on its own point, not the outermost surface under it
         from ..mesh.query import TriangleLocator
-        at = TriangleLocator(mesh.vertices, tri).closest(np.asarray(landmarks, float)[list(pins)])
+        at = TriangleLocator(mesh.vertices, tri).closest(pinned)
         t_of[-len(pins):], b_of[-len(pins):], keep[-len(pins):] = at[0], at[1], True
     pts, t_of, b_of = pts[keep], t_of[keep], b_of[keep]
     v3 = np.einsum("ij,ijk->ik", b_of, mesh.vertices[tri[t_of]])

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..align import face_cylinder
@@ -172,7 +173,6 @@ def _upper_path(mesh: Mesh, rim: np.ndarray, h: np.ndarray, corners: np.ndarray)
     the rim is not one simple loop, those above that line.  A cut eye's rim follows the valley
     inside the margin and can pass below the corners' line near a corner (one-surface dev heads:
     16L blink 0.63 -> 0.72; split by the line alone, lower-lid vertices there were paired as upper)."""
-    from scipy.sparse.csgraph import connected_components
     p = mesh.vertices[rim]
     ends = [int(np.argmin(np.linalg.norm(p - k, axis=1))) for k in corners]
     at = np.full(mesh.n_vertices, -1)
@@ -215,7 +215,6 @@ def _arc_param(chain: np.ndarray, knots: np.ndarray) -> np.ndarray:
 def _opening(mesh: Mesh, centre, radius) -> np.ndarray:
     """The vertices of the boundary loop nearest `centre` (the eye's opening), if it lies
     within `radius`; small holes beside it are other loops."""
-    from scipy.sparse.csgraph import connected_components
     be = mesh.boundary_edges()
     if not len(be):
         return np.zeros(0, np.int64)
