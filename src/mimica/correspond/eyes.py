@@ -41,6 +41,7 @@ from ..mesh import Mesh
 from ..mesh.core import unique_rows
 from ..mesh.query import TriangleLocator
 from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
 RIMS = {"right": list(range(36, 42)), "left": list(range(42, 48))}
 CAP_SHARE = 0.1           # an eye's inside is under this share of the mesh's faces
@@ -313,10 +314,8 @@ def fit_margin(mesh: Mesh, landmarks: np.ndarray, side: str, template: EyeTempla
 
 
 def _rotation(axis: np.ndarray, degrees: float) -> np.ndarray:
-    """(3, 3) the turn by `degrees` about the unit `axis` (Rodrigues' formula)."""
-    a = np.radians(degrees)
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * k @ k
+    """(3, 3) the turn by `degrees` about the unit `axis`."""
+    return Rotation.from_rotvec(np.radians(degrees) * np.asarray(axis, float)).as_matrix()
 
 
 def _capped_fit(tree, q: np.ndarray, cap: float) -> np.ndarray:
@@ -435,10 +434,11 @@ def _inside(inside, n_faces: int, fi: np.ndarray, face_of: np.ndarray):
     is_in = np.zeros(n_faces, bool)
     is_in[inside] = True
     corner_in = is_in[face_of]
-    on_both = np.intersect1d(np.unique(fi[corner_in]), np.unique(fi[~corner_in]))   # the margin
+    eye = np.unique(fi[corner_in])
+    on_both = np.intersect1d(eye, np.unique(fi[~corner_in]))   # the margin
     if len(on_both) < 6:
         return "the eye's inside meets its lids at too few vertices", None, None
-    if len(np.unique(fi[corner_in])) - len(on_both) < INSIDE:
+    if len(eye) - len(on_both) < INSIDE:
         return f"fewer than {INSIDE} vertices inside its lids' margin: too coarse to be an eye of its own", None, None
     return None, corner_in, on_both
 
@@ -498,7 +498,7 @@ def cut_eyes(mesh: Mesh, landmarks, found: bool = False, template=None) -> EyeCu
             out.why[side] = whys[0]
             continue
         pts = moved
-        copy = np.full(len(np.vstack(verts)), -1)
+        copy = np.full(now.n_vertices, -1)
         copy[on_both] = n + np.arange(len(on_both))
         sel = corner_in & np.isin(fi, on_both)
         fi[sel] = copy[fi[sel]]

@@ -136,8 +136,9 @@ def refine_along(mesh: Mesh, mask, edge_fraction: float = 0.3, reach: float = 1.
             ue = np.stack([tuv, np.roll(tuv, -1, 1)], 2).reshape(-1, 2)
             ukey = np.sort(ue, 1)
             sel = marked.reshape(-1)
-            first, uinv, _ = unique_rows(ukey[sel])
-            uu = ukey[sel][first]
+            picked = ukey[sel]
+            first, uinv, _ = unique_rows(picked)
+            uu = picked[first]
             umid = np.full(len(ue), -1)
             umid[np.nonzero(sel)[0]] = len(UV) + uinv.reshape(-1)
             UV = np.vstack([UV, 0.5 * (UV[uu[:, 0]] + UV[uu[:, 1]])])
