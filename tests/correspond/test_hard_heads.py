@@ -129,26 +129,29 @@ def test_a_template_eye_turns_with_a_face_turned_about_the_eyes_line(ict_eye_tem
 
 
 def test_a_template_eye_follows_a_lower_lid_that_sits_lower(ict_eye_template):
-    """fit_margin on the template's own face with its lower lids pulled 0.1 of the eye's width
-    down (a taller eye than the template's): the lower lid's points follow them, the upper
-    ones stay (a rigid template leaves the lower ones 0.1 off, or splits the difference)."""
+    """fit_margin on the template's own face with its lower lids pulled down (a taller eye than
+    the template's: 0.1 of the eye's width where the lid meets the cheek, 0.06-0.08 at the lid's
+    points, shaped as the fit's own warp of the lower lid): the lower lid's points follow, the
+    upper ones stay (a rigid template leaves the lower ones 0.06-0.08 off, or splits the
+    difference)."""
     from mimica.align import face_cylinder
-    from mimica.correspond.eyes import RIMS, fit_margin
+    from mimica.correspond.eyes import LOWER_REACH, RIMS, fit_margin
     src, truth, template = ict_eye_template
     up = face_cylinder(truth).axes[1]
     v, moved = src.vertices.copy(), truth.copy()
     for rim in RIMS.values():
         centre, width = truth[rim].mean(0), np.linalg.norm(truth[rim[3]] - truth[rim[0]])
         def pull(p):
-            below = np.clip((-(p - centre) @ up / width - 0.06) / 0.06, 0, 1)      # the corners left
+            below = -((p - centre) @ up) / (LOWER_REACH * width)
+            fall = np.clip(np.minimum(below, 3 - below), 0, 1)        # whole from LOWER_REACH down
             near = np.clip((1.0 - np.linalg.norm(p - centre, axis=1) / width) / 0.3, 0, 1)
-            return -0.1 * width * (below * near)[:, None] * up
+            return -0.1 * width * (fall * near)[:, None] * up
         v += pull(src.vertices)
         moved[rim] += pull(truth[rim])
     face = src.with_vertices(v)
     for side, rim in RIMS.items():
         width = np.linalg.norm(truth[rim[3]] - truth[rim[0]])
-        assert np.abs((moved[rim[4:]] - truth[rim[4:]]) @ up).min() > 0.09 * width      # the pull reached them
+        assert np.abs((moved[rim[4:]] - truth[rim[4:]]) @ up).min() > 0.05 * width      # the pull reached them
         got = fit_margin(face, moved, side, template)
         assert np.linalg.norm(got - moved[rim], axis=1).max() < 0.03 * width, side
 

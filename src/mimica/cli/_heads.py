@@ -60,7 +60,7 @@ def _warn_sealed_eyes(xfer, mesh, lm, what, found_flag=None):
         if found_flag:
             _say(f"note: {what}: a render barely shows the lids of an eye that is one surface with them, so the "
                  "eyes were cut where the source face's eye, fitted to the surface, puts their margin (on made heads "
-                 f"blinks then close 0.80-0.97 of the gap, 0.79-0.89 with the true landmarks): look with --show, "
+                 f"blinks then close 0.82-0.96 of the gap, 0.79-0.89 with the true landmarks): look with --show, "
                  f"and give the head's 68 landmarks ({found_flag}) if the cut is not at the lids' margin")
     if xfer.eyes_uncut:
         whys = "; ".join(dict.fromkeys(xfer.eyes_uncut.values()))
