@@ -454,7 +454,8 @@ def _inside(inside, n_faces: int, fi: np.ndarray, face_of: np.ndarray):
     if len(on_both) < 6:
         return "the eye's inside meets its lids at too few vertices", None, None
     if len(eye) - len(on_both) < INSIDE:
-        return f"fewer than {INSIDE} vertices inside its lids' margin: too coarse to be an eye of its own", None, None
+        return (f"fewer than {INSIDE} vertices inside its lids' margin: too coarse to be an eye of its own (a head "
+                "subdivided around its eyes is cut)"), None, None
     return None, corner_in, on_both
 
 
