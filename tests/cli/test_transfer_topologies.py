@@ -73,3 +73,23 @@ def test_cli_cuts_sealed_lips_in_one_line(head_model, sealed, tmp_path, capsys):
     assert cut.n_vertices > mesh.n_vertices and cut.n_faces == mesh.n_faces
     assert main(args + ["--out", str(tmp_path / "shut"), "--cut-mouth", "off"]) == 0
     assert read_mesh(tmp_path / "shut" / "jaw.obj").same_topology(mesh)
+
+
+def test_cli_says_each_sealed_eye_it_leaves_whole(tmp_path, capsys):
+    """The shared 468-vertex head with its own landmarks: its left eye reads open-shaped but is too
+    coarse to cut, its right one reads shut; each is said (the shut one went unsaid beside the
+    other's line)."""
+    import json
+    import os
+    from pathlib import Path
+    from mimica.landmarks import Landmarks, write_landmarks
+    d = Path(os.environ["MIMICA_DATA"]) / "real-heads" / "mediapipe-canonical"
+    mesh = read_mesh(d / "head.obj")
+    lm = Landmarks.from_vertex_indices(mesh, json.loads((d / "head.json").read_text())["landmark_vertices"])
+    write_landmarks(tmp_path / "lm.json", lm.positions(mesh))
+    capsys.readouterr()
+    assert main(["blendshapes", str(d / "head.obj"), "--landmarks", str(tmp_path / "lm.json"),
+                 "--out", str(tmp_path / "head.glb")]) == 0
+    err = capsys.readouterr().err
+    assert "the left eye stays one surface with the lids (fewer than 3 vertices inside" in err, err
+    assert "the right eye is one closed surface" in err, err

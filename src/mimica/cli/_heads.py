@@ -50,8 +50,9 @@ def _say_uncut_mouth(xfer, what, landmarks_flag: str) -> None:
 
 def _warn_sealed_eyes(xfer, mesh, lm, what, found_flag=None):
     """One line on eyes that are one surface with the lids: cut open, or why not (blinks then
-    move the lids over them); found_flag: the option that gives landmarks, where they were found
-    on renders (the pipeline's result says so)."""
+    crease the lids), and on sealed eyes neither cut nor tried (read shut, or --cut-eyes off);
+    found_flag: the option that gives landmarks, where they were found on renders (the
+    pipeline's result says so)."""
     if xfer.eye_cut is not None:
         ec = xfer.eye_cut
         _say(f"{what}: the {' and '.join(ec.eyes)} eye{'s were' if len(ec.eyes) > 1 else ' was'} one surface with "
@@ -66,11 +67,13 @@ def _warn_sealed_eyes(xfer, mesh, lm, what, found_flag=None):
         whys = "; ".join(dict.fromkeys(xfer.eyes_uncut.values()))
         sides = " and ".join(xfer.eyes_uncut)
         _say(f"note: {what}: the {sides} eye{'s stay' if len(xfer.eyes_uncut) > 1 else ' stays'} one surface with "
-             f"the lids ({whys}); blinks move the lids over {'them' if len(xfer.eyes_uncut) > 1 else 'it'}")
-    if lm is None or xfer.eye_cut is not None or xfer.eyes_uncut:
+             f"the lids ({whys}); blinks crease the lids over {'them' if len(xfer.eyes_uncut) > 1 else 'it'} "
+             "instead of closing them")
+    if lm is None:
         return
     from ..correspond.mouth import sealed_eyes
-    shut = sealed_eyes(mesh, lm.positions(mesh))
+    said = set(xfer.eye_cut.eyes if xfer.eye_cut is not None else ()) | set(xfer.eyes_uncut or ())
+    shut = [side for side in sealed_eyes(mesh, lm.positions(mesh)) if side not in said]
     if shut:
         _say(f"note: {what}: the {' and '.join(shut)} eye{'s are' if len(shut) > 1 else ' is'} one closed "
              "surface; lids move over it, they do not open or close")
