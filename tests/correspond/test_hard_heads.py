@@ -135,15 +135,14 @@ def test_a_template_eye_follows_a_lower_lid_that_sits_lower(ict_eye_template):
     upper ones stay (a rigid template leaves the lower ones 0.06-0.08 off, or splits the
     difference)."""
     from mimica.align import face_cylinder
-    from mimica.correspond.eyes import LOWER_REACH, RIMS, fit_margin
+    from mimica.correspond.eyes import RIMS, _fall, fit_margin
     src, truth, template = ict_eye_template
     up = face_cylinder(truth).axes[1]
     v, moved = src.vertices.copy(), truth.copy()
     for rim in RIMS.values():
         centre, width = truth[rim].mean(0), np.linalg.norm(truth[rim[3]] - truth[rim[0]])
         def pull(p):
-            below = -((p - centre) @ up) / (LOWER_REACH * width)
-            fall = np.clip(np.minimum(below, 3 - below), 0, 1)        # whole from LOWER_REACH down
+            fall = _fall(p - centre, width, up)                        # the fit's own warp of the lid
             near = np.clip((1.0 - np.linalg.norm(p - centre, axis=1) / width) / 0.3, 0, 1)
             return -0.1 * width * (fall * near)[:, None] * up
         v += pull(src.vertices)

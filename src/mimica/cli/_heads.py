@@ -72,7 +72,7 @@ def _warn_sealed_eyes(xfer, mesh, lm, what, found_flag=None):
     if lm is None:
         return
     from ..correspond.mouth import sealed_eyes
-    said = set(xfer.eye_cut.eyes if xfer.eye_cut is not None else ()) | set(xfer.eyes_uncut or ())
+    said = set(xfer.eye_cut.eyes if xfer.eye_cut is not None else ()) | set(xfer.eyes_uncut)
     shut = [side for side in sealed_eyes(mesh, lm.positions(mesh)) if side not in said]
     if shut:
         _say(f"note: {what}: the {' and '.join(shut)} eye{'s are' if len(shut) > 1 else ' is'} one closed "

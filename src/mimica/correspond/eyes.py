@@ -303,7 +303,8 @@ def fit_margin(mesh: Mesh, landmarks: np.ndarray, side: str, template: EyeTempla
     # template's lower part warped by `lower` x its weight `fall` (the vertices moved back instead),
     # fitted to what is seen from the front only (an open eye's eyeball under the lids pulled the
     # warp: ICT's own face fitted its lower lid 0.09 of the width low)
-    p = (p - centre) @ _rotation(ex, tilt).T + centre
+    turned = _rotation(ex, tilt)
+    p = (p - centre) @ turned.T + centre
     ps = p[_front_layer(p - centre, ex, ey, fwd, SEEN * width)]
     fall = _fall(ps - centre - best, width, ey)
     lower, m0 = 0.0, None
@@ -315,7 +316,7 @@ def fit_margin(mesh: Mesh, landmarks: np.ndarray, side: str, template: EyeTempla
         lower = tries[np.argmin(m + LOWER_PRIOR * m0 * (tries / 0.1) ** 2)]
     shift = np.zeros((6, 3))
     shift[4:] = width * lower * _fall(ls[RIMS[side]][4:] - centre, width, ey)[:, None] * ey   # 40, 41 (46, 47)
-    moved = to_t.inverse().apply((ls[RIMS[side]] + best + shift - centre) @ _rotation(ex, tilt) + centre)
+    moved = to_t.inverse().apply((ls[RIMS[side]] + best + shift - centre) @ turned + centre)
     if locator is None:
         locator = TriangleLocator(mesh.vertices, mesh.triangles)
     return locator.closest(moved)[2]
