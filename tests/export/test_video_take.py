@@ -42,6 +42,42 @@ def test_a_take_made_by_the_heads_own_points_is_recovered(head_glb):
     assert np.abs(turn - (yaw - yaw[0])).max() < np.radians(1.0)
 
 
+def test_the_rest_frame_removes_a_performers_resting_asymmetry(head_glb):
+    """A performer whose face at rest is lopsided (its left corner raised, its right brow down,
+    another face's proportions): the rest frame is their neutral, so at rest every weight reads
+    under 0.05 and the take's own shapes are found on top of the lopsided rest (jawOpen and
+    mouthSmileRight within 0.08 where they act).  Read against the head's own rest instead (its
+    landmarks as the first frame), the same points show the raised corner as a standing
+    mouthSmileLeft (0.38 of its 0.45)."""
+    from scipy.spatial.transform import Rotation
+    from mimica.export.video import fit_weights, landmark_basis
+    basis = landmark_basis(head_glb)
+    frames = 50
+    lopsided = {"mouthSmileLeft": 0.45, "browDownRight": 0.5}
+    rest = basis.rest * [1.04, 0.97, 1.0] + sum(a * basis.motion[ARKIT_52.index(n)] for n, a in lopsided.items())
+    w = np.zeros((frames, 52))
+    w[:, ARKIT_52.index("jawOpen")] = ramp(frames, 5, 25, 0.7)
+    w[:, ARKIT_52.index("mouthSmileRight")] = ramp(frames, 22, 25, 0.6)
+    yaw = np.radians(6) * np.sin(np.arange(frames) / 10)
+    pts = np.zeros((frames, 68, 2))
+    for f in range(frames):
+        R = Rotation.from_euler("YXZ", [yaw[f], 0.04, 0.0]).as_matrix()
+        p3 = (rest + np.einsum("k,knj->nj", w[f], basis.motion)) @ R.T
+        pts[f] = np.c_[320 + 1800 * p3[:, 0], 240 - 1800 * p3[:, 1]]
+    fit = fit_weights(pts, basis)
+    still = w.max(1) == 0
+    assert still.sum() >= 5
+    assert fit.weights[still].max() < 0.05, fit.weights[still].max()
+    for n in ("jawOpen", "mouthSmileRight"):
+        j = ARKIT_52.index(n)
+        on = w[:, j] > 0.2
+        assert np.abs(fit.weights[on, j] - w[on, j]).mean() < 0.08, (n, np.abs(fit.weights[on, j] - w[on, j]).mean())
+    # the same points with the head's own rest as the performer's: the asymmetry is a standing expression
+    head_rest = np.c_[320 + 1800 * basis.rest[:, 0], 240 - 1800 * basis.rest[:, 1]]
+    fit_head = fit_weights(np.concatenate([head_rest[None], pts]), basis)
+    assert fit_head.weights[1:][still, ARKIT_52.index("mouthSmileLeft")].mean() > 0.2
+
+
 def test_live_link_csv_keeps_the_video_rate(tmp_path):
     """The CSV's timecode counts frames at the video's rate: a 30 fps take of 2.5 s reads back at
     30 fps with its times (a 60 fps count would read as 59)."""
