@@ -97,7 +97,7 @@ def atomic_path(path):
     try:
         try:
             yield Path(tmp)
-            os.chmod(tmp, 0o666 & ~_umask())     # mkstemp makes 0600 files; use the usual mode
+            os.chmod(tmp, file_mode())           # mkstemp makes 0600 files; use the usual mode
             os.replace(tmp, path)
         except OSError as e:
             raise os_error(path, e) from None
@@ -110,6 +110,12 @@ def _umask() -> int:
     m = os.umask(0)
     os.umask(m)
     return m
+
+
+def file_mode() -> int:
+    """The mode a new file gets here (0666 less the umask): what a file written through a
+    temporary one (mkstemp's 0600) is given before it is moved into place."""
+    return 0o666 & ~_umask()
 
 
 def _alive(pid: int) -> bool:

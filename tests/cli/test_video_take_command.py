@@ -85,8 +85,11 @@ def test_video_requests_that_cannot_be_met_say_one_line(head_glb, tmp_path, caps
 def test_frames_without_a_face_are_found_said_and_previewed(head_glb, tmp_path, capsys):
     """A take whose face leaves the picture for frames 7-10: exactly those frames are said to
     show no face, fitted to points filled in from their neighbours (the jaw still follows the
-    rest), and the preview (the video beside the head) marks them with a red band."""
+    rest), and the preview (the video beside the head) marks them with a red band; the preview
+    and the take are readable as any new file here is (the umask's mode, not a temporary file's
+    0600)."""
     from mimica.image.video import frame_source
+    from mimica.outputs import file_mode
     from mimica.pipeline import animate
     jaw = ramp(20, 2, 16, 1.0)
     frames = jaw_frames(tmp_path / "frames", jaw, blank=range(7, 11), size=(480, 600))    # checked at half size
@@ -100,6 +103,8 @@ def test_frames_without_a_face_are_found_said_and_previewed(head_glb, tmp_path, 
     assert len(shown) == 20 and shown[0].shape[:2] == (360, 288 + 360)    # the video and the head, side by side
     red = [bool((img[:4, :, 0] > 0.7).all() and (img[:4, :, 1] < 0.35).all()) for img in shown]
     assert red == [f in range(7, 11) for f in range(20)]
+    for f in (r.preview, tmp_path / "take.glb", tmp_path / "take.csv"):
+        assert f.stat().st_mode & 0o777 == file_mode(), (f.name, oct(f.stat().st_mode))
     capsys.readouterr()
     assert main(["animate", str(head_glb), "--video", str(frames), "--out", str(tmp_path / "again.glb")]) == 0
     said = capsys.readouterr().err

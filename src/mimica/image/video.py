@@ -93,11 +93,12 @@ class VideoWriter:
 
     def close(self, ok=True):
         import os
-        from ..outputs import os_error
+        from ..outputs import file_mode, os_error
         try:
             if self.gen is not None:
                 self.gen.close()
             if ok and self.n:
+                os.chmod(self.tmp, file_mode())      # mkstemp made it 0600
                 os.replace(self.tmp, self.path)
         except OSError as e:
             raise os_error(self.path, e) from None
