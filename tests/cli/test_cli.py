@@ -163,3 +163,18 @@ def test_blender_addon_writes_the_addon_to_install(tmp_path, capsys):
     assert got.stdout.split() == ["52", "False"], got.stderr
     assert main(["blender-addon", "--out", str(copy)]) == 2
     assert "name a folder" in capsys.readouterr().err
+
+
+def test_every_command_that_writes_takes_o_for_out(files, tmp_path):
+    """`-o` is `--out` on every command that has one (as in most tools a user knows), and it
+    writes where it says."""
+    import argparse
+    from mimica.cli import build_parser
+    commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)).choices
+    with_out = {name: p for name, p in commands.items() if any(a.dest == "out" for a in p._actions)}
+    assert len(with_out) >= 15
+    for name, p in with_out.items():
+        assert next(a for a in p._actions if a.dest == "out").option_strings == ["-o", "--out"], name
+    assert main(["transfer", str(files / "S.obj"), str(files / "seq" / "f000_jawOpen.obj"),
+                 "--target", str(files / "T.obj"), "-o", str(tmp_path / "o")]) == 0
+    assert (tmp_path / "o").is_dir() and any((tmp_path / "o").iterdir())

@@ -62,7 +62,7 @@ def add_args(sub) -> None:
     ag.add_argument("--rig", help="a rig of this face (default: built with all muscles, about a minute)")
     ag.add_argument("--wrinkles", metavar="MASK", help="wrinkle mask of this face (default: the reference, carried)")
     ag.add_argument("--size", type=int, default=D.size, help="pixels per picture")
-    ag.add_argument("--out", required=True, help="PNG contact sheet")
+    ag.add_argument("-o", "--out", required=True, help="PNG contact sheet")
     ag.set_defaults(func=cmd_age)
 
 

@@ -111,7 +111,7 @@ def add_args(sub) -> None:
                                     "bending below the chin)")
     an.add_argument("--preview", help="with --video: preview.mp4, the video beside the head playing the fitted "
                                       "weights, frame by frame")
-    an.add_argument("--out", required=True, help="take.glb (take.fbx for an FBX head): the head with the take as an "
+    an.add_argument("-o", "--out", required=True, help="take.glb (take.fbx for an FBX head): the head with the take as an "
                                                  "animation (or take.usd / .usda / .usdc: its blend shapes and a "
                                                  "SkelAnimation)")
     an.set_defaults(func=cmd_animate)

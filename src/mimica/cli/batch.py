@@ -95,7 +95,7 @@ def add_args(sub) -> None:
                     "else a local one); pip install 'mimica[ray]'")
     bt.add_argument("--retry", type=int, default=2, help="times a job is retried when its worker dies")
     bt.add_argument("--status", action="store_true", help="say what is done, pending and failed in --out, and why")
-    bt.add_argument("--out", required=True, help="the batch's folder")
+    bt.add_argument("-o", "--out", required=True, help="the batch's folder")
     bt.set_defaults(func=cmd_batch)
 
 

@@ -35,7 +35,7 @@ def add_args(sub) -> None:
         The parser's commands (ArgumentParser.add_subparsers).
     """
     b = sub.add_parser("blender-addon", help="write the Blender add-on (a zip) into a folder, to install in Blender")
-    b.add_argument("--out", required=True, help="the folder to put mimica_blender.zip in")
+    b.add_argument("-o", "--out", required=True, help="the folder to put mimica_blender.zip in")
     b.set_defaults(func=cmd_blender_addon)
 
 

@@ -97,7 +97,7 @@ def add_args(sub) -> None:
     bs.add_argument("head", help="head mesh (OBJ/PLY/glTF), any topology, neutral")
     bs.add_argument("--landmarks", help="68-point landmark JSON (found automatically otherwise)")
     _head_options(bs, "head")
-    bs.add_argument("--out", required=True, help="head_arkit.glb (or .usd/.usda/.usdc: UsdSkel blend shapes)")
+    bs.add_argument("-o", "--out", required=True, help="head_arkit.glb (or .usd/.usda/.usdc: UsdSkel blend shapes)")
     bs.add_argument("--units", choices=["auto", "cm", "mm", "m"], default=D.units, help=UNITS_HELP)
     bs.add_argument("--quantize", action="store_true", help=QUANTIZE_HELP)
     bs.add_argument("--format", choices=FILE_FORMATS + ("npz",), help="the file's kind, where --out has no suffix")

@@ -34,7 +34,7 @@ def add_args(sub) -> None:
         The parser's commands (ArgumentParser.add_subparsers).
     """
     d = sub.add_parser("demo", help="transfer bundled ICT-FaceKit expressions; write meshes and a contact sheet")
-    d.add_argument("--out", default="out/demo")
+    d.add_argument("-o", "--out", default="out/demo")
     d.add_argument("--quick", action="store_true", help="fewer faces and expressions")
     d.set_defaults(func=cmd_demo)
 

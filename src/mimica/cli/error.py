@@ -84,7 +84,7 @@ def add_args(sub) -> None:
     e.add_argument("--result-neutral", help="the result's neutral (default: the reference neutral)")
     e.add_argument("--region", help="vertex range LO:HI for the summary (e.g. 0:9409, ICT face area)")
     e.add_argument("--bins", default="0.1,0.5,2", help="colour thresholds in percent (Song Fig. 11: 0.1,0.5,2)")
-    e.add_argument("--out", help="PNG to write")
+    e.add_argument("-o", "--out", help="PNG to write")
     e.set_defaults(func=cmd_error)
 
 

@@ -64,7 +64,7 @@ def add_args(sub) -> None:
     """
     ex = sub.add_parser("export", help="a sequence of meshes as one glTF animation, or as OBJ/PLY files")
     ex.add_argument("frames", nargs="+", help="mesh files or a folder, one topology")
-    ex.add_argument("--out", required=True, help="anim.glb / anim.gltf, anim.usd / .usda / .usdc (UsdSkel), or a folder")
+    ex.add_argument("-o", "--out", required=True, help="anim.glb / anim.gltf, anim.usd / .usda / .usdc (UsdSkel), or a folder")
     ex.add_argument("--rest", help="the rest mesh the morph targets are relative to (default: the first frame)")
     ex.add_argument("--fps", type=float, default=D.fps)
     ex.add_argument("--format", default=D.format, help="obj or ply, for a folder; glb, gltf, usd, usda or usdc "

@@ -59,7 +59,7 @@ def add_args(sub) -> None:
     fm.add_argument("--shapes", help="with a take: the face's ARKit shapes (HEAD_ARKIT.glb from `blendshapes`; "
                                      "else made once here)")
     fm.add_argument("--fps", type=float, help="the frame rate of a take's Timecode column")
-    fm.add_argument("--out", required=True, help="activations.json: a timeline of the muscles' activations")
+    fm.add_argument("-o", "--out", required=True, help="activations.json: a timeline of the muscles' activations")
     fm.set_defaults(func=cmd_fit_muscles)
 
 

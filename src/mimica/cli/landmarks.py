@@ -92,7 +92,7 @@ def add_args(sub) -> None:
     """
     lm = sub.add_parser("landmarks", help="find the 68 feature points on a photo or a mesh")
     lm.add_argument("face", help="photo (JPEG/PNG/GIF...) or mesh (OBJ/PLY/glTF)")
-    lm.add_argument("--out", help="landmark JSON to write (pixels for photos, 3D for meshes)")
+    lm.add_argument("-o", "--out", help="landmark JSON to write (pixels for photos, 3D for meshes)")
     lm.add_argument("--list", action="store_true", help="photos: list the faces found (numbered by size)")
     lm.add_argument("--face", type=int, default=0, dest="face_number",
                     help="photos: which face (0: the largest; --list numbers them)")

@@ -48,7 +48,7 @@ def add_args(sub) -> None:
     """
     rd = sub.add_parser("render", help="pictures and videos of a face or a sequence (no GPU needed)")
     rd.add_argument("face", help="a mesh, or a folder of meshes (a sequence)")
-    rd.add_argument("--out", required=True, help=".png (views, contact sheet) or .mp4 (sequence or turntable)")
+    rd.add_argument("-o", "--out", required=True, help=".png (views, contact sheet) or .mp4 (sequence or turntable)")
     rd.add_argument("--view", choices=list(VIEW_CHOICES), default=D.view)
     rd.add_argument("--turntable", action="store_true", help="turn the face around (PNG: 8 angles; MP4: --frames)")
     rd.add_argument("--heatmap", metavar="VALUES", help="colour by per-vertex values (.npy, .txt) or by the "

@@ -55,7 +55,7 @@ def add_args(sub) -> None:
                    help="each muscle's stretch: bar (default), its nodes sliding toward the origin by arc "
                         "length, what the library was calibrated with; shell: the stretch mode of the strip's "
                         "own shell eigenproblem (Kim eqs. 11-12), docs/benchmarks.md")
-    r.add_argument("--out", required=True, help="rig file to write")
+    r.add_argument("-o", "--out", required=True, help="rig file to write")
     r.set_defaults(func=cmd_rig)
 
 

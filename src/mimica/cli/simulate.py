@@ -113,7 +113,7 @@ def add_args(sub) -> None:
                         "(relative elongation) along the spring's deformation, linearized each step "
                         "(docs/benchmarks.md)")
     _wrinkle_args(s)
-    s.add_argument("--out", required=True, help="output folder")
+    s.add_argument("-o", "--out", required=True, help="output folder")
     s.set_defaults(func=cmd_simulate)
 
 

@@ -89,7 +89,7 @@ def add_args(sub) -> None:
     t.add_argument("--method", choices=["vtc", "dt"], default=D.method,
                    help="vtc: vertex-tent coordinates (Song); dt: Sumner-Popovic deformation transfer")
     _head_options(t, "target")
-    t.add_argument("--out", required=True, help="output folder")
+    t.add_argument("-o", "--out", required=True, help="output folder")
     t.set_defaults(func=cmd_transfer)
 
 

@@ -94,7 +94,7 @@ def add_args(sub) -> None:
                                                         "`mimica landmarks PHOTO --list` numbers them)")
     ti.add_argument("--source-face", type=int, default=0, help="the source photos' (or video's) face, as --face")
     ti.add_argument("--detector", choices=["dlib", "mediapipe"], default=D.detector, help=DETECTOR_HELP)
-    ti.add_argument("--out", required=True, help="output folder (photos), or an .mp4 with --driving")
+    ti.add_argument("-o", "--out", required=True, help="output folder (photos), or an .mp4 with --driving")
     ti.set_defaults(func=cmd_transfer_image)
 
 

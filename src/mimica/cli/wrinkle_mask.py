@@ -51,7 +51,7 @@ def add_args(sub) -> None:
                    "with those characteristic points")
     w.add_argument("--reference", metavar="MASK", help="another reference mask on the ICT-FaceKit generic face")
     w.add_argument("--show", metavar="PNG", help="also draw the mask on the face")
-    w.add_argument("--out", required=True, help="mask file to write (.wrinkles, JSON)")
+    w.add_argument("-o", "--out", required=True, help="mask file to write (.wrinkles, JSON)")
     w.set_defaults(func=cmd_wrinkle_mask)
 
 
