@@ -59,11 +59,11 @@ def mediapipe():
     return True
 
 
-def _blender_export(tmp_path_factory, suffix):
+def _blender_export(tmp_path_factory, suffix, mode="export"):
     """ICT-FaceKit's identity001 through Blender's OBJ importer and its glTF or FBX exporter."""
     from helpers import blender_files
     d = tmp_path_factory.mktemp("blender_head")
-    blender_files("export", Path(os.environ["MIMICA_DATA"]) / "ict-facekit" / "FaceXModel" / "identity001.obj",
+    blender_files(mode, Path(os.environ["MIMICA_DATA"]) / "ict-facekit" / "FaceXModel" / "identity001.obj",
                   d / f"head{suffix}")
     return d / f"head{suffix}"
 
@@ -72,6 +72,12 @@ def _blender_export(tmp_path_factory, suffix):
 def blender_head(tmp_path_factory):
     """Blender's GLB (defaults) of ICT's identity001."""
     return _blender_export(tmp_path_factory, ".glb")
+
+
+@pytest.fixture(scope="session")
+def blender_draco_head(tmp_path_factory):
+    """Blender's GLB of ICT's identity001 with its Draco mesh compression on (its defaults else)."""
+    return _blender_export(tmp_path_factory, ".glb", "export-draco")
 
 
 @pytest.fixture(scope="session")

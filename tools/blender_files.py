@@ -4,6 +4,8 @@ Blender as the other tool a user's files come from and go back to.
     python-with-bpy blender_files.py export HEAD.obj|HEAD.glb|HEAD.fbx OUT.glb|OUT.fbx
         Blender's OBJ (glTF, FBX) importer, then its glTF or FBX exporter, all with their
         defaults: a file as a user's round trip through Blender writes it back.
+    python-with-bpy blender_files.py export-draco HEAD.obj|HEAD.glb|HEAD.fbx OUT.glb
+        the same with the glTF exporter's Draco mesh compression on (its default settings).
     python-with-bpy blender_files.py import FILE.glb|FILE.fbx OUT.json
         the file imported as a user imports it; OUT.json: each mesh object's name, world matrix,
         vertex count, world-space vertices (OUT.json's .npz beside it), materials, shape keys and
@@ -23,11 +25,11 @@ bpy.ops.wm.read_factory_settings(use_empty=True)
 # the file imported as a user imports it: Blender's importer for its suffix
 {".fbx": bpy.ops.import_scene.fbx, ".glb": bpy.ops.import_scene.gltf,
  ".gltf": bpy.ops.import_scene.gltf}.get(Path(src).suffix.lower(), bpy.ops.wm.obj_import)(filepath=src)
-if mode == "export":
+if mode in ("export", "export-draco"):
     if out.lower().endswith(".fbx"):
         bpy.ops.export_scene.fbx(filepath=out)
     else:
-        bpy.ops.export_scene.gltf(filepath=out)
+        bpy.ops.export_scene.gltf(filepath=out, export_draco_mesh_compression_enable=mode == "export-draco")
     sys.exit(0)
 
 report, arrays = {"objects": []}, {}

@@ -38,6 +38,33 @@ def test_live_link_take_plays_on_the_head(head_glb, tmp_path, capsys):
     assert r["errors"] == 0 and r["warnings"] == 0, r["messages"]
 
 
+def test_a_take_plays_on_a_draco_compressed_head(head_glb, tmp_path, capsys):
+    """A head Blender wrote with Draco compression (its 52 shape keys uncompressed, the vertex order
+    kept): the take drives its 52 morph targets, each moving the head as in Blender's export of
+    the same head without compression; the file comes back uncompressed, said in a line, and
+    valid."""
+    from helpers import blender_files
+    from mimica.mesh.io import read_morph_targets
+    blender_files("export-draco", head_glb, tmp_path / "draco.glb")
+    w = np.clip(np.random.default_rng(1).normal(0.3, 0.2, (20, 52)), 0, 1)
+    live_link_csv(tmp_path / "take.csv", w)
+    capsys.readouterr()
+    assert main(["animate", str(tmp_path / "draco.glb"), "--arkit", str(tmp_path / "take.csv"),
+                 "-o", str(tmp_path / "t.glb")]) == 0
+    said = capsys.readouterr().err
+    assert "draco.glb: its 1 Draco-compressed primitive written back uncompressed" in said, said
+    assert "drive 52 morph targets" in said, said
+    r = validate([tmp_path / "t.glb"])[0]
+    assert r["errors"] == 0 and r["warnings"] == 0, r["messages"]
+    blender_files("export", head_glb, tmp_path / "plain.glb")       # the same head, uncompressed
+    mesh, targets, _ = read_morph_targets(tmp_path / "plain.glb")
+    back, back_targets, _ = read_morph_targets(tmp_path / "t.glb")
+    size = float(np.ptp(mesh.vertices, axis=0).max())
+    assert np.abs(back.vertices - mesh.vertices).max() < 2 * size / (2 ** 14 - 1)     # Draco's 14-bit grid
+    for n, t in targets.items():
+        np.testing.assert_allclose(back_targets[n] - back.vertices, t - mesh.vertices, atol=1e-6 * size)
+
+
 def test_a_weights_csv_with_a_time_column(head_glb, tmp_path):
     import pygltflib as gl
     from mimica.mesh.io.gltf import read_accessor

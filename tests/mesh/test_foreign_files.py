@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mimica.errors import MimicaError
 from mimica.mesh import read_mesh
 from mimica.mesh.io.gltf import open_for_edit, read_gltf_layout, read_morph_targets, save_edited, write_gltf_layout
 from helpers import same_objects, validate
@@ -128,6 +129,46 @@ def test_a_blender_glb_is_read_whole_and_standing(blender_head):
     skin_obj, _ = obj.submesh(np.nonzero(np.isin(obj.groups, [0, 1]))[0])
     assert sub.n_vertices == skin_obj.n_vertices      # the seam Blender split at the material is one again
     assert connected_components(sub.adjacency)[0] == connected_components(skin_obj.adjacency)[0]
+
+
+def test_a_draco_compressed_blender_glb_is_read_whole(blender_head, blender_draco_head, tmp_path):
+    """Blender's GLB with Draco mesh compression (every primitive a Draco stream, quantized on a
+    grid of its own box) reads as the same file without it: every primitive, each vertex within a
+    step of Draco's grid of where it stands, and the seams between the materials one again (the two
+    sides quantized apart are put back together: each material's vertex count the same as the
+    uncompressed file's but the lashes', whose thin strands the grid merges in places); said in a
+    note.  A stream that does not decode is one line."""
+    import json
+    import struct
+    from scipy.spatial import cKDTree
+    plain, draco = read_mesh(blender_head), read_mesh(blender_draco_head)
+    assert len(draco.layout.sets) == 12 and draco.n_faces == plain.n_faces
+    assert "12 Draco-compressed primitives decoded" in " ".join(draco.layout.notes)
+    size = float(np.ptp(plain.vertices, axis=0).max())
+    step = size / (2 ** 14 - 1)                       # Blender's default: 14 bits over the largest box
+    assert cKDTree(plain.vertices).query(draco.vertices)[0].max() < 2 * step
+    assert cKDTree(draco.vertices).query(plain.vertices)[0].max() < 2 * step
+    lashes = []
+    for k, name in enumerate(plain.group_names):
+        n_plain = len(np.unique(plain.faces[plain.groups == k]))
+        n_draco = len(np.unique(draco.faces[draco.groups == draco.group_names.index(name)]))
+        if name == "M_EyeLashes":
+            assert abs(n_draco - n_plain) <= 0.02 * n_plain, (name, n_draco, n_plain)
+            lashes = [n_draco - n_plain]
+        else:
+            assert n_draco == n_plain, (name, n_draco, n_plain)
+    assert [draco.n_vertices - plain.n_vertices] == lashes     # every seam between the materials welded
+    # the same file with a stream cut short: one line naming the file and the primitive
+    data = bytearray(blender_draco_head.read_bytes())
+    size_json = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + size_json])
+    view = doc["bufferViews"][doc["meshes"][0]["primitives"][0]["extensions"]["KHR_draco_mesh_compression"]["bufferView"]]
+    start = 20 + size_json + 8 + view.get("byteOffset", 0)
+    data[start + 16:start + view["byteLength"]] = bytes(view["byteLength"] - 16)
+    bad = tmp_path / "bad.glb"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(MimicaError, match=r"bad.glb: mesh 0, primitive 0: its Draco stream does not decode"):
+        read_mesh(bad)
 
 
 def test_a_blender_fbx_is_read_whole(blender_fbx):

@@ -44,6 +44,8 @@ def cmd_animate(a):
              f"points misfit median {v['misfit_median'] * 100:.1f} % of the face's width; "
              f"{v['unseen']} shapes the points cannot see (gaze, tongue) stay 0")
         _say(f"{a.video}: what it saw: {_saw(v['saw'])}")
+    for note in r.notes:
+        _say(f"{a.head}: {note}")
     head_line = _head_line(r)
     _say(f"{a.video or a.arkit}: {len(r.times)} frames over {r.times[-1]:.2f}s ({r.rate:.3g} fps) drive {r.driven} "
          f"morph targets of {Path(a.head).name}{head_line} -> {r.out}" + (f" (weights: {r.csv})" if r.csv else "")

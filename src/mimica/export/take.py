@@ -200,11 +200,15 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: 
     -------
     dict
         {"driven": how many of the head's targets the take drives, "pivot": the pivot used or
-        None, "bending": how many vertices bend with the neck}.
+        None, "bending": how many vertices bend with the neck, "notes": what a user should know of
+        the head as written back (gltf.open_for_edit)}.
     """
     from ..mesh.io.gltf import ARRAY_BUFFER, FLOAT, UNSIGNED_BYTE, placed_meshes, open_for_edit, save_edited
     head_glb = Path(head_glb)
-    g, doc, buf, _ = open_for_edit(head_glb)
+    g, doc, buf, notes = open_for_edit(head_glb)
+    n_draco = getattr(g, "_mimica_draco", 0)            # mesh.io.draco decoded them on reading
+    if n_draco:
+        notes.append(f"its {n_draco} Draco-compressed primitive{'s' if n_draco > 1 else ''} written back uncompressed")
     # every node of the scene showing a mesh with morph targets named like the take's shapes
     shown, plays = {}, {}                # mesh -> its placing nodes; mesh -> {its target: ARKit name}
     for node, mi, _, _ in placed_meshes(g, head_glb):
@@ -278,4 +282,4 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: 
     # the file's own animations stay; the take is one more
     doc.setdefault("animations", []).append({"name": Path(out).stem, "samplers": samplers, "channels": channels})
     save_edited(doc, buf, out, binary=Path(out).suffix.lower() != ".gltf")
-    return {"driven": len(driven), "pivot": used_pivot, "bending": bending}
+    return {"driven": len(driven), "pivot": used_pivot, "bending": bending, "notes": notes}

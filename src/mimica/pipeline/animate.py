@@ -74,6 +74,8 @@ class AnimateResult:
         "landmarks" (where the head's came from)}.
     preview : Path or None
         The video beside the head playing its weights, where asked for.
+    notes : list of str
+        What a user should know of the head as written back (export.take.animate_glb).
     """
     out: Path
     times: np.ndarray
@@ -85,6 +87,7 @@ class AnimateResult:
     csv: Path | None = None
     video: dict = field(default_factory=dict)
     preview: Path | None = None
+    notes: list = field(default_factory=list)
 
 
 def _check(head: Path, out: Path, take, video, o: AnimateOptions) -> str:
@@ -288,4 +291,4 @@ def animate(head, out, take=None, video=None, options: AnimateOptions | None = N
                                    pivot=None if o.pivot is None else list(o.pivot))
             video_outputs()                     # inside: a failure leaves none of them
     return AnimateResult(out, times, rate, weights, info["driven"], info["pivot"], info["bending"], csv_out, figures,
-                         preview)
+                         preview, info.get("notes", []))

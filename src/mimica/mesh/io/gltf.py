@@ -29,7 +29,9 @@ SPARSE_TOLERANCE = 1e-5             # metres: 0.01 mm, below what a morph target
 QUANTIZATION = "KHR_mesh_quantization"
 QUANTIZE_ERROR = 0.5 / 32767          # metres: the largest error of a quantized move, per axis
 SPARSE_NORMAL = 1e-3                # the change of a unit normal below which it counts as unturned
-# Extensions that compress the geometry itself: such a file is refused (decompress it first)
+# Extensions that compress the geometry itself: Draco's is decoded (mesh.io.draco, written back
+# uncompressed), a meshopt file is refused (decompress it first)
+DRACO = "KHR_draco_mesh_compression"
 COMPRESSED = {"KHR_draco_mesh_compression": "Draco", "EXT_meshopt_compression": "meshopt",
               "KHR_meshopt_compression": "meshopt"}
 SURFACE_MODES = (4, 5, 6)             # TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN
@@ -133,11 +135,36 @@ def _load(path: Path):
         raise MimicaError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
     if g is None:
         raise MimicaError(f"{path}: not a readable glTF file")
-    squeezed = [e for e in (g.extensionsRequired or []) if e in COMPRESSED]
+    squeezed = [e for e in (g.extensionsRequired or []) if e in COMPRESSED and e != DRACO]
     if squeezed:
         raise MimicaError(f"{path}: its geometry is {COMPRESSED[squeezed[0]]}-compressed ({squeezed[0]}); "
                           "decompress it first (gltf-transform copy, or Blender's export with compression off)")
+    if DRACO in (g.extensionsUsed or []) + (g.extensionsRequired or []):
+        g = _decoded(path, g)
     return g
+
+
+def _decoded(path: Path, g):
+    """The file with its Draco-compressed primitives decoded (mesh.io.draco): parsed again from
+    the decoded JSON over one buffer; what open_for_edit starts from kept on it (`_mimica_doc`)."""
+    import copy
+    import json
+    from .draco import decode_draco
+    from .gltf_decode import fast_gltf_class
+    doc, buf = _merged(path, g)
+    n = decode_draco(doc, buf, path)
+    if not n:
+        return g
+    blob = buf.blob()
+    doc["buffers"] = [{"byteLength": len(blob)}]
+    try:
+        out = fast_gltf_class().from_json(json.dumps(doc))
+    except Exception as e:
+        raise MimicaError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
+    out.set_binary_blob(blob)
+    out._mimica_doc = copy.deepcopy(doc)
+    out._mimica_draco = n
+    return out
 
 
 def node_matrix(node) -> np.ndarray:
@@ -294,6 +321,10 @@ def _read_layout(g, path: Path) -> tuple[Mesh, GltfLayout]:
     sets = list(sets.values())
     if not sets:
         raise MimicaError(f"{path}: no triangle meshes in its scene (points and lines are not surfaces)")
+    n_draco = getattr(g, "_mimica_draco", 0)
+    if n_draco:
+        notes.append(f"{n_draco} Draco-compressed primitive{'s' if n_draco > 1 else ''} decoded (a file written back "
+                     "from it holds them uncompressed)")
     if skinned:
         notes.append(f"{skinned} skinned mesh{'es' if skinned > 1 else ''} read in the bind pose (the skeleton's "
                      "pose is not applied)")
@@ -561,8 +592,31 @@ def open_for_edit(path):
     notes : list of str
         What could not be put inside (an image not beside the file keeps its uri).
     """
+    import copy
     path = Path(path)
     g = _load(path)
+    if getattr(g, "_mimica_doc", None) is not None:          # Draco decoded: its one buffer as read
+        doc = copy.deepcopy(g._mimica_doc)
+        buf = _Buffers(g.binary_blob(), doc["bufferViews"], doc["accessors"])
+    else:
+        doc, buf = _merged(path, g)
+    notes = []
+    for im in doc.get("images", []):
+        if not im.get("uri"):
+            continue
+        data = _uri_bytes(im["uri"], path.parent)
+        if data is None:
+            notes.append(f"image {im['uri']!r} is not beside {path.name}: its uri is kept as it is")
+            continue
+        im["mimeType"] = im["uri"][5:].split(";", 1)[0] if im["uri"].startswith("data:") else \
+            _MIME.get(Path(im["uri"]).suffix.lower(), "application/octet-stream")
+        im["bufferView"] = buf.view(np.frombuffer(data, np.uint8))
+        del im["uri"]
+    return g, doc, buf, notes
+
+
+def _merged(path: Path, g) -> tuple[dict, "_Buffers"]:
+    """A glTF file's JSON and all its buffers as one (the buffer views re-pointed at it)."""
     try:
         doc = _json_of(path)
         parts, base, at = [], [], 0
@@ -583,20 +637,7 @@ def open_for_edit(path):
     for v in doc["bufferViews"]:
         v["byteOffset"] = base[v["buffer"]] + v.get("byteOffset", 0)
         v["buffer"] = 0
-    buf = _Buffers(b"".join(parts), doc["bufferViews"], doc["accessors"])
-    notes = []
-    for im in doc.get("images", []):
-        if not im.get("uri"):
-            continue
-        data = _uri_bytes(im["uri"], path.parent)
-        if data is None:
-            notes.append(f"image {im['uri']!r} is not beside {path.name}: its uri is kept as it is")
-            continue
-        im["mimeType"] = im["uri"][5:].split(";", 1)[0] if im["uri"].startswith("data:") else \
-            _MIME.get(Path(im["uri"]).suffix.lower(), "application/octet-stream")
-        im["bufferView"] = buf.view(np.frombuffer(data, np.uint8))
-        del im["uri"]
-    return g, doc, buf, notes
+    return doc, _Buffers(b"".join(parts), doc["bufferViews"], doc["accessors"])
 
 
 def save_edited(doc: dict, buf: "_Buffers", path, binary: bool = True) -> None:
