@@ -6,9 +6,11 @@ view; the primitive's accessors keep their count and type but no data.  Each suc
 decoded by DracoPy (Python bindings of Google's Draco, the library the encoders use), the decoded
 rows appended to the file's buffer and the accessors pointed at them, and the extension dropped
 from the primitive (and from the file once no primitive uses it).  A file written back is then
-uncompressed: every node, material and morph target as it was, the geometry plain.  Morph
-targets are not part of the Draco stream (the extension leaves them uncompressed); encoders keep
-the vertex order where a mesh has them (Blender: "preserve order"), so they apply as read.
+uncompressed: every node, material and morph target as it was, the geometry plain (the streams'
+bytes stay in its buffer, their views unused: ICT's head 44.9 MB against 44.6 MB written from
+Blender's uncompressed export).  Morph targets are not part of the Draco stream (the extension
+leaves them uncompressed); encoders keep the vertex order where a mesh has them (Blender:
+"preserve order"), so they apply as read.
 """
 
 from __future__ import annotations
@@ -65,7 +67,7 @@ def decode_draco(doc: dict, buf, path: Path) -> int:
         raise MimicaError(f"{path}: its geometry is Draco-compressed and DracoPy is not installed "
                           "(pip install DracoPy)") from None
     acc, views = doc["accessors"], doc["bufferViews"]
-    streams, got = {}, {}                           # Draco buffer view -> its mesh; primitive -> its rows
+    streams, got = {}, {}                           # buffer view -> its decoded stream; primitive -> its rows
     for mi, j in todo:
         prim = doc["meshes"][mi]["primitives"][j]
         ext = prim["extensions"][EXTENSION]
@@ -142,11 +144,11 @@ def _close_seams(got: dict) -> None:
             e = np.sort(np.c_[faces, np.roll(faces, -1, 1)].reshape(-1, 2), 1)
             _, inv, cnt = unique_rows(e)
             ends = np.unique(e[cnt[inv] == 1])              # on the primitive's open boundary
-            first, where, _ = unique_rows(pos[ends])         # a place once (uv seams split vertices)
+            first, where, cnt = unique_rows(pos[ends])       # a place once (uv seams split vertices)
             pts.append(pos[ends[first]])
             owner.append(np.full(len(first), j))
-            local.append([ends[where == k] for k in range(len(first))])
-        pts, owner, local = np.vstack(pts), np.concatenate(owner), [v for lst in local for v in lst]
+            local += np.split(ends[np.argsort(where, kind="stable")], np.cumsum(cnt)[:-1])
+        pts, owner = np.vstack(pts), np.concatenate(owner)
         reach = np.sqrt(3) * np.array(step)[np.searchsorted(prims, owner)]     # each place's own grid
         if len(pts) < 2 or not reach.max():
             continue
