@@ -44,10 +44,9 @@ def cmd_animate(a):
              f"points misfit median {v['misfit_median'] * 100:.1f} % of the face's width; "
              f"{v['unseen']} shapes the points cannot see (gaze, tongue) stay 0")
         _say(f"{a.video}: what it saw: {_saw(v['saw'])}")
-    for note in r.notes:
-        _say(f"{a.head}: {note}")
     head_line = _head_line(r)
-    _say(f"{a.video or a.arkit}: {len(r.times)} frames over {r.times[-1]:.2f}s ({r.rate:.3g} fps) drive {r.driven} "
+    _say("".join(f"{a.head}: {note}\n" for note in r.notes)          # what writing the head back did
+         + f"{a.video or a.arkit}: {len(r.times)} frames over {r.times[-1]:.2f}s ({r.rate:.3g} fps) drive {r.driven} "
          f"morph targets of {Path(a.head).name}{head_line} -> {r.out}" + (f" (weights: {r.csv})" if r.csv else "")
          + (f"; preview: {r.preview}" if r.preview else ""))
     return 0
@@ -111,11 +110,9 @@ def add_args(sub) -> None:
     an.add_argument("--pivot", help="x,y,z in metres, in the GLB's frame: the point the head turns about "
                                     "(default: the one `blendshapes` placed from the landmarks, with the neck "
                                     "bending below the chin)")
-    an.add_argument("--preview", help="with --video: preview.mp4, the video beside the head playing the fitted "
-                                      "weights, frame by frame")
-    an.add_argument("-o", "--out", required=True, help="take.glb (take.fbx for an FBX head): the head with the take as an "
-                                                 "animation (or take.usd / .usda / .usdc: its blend shapes and a "
-                                                 "SkelAnimation)")
+    an.add_argument("--preview", help="with --video: preview.mp4, the video beside the head playing the fitted weights")
+    an.add_argument("-o", "--out", required=True, help="take.glb (take.fbx for an FBX head): the head with the take as "
+                    "an animation (or take.usd / .usda / .usdc: its blend shapes and a SkelAnimation)")
     an.set_defaults(func=cmd_animate)
 
 
