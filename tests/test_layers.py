@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import ast
 import json
+import os
 import re
 import subprocess
 import sys
@@ -159,8 +160,12 @@ def test_no_import_cycles():
 def test_importing_mimica_changes_nothing_process_wide():
     """Every module imported: the allocator (mallopt), signal handlers, numpy's error state and
     huge-page advice, warning filters and the environment are as before (threadpoolctl's import
-    sets an environment variable: it is imported where it is used); keep_memory() then turns the
-    advice off."""
+    sets an environment variable: it is imported where it is used) but for the one setting
+    mimica.solver makes on purpose: OpenMP's thread limit 1 on a machine of under 4 cores, unless
+    the user set one (CHOLMOD's threads wait on one another there); keep_memory() then turns the
+    advice off.  Run in a process whose environment holds no thread limit (a test before may have
+    imported the solver into this one)."""
+    from mimica.parallel import cores
     names = sorted(n for n in modules() if not n.endswith("__main__"))
     code = f"""
 import json, os, signal, sys, warnings
@@ -172,17 +177,20 @@ import importlib
 for n in {names!r}:
     importlib.import_module(n)
 import mimica._memory as m
+limit = os.environ.pop("OMP_THREAD_LIMIT", None)
 after = (dict(os.environ), signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM), np.geterr(),
          len(warnings.filters), np._core.multiarray._get_madvise_hugepage())
 done = m._done
 m.keep_memory()                              # the command line's and the batch jobs' setting: the advice off
 print(json.dumps({{"same": [a == b for a, b in zip(before, after)], "mallopt": done,
-                  "advice": np._core.multiarray._get_madvise_hugepage()}}))
+                  "advice": np._core.multiarray._get_madvise_hugepage(), "limit": limit}}))
 """
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    env = {k: v for k, v in os.environ.items() if k != "OMP_THREAD_LIMIT"}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
     assert r.returncode == 0, r.stderr[-2000:]
     got = json.loads(r.stdout.strip().splitlines()[-1])
-    assert got == {"same": [True] * 6, "mallopt": False, "advice": False}, got
+    assert got == {"same": [True] * 6, "mallopt": False, "advice": False,
+                   "limit": "1" if 0 < cores() < 4 else None}, got
 
 
 # the package's own child processes, each with its reason: the Blender add-on runs inside Blender,
