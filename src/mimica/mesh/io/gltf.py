@@ -137,8 +137,8 @@ def _load(path: Path):
         raise MimicaError(f"{path}: not a readable glTF file")
     squeezed = [e for e in (g.extensionsRequired or []) if e in COMPRESSED and e != DRACO]
     if squeezed:
-        raise MimicaError(f"{path}: its geometry is {COMPRESSED[squeezed[0]]}-compressed ({squeezed[0]}); "
-                          "decompress it first (gltf-transform copy, or Blender's export with compression off)")
+        raise MimicaError(f"{path}: its geometry is {COMPRESSED[squeezed[0]]}-compressed ({squeezed[0]}), which "
+                          "is not read here; export it again without compression, or with Draco's")
     if DRACO in (g.extensionsUsed or []) + (g.extensionsRequired or []):
         g = _decoded(path, g)
     return g
