@@ -44,6 +44,18 @@ def validate(paths) -> list[dict]:
     return [json.loads(line) for line in run.stdout.splitlines()]
 
 
+def gltfpack(*args) -> None:
+    """meshoptimizer's gltfpack (tools/gltf, npm) run on its arguments; fails under CI when it is missing."""
+    node = shutil.which("node")
+    cli = TOOLS / "node_modules" / "gltfpack" / "cli.js"
+    if node is None or not cli.is_file():
+        if os.environ.get("CI"):
+            pytest.fail("gltfpack is missing in CI: `make test` installs it with npm (tools/gltf)")
+        pytest.skip("Node.js or tools/gltf/node_modules/gltfpack missing (make test installs it)")
+    run = subprocess.run([node, str(cli), *map(str, args)], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:] + run.stdout[-2000:]
+
+
 def live_link_csv(path, weights, start="13:32:48:00"):
     """A take as Live Link Face writes it: Timecode at 60 fps, BlendShapeCount, PascalCase names."""
     h, m, s, _ = start.split(":")

@@ -26,7 +26,7 @@ ICT_HEAD = DATA / "ict-facekit" / "FaceXModel" / "identity001.obj"
 def test_files_it_cannot_read_are_refused_in_one_line(tmp_path, capsys):
     data = (SAMPLES / "AnimatedMorphCube" / "AnimatedMorphCube.gltf").read_text()
     squeezed = json.loads(data)
-    squeezed["extensionsRequired"] = squeezed["extensionsUsed"] = ["EXT_meshopt_compression"]
+    squeezed["extensionsRequired"] = squeezed["extensionsUsed"] = ["KHR_meshopt_compression"]
     (tmp_path / "meshopt.gltf").write_text(json.dumps(squeezed))
     with pytest.raises(MimicaError, match="meshopt-compressed"):
         read_mesh(tmp_path / "meshopt.gltf")

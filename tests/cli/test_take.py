@@ -65,6 +65,32 @@ def test_a_take_plays_on_a_draco_compressed_head(head_glb, tmp_path, capsys):
         np.testing.assert_allclose(back_targets[n] - back.vertices, t - mesh.vertices, atol=1e-6 * size)
 
 
+def test_a_take_plays_on_a_meshopt_compressed_head(head_glb, tmp_path, capsys):
+    """gltfpack's meshopt-compressed GLB of the head (quantized, KHR_mesh_quantization): the take
+    drives its 52 morph targets, each as in gltfpack's uncompressed output; the file comes back
+    uncompressed (still quantized), said in a line, and valid."""
+    from helpers import gltfpack
+    from mimica.mesh.io import read_morph_targets
+    gltfpack("-i", head_glb, "-o", tmp_path / "packed.glb", "-cc")
+    gltfpack("-i", head_glb, "-o", tmp_path / "plain.glb")
+    w = np.clip(np.random.default_rng(2).normal(0.3, 0.2, (20, 52)), 0, 1)
+    live_link_csv(tmp_path / "take.csv", w)
+    capsys.readouterr()
+    assert main(["animate", str(tmp_path / "packed.glb"), "--arkit", str(tmp_path / "take.csv"),
+                 "-o", str(tmp_path / "t.glb")]) == 0
+    said = capsys.readouterr().err
+    assert "packed.glb: its 5 meshopt-compressed buffer views written back uncompressed" in said, said
+    r = validate([tmp_path / "t.glb"])[0]
+    assert r["errors"] == 0 and r["warnings"] == 0, r["messages"]
+    back, back_targets, _ = read_morph_targets(tmp_path / "t.glb")
+    mesh, targets, _ = read_morph_targets(tmp_path / "plain.glb")
+
+    def rows(m, t):                              # each vertex with its moves, in one order (the files' differ)
+        r = np.hstack([m.vertices] + [t[n] for n in sorted(t)])
+        return r[np.lexsort(r.T[::-1])]
+    np.testing.assert_array_equal(rows(back, back_targets), rows(mesh, targets))
+
+
 def test_a_weights_csv_with_a_time_column(head_glb, tmp_path):
     import pygltflib as gl
     from mimica.mesh.io.gltf import read_accessor

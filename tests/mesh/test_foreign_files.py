@@ -171,6 +171,70 @@ def test_a_draco_compressed_blender_glb_is_read_whole(blender_head, blender_drac
         read_mesh(bad)
 
 
+def _rotated(tris: np.ndarray) -> set:
+    """A triangle list as a set, each triangle from its smallest index (the winding kept): the
+    meshopt codec may rotate triangles."""
+    r = np.argmin(tris, 1)
+    return set(map(tuple, np.stack([tris[np.arange(len(tris)), (r + k) % 3] for k in range(3)], 1)))
+
+
+def test_a_meshopt_compressed_gltfpack_glb_is_read_whole(blender_head, head_glb, tmp_path):
+    """gltfpack's output (meshoptimizer's tool for the web: quantized, reordered, primitives merged)
+    compressed with EXT_meshopt_compression reads as the same output uncompressed: vertices, their
+    triangles (each maybe rotated) and morph targets exactly; with its higher compression (the
+    octahedral filter on normals, the exponential one on float positions) the same again or within
+    its quantization of the original; said in a note.  A stream cut short is one line."""
+    import json
+    import struct
+    from mimica.mesh.io import read_morph_targets
+    from helpers import gltfpack
+    for src, name in ((blender_head, "ict"), (head_glb, "arkit")):
+        gltfpack("-i", src, "-o", tmp_path / f"{name}.glb")
+        gltfpack("-i", src, "-o", tmp_path / f"{name}_c.glb", "-c")
+        plain, packed = read_mesh(tmp_path / f"{name}.glb"), read_mesh(tmp_path / f"{name}_c.glb")
+        assert "meshopt-compressed buffer views decoded" in " ".join(packed.layout.notes)
+        np.testing.assert_array_equal(packed.vertices, plain.vertices)
+        assert _rotated(packed.triangles) == _rotated(plain.triangles)
+    _, t_plain, _ = read_morph_targets(tmp_path / "arkit.glb")
+    mesh, t_packed, _ = read_morph_targets(tmp_path / "arkit_c.glb")
+    assert len(t_packed) == 52 and all(np.array_equal(t_packed[n], t_plain[n]) for n in t_plain)
+    gltfpack("-i", head_glb, "-o", tmp_path / "arkit_cc.glb", "-cc")            # normals octahedral
+    cc, t_cc, _ = read_morph_targets(tmp_path / "arkit_cc.glb")
+
+    def rows(m, t):                              # each vertex with its moves, in one order (the files' differ)
+        r = np.hstack([m.vertices] + [t[n] for n in sorted(t)])
+        return r[np.lexsort(r.T[::-1])]
+    np.testing.assert_array_equal(rows(cc, t_cc), rows(mesh, t_packed))
+    from mimica.mesh.io.gltf import _load, read_accessor
+
+    def normals(path):                           # each file vertex's normal, in the order of its place and moves
+        g = _load(path)
+        p = g.meshes[0].primitives[0]
+        key = np.hstack([read_accessor(g, p.attributes.POSITION)] + [read_accessor(g, t["POSITION"]) for t in p.targets])
+        return read_accessor(g, p.attributes.NORMAL)[np.lexsort(key.T[::-1])]
+    n_c, n_cc = normals(tmp_path / "arkit_c.glb"), normals(tmp_path / "arkit_cc.glb")
+    assert np.abs(n_cc - n_c).max() < 0.05 and np.abs(np.linalg.norm(n_cc, axis=1) - 1).max() < 0.02
+    gltfpack("-i", blender_head, "-o", tmp_path / "ict_cc.glb", "-cc", "-vpf")  # float positions exponential
+    from scipy.spatial import cKDTree
+    obj = read_mesh(blender_head)
+    size = float(np.ptp(obj.vertices, axis=0).max())
+    got = read_mesh(tmp_path / "ict_cc.glb")
+    assert cKDTree(obj.vertices).query(got.vertices)[0].max() < 1e-4 * size
+    assert cKDTree(got.vertices).query(obj.vertices)[0].max() < 1e-4 * size
+    # a compressed view's bytes cut short: one line naming the file and the view
+    data = bytearray((tmp_path / "arkit_c.glb").read_bytes())
+    n = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + n])
+    i, view = next((i, v) for i, v in enumerate(doc["bufferViews"]) if "extensions" in v)
+    view["extensions"]["EXT_meshopt_compression"]["byteLength"] -= 7
+    j = json.dumps(doc).encode()
+    j += b" " * ((-len(j)) % 4)
+    body = struct.pack("<II", len(j), 0x4E4F534A) + j + bytes(data[20 + n:])
+    (tmp_path / "bad.glb").write_bytes(struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body)
+    with pytest.raises(MimicaError, match=rf"bad.glb: buffer view {i}: its meshopt-compressed data does not decode"):
+        read_mesh(tmp_path / "bad.glb")
+
+
 def test_a_blender_fbx_is_read_whole(blender_fbx):
     """Blender's FBX (in centimetres, its axes converted): every control point, in its place
     (y up, metres), polygons and materials as the OBJ has them."""

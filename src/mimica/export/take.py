@@ -206,9 +206,10 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: 
     from ..mesh.io.gltf import ARRAY_BUFFER, FLOAT, UNSIGNED_BYTE, placed_meshes, open_for_edit, save_edited
     head_glb = Path(head_glb)
     g, doc, buf, notes = open_for_edit(head_glb)
-    n_draco = getattr(g, "_mimica_draco", 0)            # mesh.io.draco decoded them on reading
-    if n_draco:
-        notes.append(f"its {n_draco} Draco-compressed primitive{'s' if n_draco > 1 else ''} written back uncompressed")
+    for n, what in ((getattr(g, "_mimica_draco", 0), "Draco-compressed primitive"),     # decoded on reading
+                    (getattr(g, "_mimica_meshopt", 0), "meshopt-compressed buffer view")):
+        if n:
+            notes.append(f"its {n} {what}{'s' if n > 1 else ''} written back uncompressed")
     # every node of the scene showing a mesh with morph targets named like the take's shapes
     shown, plays = {}, {}                # mesh -> its placing nodes; mesh -> {its target: ARKit name}
     for node, mi, _, _ in placed_meshes(g, head_glb):

@@ -29,9 +29,10 @@ SPARSE_TOLERANCE = 1e-5             # metres: 0.01 mm, below what a morph target
 QUANTIZATION = "KHR_mesh_quantization"
 QUANTIZE_ERROR = 0.5 / 32767          # metres: the largest error of a quantized move, per axis
 SPARSE_NORMAL = 1e-3                # the change of a unit normal below which it counts as unturned
-# Extensions that compress the geometry itself: Draco's is decoded (mesh.io.draco, written back
-# uncompressed), a meshopt file is refused (decompress it first)
+# Extensions that compress the geometry itself: Draco's and meshopt's are decoded (mesh.io.draco,
+# mesh.io.meshopt; written back uncompressed), KHR_meshopt_compression's newer codecs refused
 DRACO = "KHR_draco_mesh_compression"
+MESHOPT = "EXT_meshopt_compression"
 COMPRESSED = {"KHR_draco_mesh_compression": "Draco", "EXT_meshopt_compression": "meshopt",
               "KHR_meshopt_compression": "meshopt"}
 SURFACE_MODES = (4, 5, 6)             # TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN
@@ -135,25 +136,28 @@ def _load(path: Path):
         raise MimicaError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
     if g is None:
         raise MimicaError(f"{path}: not a readable glTF file")
-    squeezed = [e for e in (g.extensionsRequired or []) if e in COMPRESSED and e != DRACO]
+    squeezed = [e for e in (g.extensionsRequired or []) if e in COMPRESSED and e not in (DRACO, MESHOPT)]
     if squeezed:
         raise MimicaError(f"{path}: its geometry is {COMPRESSED[squeezed[0]]}-compressed ({squeezed[0]}), which "
-                          "is not read here; export it again without compression, or with Draco's")
-    if DRACO in (g.extensionsUsed or []) + (g.extensionsRequired or []):
+                          "is not read here; export it again without compression, or with Draco's or EXT_meshopt's")
+    if {DRACO, MESHOPT} & set((g.extensionsUsed or []) + (g.extensionsRequired or [])):
         g = _decoded(path, g)
     return g
 
 
 def _decoded(path: Path, g):
-    """The file with its Draco-compressed primitives decoded (mesh.io.draco): parsed again from
-    the decoded JSON over one buffer; what open_for_edit starts from kept on it (`_mimica_doc`)."""
+    """The file with its meshopt-compressed buffer views and Draco-compressed primitives decoded
+    (mesh.io.meshopt, mesh.io.draco): parsed again from the decoded JSON over one buffer; what
+    open_for_edit starts from kept on it (`_mimica_doc`)."""
     import copy
     import json
     from .draco import decode_draco
     from .gltf_decode import fast_gltf_class
+    from .meshopt import decode_meshopt
     doc, buf = _merged(path, g)
+    views = decode_meshopt(doc, buf, path)
     n = decode_draco(doc, buf, path)
-    if not n:
+    if not (n or views):
         return g
     blob = buf.blob()
     doc["buffers"] = [{"byteLength": len(blob)}]
@@ -163,7 +167,7 @@ def _decoded(path: Path, g):
         raise MimicaError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
     out.set_binary_blob(blob)
     out._mimica_doc = copy.deepcopy(doc)
-    out._mimica_draco = n
+    out._mimica_draco, out._mimica_meshopt = n, views
     return out
 
 
@@ -321,10 +325,13 @@ def _read_layout(g, path: Path) -> tuple[Mesh, GltfLayout]:
     sets = list(sets.values())
     if not sets:
         raise MimicaError(f"{path}: no triangle meshes in its scene (points and lines are not surfaces)")
-    n_draco = getattr(g, "_mimica_draco", 0)
+    n_draco, n_meshopt = getattr(g, "_mimica_draco", 0), getattr(g, "_mimica_meshopt", 0)
     if n_draco:
         notes.append(f"{n_draco} Draco-compressed primitive{'s' if n_draco > 1 else ''} decoded (a file written back "
                      "from it holds them uncompressed)")
+    if n_meshopt:
+        notes.append(f"{n_meshopt} meshopt-compressed buffer view{'s' if n_meshopt > 1 else ''} decoded (a file "
+                     "written back from it holds them uncompressed)")
     if skinned:
         notes.append(f"{skinned} skinned mesh{'es' if skinned > 1 else ''} read in the bind pose (the skeleton's "
                      "pose is not applied)")
@@ -617,13 +624,19 @@ def open_for_edit(path):
 
 def _merged(path: Path, g) -> tuple[dict, "_Buffers"]:
     """A glTF file's JSON and all its buffers as one (the buffer views re-pointed at it)."""
+    from .meshopt import EXTENSION as _MESHOPT, placeholder
     try:
         doc = _json_of(path)
         parts, base, at = [], [], 0
         for i, b in enumerate(doc.get("buffers", [])):
-            data = g.binary_blob() if b.get("uri") is None else _uri_bytes(b["uri"], path.parent)
+            if b.get("uri") is not None:
+                data = _uri_bytes(b["uri"], path.parent)
+            elif placeholder(doc, i):                # meshopt's fallback: its views are decoded into place
+                data = b""
+            else:
+                data = g.binary_blob() if i == 0 else None
             if data is None:
-                raise MimicaError(f"{path}: its buffer {b['uri']!r} is missing (keep its .bin files beside it)")
+                raise MimicaError(f"{path}: its buffer {b.get('uri', i)!r} is missing (keep its .bin files beside it)")
             data = bytes(data[:b["byteLength"]])
             base.append(at)
             parts.append(data + b"\0" * ((-len(data)) % 8))
@@ -637,6 +650,10 @@ def _merged(path: Path, g) -> tuple[dict, "_Buffers"]:
     for v in doc["bufferViews"]:
         v["byteOffset"] = base[v["buffer"]] + v.get("byteOffset", 0)
         v["buffer"] = 0
+        squeezed = (v.get("extensions") or {}).get(_MESHOPT)
+        if isinstance(squeezed, dict) and isinstance(squeezed.get("buffer"), int) and 0 <= squeezed["buffer"] < len(base):
+            squeezed["byteOffset"] = base[squeezed["buffer"]] + squeezed.get("byteOffset", 0)
+            squeezed["buffer"] = 0
     return doc, _Buffers(b"".join(parts), doc["bufferViews"], doc["accessors"])
 
 
