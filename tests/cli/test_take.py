@@ -89,6 +89,22 @@ def test_a_take_plays_on_a_meshopt_compressed_head(head_glb, tmp_path, capsys):
         r = np.hstack([m.vertices] + [t[n] for n in sorted(t)])
         return r[np.lexsort(r.T[::-1])]
     np.testing.assert_array_equal(rows(back, back_targets), rows(mesh, targets))
+    # a turning take through gltfpack: its rotations meshopt's quaternion filter, decoded as the
+    # uncompressed output has them (to the filter's precision), unit quaternions
+    from mimica.mesh.io.gltf import _load, read_accessor
+    _turning_take(tmp_path / "turn.csv")
+    assert main(["animate", str(head_glb), "--arkit", str(tmp_path / "turn.csv"), "--head-rotation",
+                 "-o", str(tmp_path / "turn.glb")]) == 0
+    gltfpack("-i", tmp_path / "turn.glb", "-o", tmp_path / "turn_cc.glb", "-cc")
+    gltfpack("-i", tmp_path / "turn.glb", "-o", tmp_path / "turn_plain.glb")
+
+    def rotations(path):
+        g = _load(path)
+        return [read_accessor(g, a.samplers[c.sampler].output) for a in g.animations for c in a.channels
+                if c.target.path == "rotation"]
+    [q_cc], [q_plain] = rotations(tmp_path / "turn_cc.glb"), rotations(tmp_path / "turn_plain.glb")
+    assert q_cc.shape == q_plain.shape and np.abs(q_cc - q_plain).max() < 5e-4
+    assert np.abs(np.linalg.norm(q_cc, axis=1) - 1).max() < 1e-3
 
 
 def test_a_weights_csv_with_a_time_column(head_glb, tmp_path):
