@@ -235,6 +235,35 @@ def test_a_meshopt_compressed_gltfpack_glb_is_read_whole(blender_head, head_glb,
         read_mesh(tmp_path / "bad.glb")
 
 
+def test_the_meshopt_bitstream_as_its_specification_gives_it():
+    """EXT_meshopt_compression's Appendix A on its own examples: varints (LEB128); the 4-bit sentinel
+    group (10 bytes -> -1 -4 -3 26 -91 0 -6 6 -4 -4 5 -5 1 -1 0 0, deltas from the baseline element
+    kept at the end of the tail); mode 2's indices, each a zigzag delta from one of two baselines."""
+    from mimica.mesh.io.meshopt import _attributes, _indices, _varint
+    assert _varint(b"\x7f", 0) == (0x7F, 1) and _varint(b"\x81\x04", 0) == (0x201, 2)
+    assert _varint(b"\xff\xa0\x05", 0) == (0x7F | 0x20 << 7 | 0x05 << 14, 3)   # LEB128 (the text's 0x1fd005
+    #                                            reads the groups the other way; gltfpack's files decode as LEB128)
+    group = bytes([0x17, 0x5F, 0xF0, 0xBC, 0x77, 0xA9, 0x21, 0x00, 0x34, 0xB5])
+    baseline = bytes([10, 20, 30, 40])
+    stream = bytes([0xA0, 0b10]) + group + bytes([0, 0, 0]) + bytes(28) + baseline   # bytes 1-3 of each: no change
+    got = _attributes(stream, 16, 4)
+    deltas = np.array([-1, -4, -3, 26, -91, 0, -6, 6, -4, -4, 5, -5, 1, -1, 0, 0])
+    np.testing.assert_array_equal(got[:, 0], (10 + np.cumsum(deltas)) % 256)
+    assert (got[:, 1:] == [20, 30, 40]).all()
+    want = [5, 3, 100, 4, 101, 101, 2]
+    which = [0, 1, 0, 1, 0, 0, 1]
+    last, data = [0, 0], bytearray([0xD1])
+    for i, b in zip(want, which):                  # the encoding Appendix A describes
+        d = i - last[b]
+        last[b] = i
+        v = ((((d << 1) ^ (d >> 31)) & 0x7FFFFFFF) << 1) | b
+        while v >= 0x80:
+            data += bytes([(v & 0x7F) | 0x80])
+            v >>= 7
+        data += bytes([v])
+    np.testing.assert_array_equal(_indices(bytes(data) + bytes(4), len(want), 4), want)
+
+
 def test_a_blender_fbx_is_read_whole(blender_fbx):
     """Blender's FBX (in centimetres, its axes converted): every control point, in its place
     (y up, metres), polygons and materials as the OBJ has them."""
