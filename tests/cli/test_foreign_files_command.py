@@ -71,14 +71,17 @@ def test_blendshapes_go_back_into_blenders_file(blender_head, tmp_path):
 
 def test_blendshapes_go_back_into_a_draco_compressed_glb(blender_draco_head, tmp_path, capsys):
     """`blendshapes` on Blender's Draco-compressed GLB: said in a line that the file comes back
-    uncompressed; written back with 52 morph targets, no validator error; imported into Blender,
-    the same object, node transform and materials, every vertex within a step of Draco's grid of
-    where Blender's own import of the compressed file puts it."""
+    uncompressed; its lips cut; written back with 52 morph targets, no validator error; imported
+    into Blender, the same object, node transform and materials, every vertex within a step of
+    Draco's grid of where Blender's own import of the compressed file puts it."""
     out = tmp_path / "arkit.glb"
     capsys.readouterr()
     assert main(["blendshapes", str(blender_draco_head), "-o", str(out)]) == 0
-    assert "12 Draco-compressed primitives decoded (a file written back from it holds them uncompressed)" in \
-        capsys.readouterr().err
+    said = capsys.readouterr().err
+    assert "12 Draco-compressed primitives decoded (a file written back from it holds them uncompressed)" in said
+    # the grid moves the found landmarks a little: the path between the lips went out and back
+    # around one of them (refused as crossing itself); its loop erased, the lips are cut
+    assert "the lips were sealed: cut apart along" in said, said
     [report] = validate([out])
     assert report["errors"] == 0 and report["warnings"] == 0, report["messages"]
     assert "KHR_draco_mesh_compression" not in json.dumps(read_json_chunk(out))

@@ -143,9 +143,17 @@ def _seam(mesh: Mesh, lm, crease: float = CREASE, valley_corners: bool = False, 
         if seg is None:
             return np.zeros(0, np.int64)
         path += seg[1:]
-    out = [path[0]]
-    for x in path[1:]:                       # no vertex twice (waypoints can coincide)
-        if x != out[-1]:
+    # no vertex twice: waypoints can coincide, and one a little off the valley (landmarks found
+    # on a head whose positions a compressed file quantized) sends the path out and back the same
+    # way -- the loop is erased, the path kept simple (it was refused as crossing itself)
+    out, at = [], {}
+    for x in path:
+        if x in at:
+            for y in out[at[x] + 1:]:
+                del at[y]
+            del out[at[x] + 1:]
+        else:
+            at[x] = len(out)
             out.append(x)
     return np.array(out, np.int64)
 
