@@ -203,13 +203,10 @@ def animate_glb(head_glb, out, times: np.ndarray, weights: dict, head_rotation: 
         None, "bending": how many vertices bend with the neck, "notes": what a user should know of
         the head as written back (gltf.open_for_edit)}.
     """
-    from ..mesh.io.gltf import ARRAY_BUFFER, FLOAT, UNSIGNED_BYTE, placed_meshes, open_for_edit, save_edited
+    from ..mesh.io.gltf import ARRAY_BUFFER, FLOAT, UNSIGNED_BYTE, decompressed, placed_meshes, open_for_edit, save_edited
     head_glb = Path(head_glb)
     g, doc, buf, notes = open_for_edit(head_glb)
-    for n, what in ((getattr(g, "_mimica_draco", 0), "Draco-compressed primitive"),     # decoded on reading
-                    (getattr(g, "_mimica_meshopt", 0), "meshopt-compressed buffer view")):
-        if n:
-            notes.append(f"its {n} {what}{'s' if n > 1 else ''} written back uncompressed")
+    notes += [f"its {n} {what}{'s' if n > 1 else ''} written back uncompressed" for what, n in decompressed(g).items()]
     # every node of the scene showing a mesh with morph targets named like the take's shapes
     shown, plays = {}, {}                # mesh -> its placing nodes; mesh -> {its target: ARKit name}
     for node, mi, _, _ in placed_meshes(g, head_glb):

@@ -171,6 +171,14 @@ def _decoded(path: Path, g):
     return out
 
 
+def decompressed(g) -> dict:
+    """What reading decompressed in a parsed file (_load): {"Draco-compressed primitive": n,
+    "meshopt-compressed buffer view": n}, those above 0 -- written back uncompressed."""
+    got = {"Draco-compressed primitive": getattr(g, "_mimica_draco", 0),
+           "meshopt-compressed buffer view": getattr(g, "_mimica_meshopt", 0)}
+    return {k: n for k, n in got.items() if n}
+
+
 def node_matrix(node) -> np.ndarray:
     """A node's local matrix.
 
@@ -325,13 +333,8 @@ def _read_layout(g, path: Path) -> tuple[Mesh, GltfLayout]:
     sets = list(sets.values())
     if not sets:
         raise MimicaError(f"{path}: no triangle meshes in its scene (points and lines are not surfaces)")
-    n_draco, n_meshopt = getattr(g, "_mimica_draco", 0), getattr(g, "_mimica_meshopt", 0)
-    if n_draco:
-        notes.append(f"{n_draco} Draco-compressed primitive{'s' if n_draco > 1 else ''} decoded (a file written back "
-                     "from it holds them uncompressed)")
-    if n_meshopt:
-        notes.append(f"{n_meshopt} meshopt-compressed buffer view{'s' if n_meshopt > 1 else ''} decoded (a file "
-                     "written back from it holds them uncompressed)")
+    for what, n in decompressed(g).items():
+        notes.append(f"{n} {what}{'s' if n > 1 else ''} decoded (a file written back from it holds them uncompressed)")
     if skinned:
         notes.append(f"{skinned} skinned mesh{'es' if skinned > 1 else ''} read in the bind pose (the skeleton's "
                      "pose is not applied)")
@@ -602,7 +605,7 @@ def open_for_edit(path):
     import copy
     path = Path(path)
     g = _load(path)
-    if getattr(g, "_mimica_doc", None) is not None:          # Draco decoded: its one buffer as read
+    if getattr(g, "_mimica_doc", None) is not None:          # decompressed on reading: its one buffer as read
         doc = copy.deepcopy(g._mimica_doc)
         buf = _Buffers(g.binary_blob(), doc["bufferViews"], doc["accessors"])
     else:
@@ -636,7 +639,7 @@ def _merged(path: Path, g) -> tuple[dict, "_Buffers"]:
             else:
                 data = g.binary_blob() if i == 0 else None
             if data is None:
-                raise MimicaError(f"{path}: its buffer {b.get('uri', i)!r} is missing (keep its .bin files beside it)")
+                raise MimicaError(f"{path}: its buffer {b.get('uri') or i!r} is missing (keep its .bin files beside it)")
             data = bytes(data[:b["byteLength"]])
             base.append(at)
             parts.append(data + b"\0" * ((-len(data)) % 8))
