@@ -38,6 +38,19 @@ def test_live_link_take_plays_on_the_head(head_glb, tmp_path, capsys):
     assert r["errors"] == 0 and r["warnings"] == 0, r["messages"]
 
 
+def _played(head, tmp_path, capsys) -> str:
+    """A random 20-frame take played on `head` into tmp_path/t.glb, which the validator passes;
+    what the command said."""
+    live_link_csv(tmp_path / "take.csv", np.clip(np.random.default_rng(1).normal(0.3, 0.2, (20, 52)), 0, 1))
+    capsys.readouterr()
+    assert main(["animate", str(head), "--arkit", str(tmp_path / "take.csv"), "-o", str(tmp_path / "t.glb")]) == 0
+    said = capsys.readouterr().err
+    assert "drive 52 morph targets" in said, said
+    r = validate([tmp_path / "t.glb"])[0]
+    assert r["errors"] == 0 and r["warnings"] == 0, r["messages"]
+    return said
+
+
 def test_a_take_plays_on_a_draco_compressed_head(head_glb, tmp_path, capsys):
     """A head Blender wrote with Draco compression (its 52 shape keys uncompressed, the vertex order
     kept): the take drives its 52 morph targets, each moving the head as in Blender's export of
@@ -46,16 +59,8 @@ def test_a_take_plays_on_a_draco_compressed_head(head_glb, tmp_path, capsys):
     from helpers import blender_files
     from mimica.mesh.io import read_morph_targets
     blender_files("export-draco", head_glb, tmp_path / "draco.glb")
-    w = np.clip(np.random.default_rng(1).normal(0.3, 0.2, (20, 52)), 0, 1)
-    live_link_csv(tmp_path / "take.csv", w)
-    capsys.readouterr()
-    assert main(["animate", str(tmp_path / "draco.glb"), "--arkit", str(tmp_path / "take.csv"),
-                 "-o", str(tmp_path / "t.glb")]) == 0
-    said = capsys.readouterr().err
+    said = _played(tmp_path / "draco.glb", tmp_path, capsys)
     assert "draco.glb: its 1 Draco-compressed primitive written back uncompressed" in said, said
-    assert "drive 52 morph targets" in said, said
-    r = validate([tmp_path / "t.glb"])[0]
-    assert r["errors"] == 0 and r["warnings"] == 0, r["messages"]
     blender_files("export", head_glb, tmp_path / "plain.glb")       # the same head, uncompressed
     mesh, targets, _ = read_morph_targets(tmp_path / "plain.glb")
     back, back_targets, _ = read_morph_targets(tmp_path / "t.glb")
@@ -73,15 +78,8 @@ def test_a_take_plays_on_a_meshopt_compressed_head(head_glb, tmp_path, capsys):
     from mimica.mesh.io import read_morph_targets
     gltfpack("-i", head_glb, "-o", tmp_path / "packed.glb", "-cc")
     gltfpack("-i", head_glb, "-o", tmp_path / "plain.glb")
-    w = np.clip(np.random.default_rng(2).normal(0.3, 0.2, (20, 52)), 0, 1)
-    live_link_csv(tmp_path / "take.csv", w)
-    capsys.readouterr()
-    assert main(["animate", str(tmp_path / "packed.glb"), "--arkit", str(tmp_path / "take.csv"),
-                 "-o", str(tmp_path / "t.glb")]) == 0
-    said = capsys.readouterr().err
+    said = _played(tmp_path / "packed.glb", tmp_path, capsys)
     assert "packed.glb: its 5 meshopt-compressed buffer views written back uncompressed" in said, said
-    r = validate([tmp_path / "t.glb"])[0]
-    assert r["errors"] == 0 and r["warnings"] == 0, r["messages"]
     back, back_targets, _ = read_morph_targets(tmp_path / "t.glb")
     mesh, targets, _ = read_morph_targets(tmp_path / "plain.glb")
 

@@ -11,11 +11,22 @@ from mimica.export import ARKIT_52
 from helpers import jaw_frames, ramp
 
 
+def _projected(rest, motion, w, yaw, pitch) -> np.ndarray:
+    """(F, 68, 2) pixels (y down) of the landmarks `rest` moved by weights w through `motion`,
+    the head turned by yaw (F,) and pitch (radians)."""
+    from scipy.spatial.transform import Rotation
+    pts = np.zeros((len(w), 68, 2))
+    for f in range(len(w)):
+        R = Rotation.from_euler("YXZ", [yaw[f], pitch, 0.0]).as_matrix()
+        p3 = (rest + np.einsum("k,knj->nj", w[f], motion)) @ R.T
+        pts[f] = np.c_[320 + 1800 * p3[:, 0], 240 - 1800 * p3[:, 1]]
+    return pts
+
+
 def test_a_take_made_by_the_heads_own_points_is_recovered(head_glb):
     """Points projected from the head's landmarks moved by known weights, under a turning head:
     the fit finds the weights (mean error under 0.08 where they act, correlation over 0.95, under
     0.02 elsewhere) and the head's turn."""
-    from scipy.spatial.transform import Rotation
     from mimica.export.video import fit_weights, head_angles, landmark_basis
     basis = landmark_basis(head_glb)
     frames = 60
@@ -24,12 +35,7 @@ def test_a_take_made_by_the_heads_own_points_is_recovered(head_glb):
     w[:, ARKIT_52.index("mouthSmileLeft")] = ramp(frames, 25, 30, 0.7)
     w[:, ARKIT_52.index("browInnerUp")] = ramp(frames, 10, 40, 0.9)
     yaw = np.radians(10) * np.sin(np.arange(frames) / 12)
-    pts = np.zeros((frames, 68, 2))
-    for f in range(frames):
-        R = Rotation.from_euler("YXZ", [yaw[f], 0.05, 0.0]).as_matrix()
-        p3 = (basis.rest + np.einsum("k,knj->nj", w[f], basis.motion)) @ R.T
-        pts[f] = np.c_[320 + 1800 * p3[:, 0], 240 - 1800 * p3[:, 1]]           # pixels, y down
-    fit = fit_weights(pts, basis)
+    fit = fit_weights(_projected(basis.rest, basis.motion, w, yaw, 0.05), basis)
     acting = [ARKIT_52.index(n) for n in ("jawOpen", "mouthSmileLeft", "browInnerUp")]
     on = w[:, acting] > 0.2
     err = np.abs(fit.weights[:, acting] - w[:, acting])
@@ -49,7 +55,6 @@ def test_the_rest_frame_removes_a_performers_resting_asymmetry(head_glb):
     mouthSmileRight within 0.08 where they act).  Read against the head's own rest instead (its
     landmarks as the first frame), the same points show the raised corner as a standing
     mouthSmileLeft (0.38 of its 0.45)."""
-    from scipy.spatial.transform import Rotation
     from mimica.export.video import fit_weights, landmark_basis
     basis = landmark_basis(head_glb)
     frames = 50
@@ -58,12 +63,7 @@ def test_the_rest_frame_removes_a_performers_resting_asymmetry(head_glb):
     w = np.zeros((frames, 52))
     w[:, ARKIT_52.index("jawOpen")] = ramp(frames, 5, 25, 0.7)
     w[:, ARKIT_52.index("mouthSmileRight")] = ramp(frames, 22, 25, 0.6)
-    yaw = np.radians(6) * np.sin(np.arange(frames) / 10)
-    pts = np.zeros((frames, 68, 2))
-    for f in range(frames):
-        R = Rotation.from_euler("YXZ", [yaw[f], 0.04, 0.0]).as_matrix()
-        p3 = (rest + np.einsum("k,knj->nj", w[f], basis.motion)) @ R.T
-        pts[f] = np.c_[320 + 1800 * p3[:, 0], 240 - 1800 * p3[:, 1]]
+    pts = _projected(rest, basis.motion, w, np.radians(6) * np.sin(np.arange(frames) / 10), 0.04)
     fit = fit_weights(pts, basis)
     still = w.max(1) == 0
     assert still.sum() >= 5

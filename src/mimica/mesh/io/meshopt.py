@@ -235,6 +235,20 @@ def _triangles(data: bytes, count: int, stride: int) -> np.ndarray:
         last = (last + ((~(v >> 1)) if v & 1 else (v >> 1))) & 0xFFFFFFFF
         return last, p
 
+    def other(nib, explicit, pushed):
+        """b or c of a 0xfY / 0xfe / 0xff code from its nibble: `next` (pushed), the vertex FIFO
+        at nib - 1, or (0xf, for 0xfe / 0xff) an explicit index (pushed)."""
+        nonlocal nxt, pos
+        if nib == 0:
+            v = nxt
+            nxt += 1
+        elif nib < 15 or not explicit:
+            return verts[nib - 1]
+        else:
+            v, pos = index(pos)
+        pushed.append(v)
+        return v
+
     for t in range(tris):
         code = data[codes + t]
         hi, lo = code >> 4, code & 15
@@ -268,26 +282,8 @@ def _triangles(data: bytes, count: int, stride: int) -> np.ndarray:
                     nxt += 1
                 else:
                     a, pos = index(pos)
-            z, w = zw >> 4, zw & 15
             pushed = [a]
-            if z == 0:
-                b = nxt
-                nxt += 1
-                pushed.append(b)
-            elif z < 15 or lo < 14:
-                b = verts[z - 1]
-            else:
-                b, pos = index(pos)
-                pushed.append(b)
-            if w == 0:
-                c = nxt
-                nxt += 1
-                pushed.append(c)
-            elif w < 15 or lo < 14:
-                c = verts[w - 1]
-            else:
-                c, pos = index(pos)
-                pushed.append(c)
+            b, c = other(zw >> 4, lo >= 14, pushed), other(zw & 15, lo >= 14, pushed)
             edges[:0] = [(a, c), (c, b), (b, a)]
             verts[:0] = pushed[::-1]
         del edges[16:], verts[16:]
