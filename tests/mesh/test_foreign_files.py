@@ -221,18 +221,26 @@ def test_a_meshopt_compressed_gltfpack_glb_is_read_whole(blender_head, head_glb,
     got = read_mesh(tmp_path / "ict_cc.glb")
     assert cKDTree(obj.vertices).query(got.vertices)[0].max() < 1e-4 * size
     assert cKDTree(got.vertices).query(obj.vertices)[0].max() < 1e-4 * size
-    # a compressed view's bytes cut short: one line naming the file and the view
     data = bytearray((tmp_path / "arkit_c.glb").read_bytes())
     n = struct.unpack_from("<I", data, 12)[0]
-    doc = json.loads(data[20:20 + n])
-    i, view = next((i, v) for i, v in enumerate(doc["bufferViews"]) if "extensions" in v)
-    view["extensions"]["EXT_meshopt_compression"]["byteLength"] -= 7
-    j = json.dumps(doc).encode()
-    j += b" " * ((-len(j)) % 4)
-    body = struct.pack("<II", len(j), 0x4E4F534A) + j + bytes(data[20 + n:])
-    (tmp_path / "bad.glb").write_bytes(struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body)
+
+    def rewritten(name, edit):                   # the GLB with its JSON edited
+        doc = json.loads(data[20:20 + n])
+        edit(doc)
+        j = json.dumps(doc).encode()
+        j += b" " * ((-len(j)) % 4)
+        body = struct.pack("<II", len(j), 0x4E4F534A) + j + bytes(data[20 + n:])
+        (tmp_path / name).write_bytes(struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body)
+        return tmp_path / name
+    # the views' own buffer the GLB's chunk, which holds the compressed bytes too: not a placeholder
+    one = rewritten("one.glb", lambda d: ([v.update(buffer=0) for v in d["bufferViews"]], d["buffers"].pop()))
+    np.testing.assert_array_equal(read_mesh(one).vertices, read_mesh(tmp_path / "arkit.glb").vertices)
+    # a compressed view's bytes cut short: one line naming the file and the view
+    i = next(i for i, v in enumerate(json.loads(data[20:20 + n])["bufferViews"]) if "extensions" in v)
+    bad = rewritten("bad.glb", lambda d: d["bufferViews"][i]["extensions"]["EXT_meshopt_compression"].update(
+        byteLength=d["bufferViews"][i]["extensions"]["EXT_meshopt_compression"]["byteLength"] - 7))
     with pytest.raises(MimicaError, match=rf"bad.glb: buffer view {i}: its meshopt-compressed data does not decode"):
-        read_mesh(tmp_path / "bad.glb")
+        read_mesh(bad)
 
 
 def test_the_meshopt_bitstream_as_its_specification_gives_it():

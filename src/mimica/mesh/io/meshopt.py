@@ -30,13 +30,15 @@ def uses_meshopt(doc: dict) -> bool:
 
 
 def placeholder(doc: dict, i: int) -> bool:
-    """Whether buffer `i` holds no data of its own: a meshopt fallback (its views are all
-    compressed), or a buffer without a uri that only compressed views use."""
+    """Whether buffer `i` holds no data of its own: a meshopt fallback, or a buffer without a uri
+    that only compressed views use and no compressed data is read from (a GLB's own chunk is)."""
     b = doc["buffers"][i]
     if (b.get("extensions") or {}).get(EXTENSION, {}).get("fallback"):
         return True
     views = [v for v in doc.get("bufferViews") or [] if v.get("buffer") == i]
-    return b.get("uri") is None and bool(views) and all(EXTENSION in (v.get("extensions") or {}) for v in views)
+    squeezed = [(v.get("extensions") or {}).get(EXTENSION) for v in views]
+    sources = {(v.get("extensions") or {}).get(EXTENSION, {}).get("buffer") for v in doc.get("bufferViews") or []}
+    return b.get("uri") is None and bool(views) and all(squeezed) and i not in sources
 
 
 def decode_meshopt(doc: dict, buf, path: Path) -> int:
