@@ -24,11 +24,6 @@ _SHIFT2 = (6, 4, 2, 0)            # 2-bit deltas, the first in the byte's top bi
 _SHIFT4 = (4, 0)
 
 
-def uses_meshopt(doc: dict) -> bool:
-    """Whether any buffer view of a glTF document is meshopt-compressed."""
-    return any(EXTENSION in (v.get("extensions") or {}) for v in doc.get("bufferViews") or [])
-
-
 def placeholder(doc: dict, i: int) -> bool:
     """Whether buffer `i` holds no data of its own: a meshopt fallback, or a buffer without a uri
     that only compressed views use and no compressed data is read from (a GLB's own chunk is)."""
