@@ -189,10 +189,10 @@ def cut_mouth(mesh: Mesh, landmarks) -> MouthCut:
 
 
 def _cut_along(mesh: Mesh, lm: np.ndarray, seam: np.ndarray) -> MouthCut:
-    """The mesh cut along this seam, or why not."""
-    if len(seam) < 3 or len(np.unique(seam)) != len(seam):
+    """The mesh cut along this seam (a simple path: _seam erases its loops), or why not."""
+    if len(seam) < 3:
         why = "no path over the mesh between the mouth's corners" if len(seam) == 0 else \
-            "the mouth's corners are too close on the mesh" if len(seam) < 3 else "the path between the lips crosses itself"
+            "the mouth's corners are too close on the mesh"
         return MouthCut(mesh, np.zeros(0, np.int64), seam, why=why)
     inner = seam[1:-1]
     # the faces around the seam, split into the two lips: faces meet across shared edges,
