@@ -20,11 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import MimicaError
+from .gltf_spec import ARRAY_BUFFER, COMPONENT, ELEMENT_ARRAY_BUFFER, NCOMP, drop_extension
 
 EXTENSION = "KHR_draco_mesh_compression"
-_DTYPE = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
-_ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
 
 
 def draco_primitives(doc: dict) -> list:
@@ -100,19 +98,15 @@ def decode_draco(doc: dict, buf, path: Path) -> int:
         prim = doc["meshes"][mi]["primitives"][j]
         where = f"{path}: mesh {mi}, primitive {j}"
         for sem, r in rows.items():
-            _fill(acc[prim["attributes"][sem]], r, buf, _ARRAY_BUFFER, f"{where}, {sem}")
+            _fill(acc[prim["attributes"][sem]], r, buf, ARRAY_BUFFER, f"{where}, {sem}")
         if prim.get("indices") is not None and acc[prim["indices"]].get("bufferView") is None:
-            _fill(acc[prim["indices"]], faces.reshape(-1), buf, _ELEMENT_ARRAY_BUFFER, f"{where}, indices")
+            _fill(acc[prim["indices"]], faces.reshape(-1), buf, ELEMENT_ARRAY_BUFFER, f"{where}, indices")
         del prim["extensions"][EXTENSION]
         if not prim["extensions"]:
             del prim["extensions"]
     still = any(EXTENSION in (p.get("extensions") or {}) for m in doc.get("meshes") or [] for p in m.get("primitives") or [])
     if not still:
-        for k in ("extensionsUsed", "extensionsRequired"):
-            if EXTENSION in (doc.get(k) or []):
-                doc[k] = [e for e in doc[k] if e != EXTENSION]
-                if not doc[k]:
-                    del doc[k]
+        drop_extension(doc, EXTENSION)
     return len(todo)
 
 
@@ -177,11 +171,11 @@ def _close_seams(got: dict) -> None:
 
 def _fill(a: dict, rows: np.ndarray, buf, target: int, what: str) -> None:
     """Point accessor `a` at `rows` (decoded), stored as its declared component type."""
-    dt = np.dtype(_DTYPE.get(a.get("componentType"), np.float32))
-    width = _WIDTH.get(a.get("type"), 0)
-    if not width:
+    dt = np.dtype(COMPONENT.get(a.get("componentType"), np.float32))
+    width = NCOMP.get(a.get("type"), 0)
+    if not width or a.get("type", "").startswith("MAT"):
         raise MimicaError(f"{what}: a Draco-decoded {a.get('type')} accessor is not a vertex attribute")
-    rows = rows.reshape(len(rows), -1) if rows.ndim > 1 or width > 1 else rows.reshape(-1, 1)
+    rows = rows.reshape(len(rows), -1)
     if rows.shape != (a["count"], width):
         raise MimicaError(f"{what}: the Draco stream gives {rows.shape[0]} x {rows.shape[1]} values where its "
                           f"accessor says {a['count']} x {width}")
@@ -198,11 +192,5 @@ def _fill(a: dict, rows: np.ndarray, buf, target: int, what: str) -> None:
         out = rows.astype(dt)
     if "min" in a or "max" in a:                    # the encoder's were of the rows before quantizing
         a["min"], a["max"] = out.min(0).tolist(), out.max(0).tolist()
-    stride = None
-    if target == _ARRAY_BUFFER and out.itemsize * width % 4:       # glTF 2.0 3.6.2.4: elements on 4 bytes
-        padded = -(-out.itemsize * width // 4) * 4 // out.itemsize
-        full = np.zeros((len(out), padded), dt)
-        full[:, :width] = out
-        out, stride = full, padded * dt.itemsize
-    a["bufferView"] = buf.view(out if width > 1 or stride else out.reshape(-1), target, stride)
+    a["bufferView"] = buf.rows_view(out, target)
     a["byteOffset"] = 0

@@ -19,6 +19,11 @@ import numpy as np
 
 from ...errors import MimicaError
 from ..core import Mesh, unique_rows
+from .draco import EXTENSION as DRACO, decode_draco
+from .gltf_spec import (ARRAY_BUFFER, BYTE, ELEMENT_ARRAY_BUFFER, FLOAT, SHORT, UNSIGNED_BYTE,  # noqa: F401
+                        UNSIGNED_INT, UNSIGNED_SHORT)
+from .gltf_spec import COMPONENT as _COMPONENT, NCOMP as _NCOMP
+from .meshopt import EXTENSION as MESHOPT, decode_meshopt, placeholder
 from .weld import move_key, weld_seams
 
 
@@ -29,15 +34,10 @@ SPARSE_TOLERANCE = 1e-5             # metres: 0.01 mm, below what a morph target
 QUANTIZATION = "KHR_mesh_quantization"
 QUANTIZE_ERROR = 0.5 / 32767          # metres: the largest error of a quantized move, per axis
 SPARSE_NORMAL = 1e-3                # the change of a unit normal below which it counts as unturned
-# Extensions that compress the geometry itself: Draco's and meshopt's are decoded (mesh.io.draco,
-# mesh.io.meshopt; written back uncompressed), KHR_meshopt_compression's newer codecs refused
-DRACO = "KHR_draco_mesh_compression"
-MESHOPT = "EXT_meshopt_compression"
-COMPRESSED = {"KHR_draco_mesh_compression": "Draco", "EXT_meshopt_compression": "meshopt",
-              "KHR_meshopt_compression": "meshopt"}
+# Geometry compressed by Draco (DRACO) or EXT_meshopt (MESHOPT) is decoded on reading (mesh.io.draco,
+# mesh.io.meshopt; written back uncompressed); these extensions' files are refused
+REFUSED = {"KHR_meshopt_compression": "meshopt"}
 SURFACE_MODES = (4, 5, 6)             # TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN
-_COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
-_NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 
 
 @dataclass
@@ -136,9 +136,9 @@ def _load(path: Path):
         raise MimicaError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
     if g is None:
         raise MimicaError(f"{path}: not a readable glTF file")
-    squeezed = [e for e in (g.extensionsRequired or []) if e in COMPRESSED and e not in (DRACO, MESHOPT)]
+    squeezed = [e for e in (g.extensionsRequired or []) if e in REFUSED]
     if squeezed:
-        raise MimicaError(f"{path}: its geometry is {COMPRESSED[squeezed[0]]}-compressed ({squeezed[0]}), which "
+        raise MimicaError(f"{path}: its geometry is {REFUSED[squeezed[0]]}-compressed ({squeezed[0]}), which "
                           "is not read here; export it again without compression, or with Draco's or EXT_meshopt's")
     if {DRACO, MESHOPT} & set((g.extensionsUsed or []) + (g.extensionsRequired or [])):
         g = _decoded(path, g)
@@ -149,11 +149,8 @@ def _decoded(path: Path, g):
     """The file with its meshopt-compressed buffer views and Draco-compressed primitives decoded
     (mesh.io.meshopt, mesh.io.draco): parsed again from the decoded JSON over one buffer; what
     open_for_edit starts from kept on it (`_mimica_doc`)."""
-    import copy
     import json
-    from .draco import decode_draco
     from .gltf_decode import fast_gltf_class
-    from .meshopt import decode_meshopt
     doc, buf = _merged(path, g)
     views = decode_meshopt(doc, buf, path)
     n = decode_draco(doc, buf, path)
@@ -166,7 +163,7 @@ def _decoded(path: Path, g):
     except Exception as e:
         raise MimicaError(f"{path}: not a readable glTF file ({type(e).__name__}: {e})") from None
     out.set_binary_blob(blob)
-    out._mimica_doc = copy.deepcopy(doc)
+    out._mimica_doc = doc                        # open_for_edit takes a copy of it each time
     out._mimica_draco, out._mimica_meshopt = n, views
     return out
 
@@ -553,8 +550,6 @@ def read_morph_targets(path) -> tuple[Mesh, dict, str]:
 # ----------------------------------------------------------------- writing back
 # The writers work on the file's own JSON (a dict), so that nothing of it is lost: pygltflib's
 # objects drop what they do not model (a node's `weights`, properties of extensions' authors).
-FLOAT, SHORT, BYTE, UNSIGNED_BYTE, UNSIGNED_SHORT, UNSIGNED_INT = 5126, 5122, 5120, 5121, 5123, 5125
-ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 _GLB_JSON, _GLB_BIN = 0x4E4F534A, 0x004E4942
 _MIME = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".webp": "image/webp",
          ".ktx2": "image/ktx2"}
@@ -627,14 +622,14 @@ def open_for_edit(path):
 
 def _merged(path: Path, g) -> tuple[dict, "_Buffers"]:
     """A glTF file's JSON and all its buffers as one (the buffer views re-pointed at it)."""
-    from .meshopt import EXTENSION as _MESHOPT, placeholder
     try:
         doc = _json_of(path)
         parts, base, at = [], [], 0
         for i, b in enumerate(doc.get("buffers", [])):
             if b.get("uri") is not None:
                 data = _uri_bytes(b["uri"], path.parent)
-            elif placeholder(doc, i):                # meshopt's fallback: its views are decoded into place
+            elif MESHOPT in (doc.get("extensionsUsed") or []) and placeholder(doc, i):
+                # meshopt's fallback: its views are decoded into place
                 data = b""
             else:
                 data = g.binary_blob() if i == 0 else None
@@ -653,7 +648,7 @@ def _merged(path: Path, g) -> tuple[dict, "_Buffers"]:
     for v in doc["bufferViews"]:
         v["byteOffset"] = base[v["buffer"]] + v.get("byteOffset", 0)
         v["buffer"] = 0
-        squeezed = (v.get("extensions") or {}).get(_MESHOPT)
+        squeezed = (v.get("extensions") or {}).get(MESHOPT)
         if isinstance(squeezed, dict) and isinstance(squeezed.get("buffer"), int) and 0 <= squeezed["buffer"] < len(base):
             squeezed["byteOffset"] = base[squeezed["buffer"]] + squeezed.get("byteOffset", 0)
             squeezed["buffer"] = 0
@@ -961,12 +956,16 @@ class _Buffers:
     def blob(self) -> bytes:
         return bytes(self.data)
 
+    def append(self, raw: bytes) -> int:
+        """Bytes added on 4 bytes, as glTF wants; their offset."""
+        off = len(self.data)
+        self.data += raw + b"\0" * ((-len(raw)) % 4)
+        return off
+
     def view(self, arr, target=None, stride=None) -> int:
         """A buffer view of the array's bytes (on 4 bytes, as glTF wants); its index."""
         data = np.ascontiguousarray(arr)
-        off = len(self.data)
-        self.data += data.tobytes() + b"\0" * ((-data.nbytes) % 4)
-        v = {"buffer": 0, "byteOffset": off, "byteLength": int(data.nbytes)}
+        v = {"buffer": 0, "byteOffset": self.append(data.tobytes()), "byteLength": int(data.nbytes)}
         if target is not None:
             v["target"] = target
         if stride is not None:
@@ -974,18 +973,21 @@ class _Buffers:
         self.views.append(v)
         return len(self.views) - 1
 
+    def rows_view(self, arr, target) -> int:
+        """A buffer view of arr's rows; in a vertex buffer each row padded to 4 bytes (glTF 2.0
+        3.6.2.4: each vertex's element starts on 4 bytes -- quantized VEC3s); its index."""
+        arr = np.ascontiguousarray(arr)
+        if target == ARRAY_BUFFER and arr.ndim == 2 and arr.itemsize * arr.shape[1] % 4:
+            width = -(-arr.itemsize * arr.shape[1] // 4) * 4 // arr.itemsize
+            data = np.zeros((len(arr), width), arr.dtype)
+            data[:, :arr.shape[1]] = arr
+            return self.view(data, target, width * arr.itemsize)
+        return self.view(arr, target)
+
     def add(self, arr, target, acc_type, comp, minmax=False, normalized=False) -> int:
         """An accessor of the rows of arr in a view of its own; its index."""
         arr = np.ascontiguousarray(arr)
-        stride = None
-        data = arr
-        if target == ARRAY_BUFFER and arr.ndim == 2 and arr.itemsize * arr.shape[1] % 4:
-            # glTF 2.0 3.6.2.4: each vertex's element starts on 4 bytes (quantized VEC3s padded)
-            width = -(-arr.itemsize * arr.shape[1] // 4) * 4 // arr.itemsize
-            stride = width * arr.itemsize
-            data = np.zeros((len(arr), width), arr.dtype)
-            data[:, :arr.shape[1]] = arr
-        a = {"bufferView": self.view(data, target, stride), "componentType": int(comp), "count": len(arr),
+        a = {"bufferView": self.rows_view(arr, target), "componentType": int(comp), "count": len(arr),
              "type": acc_type}
         if normalized:
             a["normalized"] = True

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import MimicaError
+from .gltf_spec import drop_extension
 
 EXTENSION = "EXT_meshopt_compression"
 _SHIFT2 = (6, 4, 2, 0)            # 2-bit deltas, the first in the byte's top bits
@@ -82,9 +83,7 @@ def decode_meshopt(doc: dict, buf, path: Path) -> int:
         out = raw.tobytes()
         if len(out) != v.get("byteLength", len(out)):
             raise MimicaError(f"{where}: it decodes to {len(out)} bytes where the view says {v.get('byteLength')}")
-        buf.data += b"\0" * ((-len(buf.data)) % 16)
-        v["buffer"], v["byteOffset"] = 0, len(buf.data)
-        buf.data += out
+        v["buffer"], v["byteOffset"] = 0, buf.append(out)
         del v["extensions"][EXTENSION]
         if not v["extensions"]:
             del v["extensions"]
@@ -92,11 +91,7 @@ def decode_meshopt(doc: dict, buf, path: Path) -> int:
     if n:
         for b in doc.get("buffers") or []:
             (b.get("extensions") or {}).pop(EXTENSION, None)
-        for k in ("extensionsUsed", "extensionsRequired"):
-            if EXTENSION in (doc.get(k) or []):
-                doc[k] = [e for e in doc[k] if e != EXTENSION]
-                if not doc[k]:
-                    del doc[k]
+        drop_extension(doc, EXTENSION)
     return n
 
 
