@@ -7,11 +7,13 @@ an expression is transferred:
 - `skull`: stays (upper teeth and gums),
 - `jaw`: the jaw's rigid motion (lower teeth and gums, tongue),
 - `eye.left` / `eye.right`: rigid, rotating about the eyeball's centre,
-- `follow`: each vertex follows the skin nearest to it (lashes, shells, sockets).
+- `follow`: each vertex follows the skin nearest to it (lashes, shells, sockets),
+- `mouth`: the mouth's lining behind the lips (a mouth bag), moving as the source's lining.
 
 How parts are found: ICT-FaceKit's own topology from its table (README.upstream.md, "Face
 Model Topology"); any other head from its connected components and OBJ materials/groups:
-the skin is the component with the largest area; a component named like an eye, tooth,
+the skin is the component with the largest area (less a mouth bag joined to its lips: what
+a loop along the inner lips cuts off behind them); a component named like an eye, tooth,
 gum or tongue part (material or group names), or shaped like one where the landmarks say
 (a sphere behind an eye; a piece inside the mouth), gets that role; the rest follow.
 """
@@ -22,13 +24,16 @@ import re
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from ..align import face_cylinder
 from ..mesh import Mesh
 
 SKIN, SKULL, JAW, EYE_LEFT, EYE_RIGHT, FOLLOW = "skin", "skull", "jaw", "eye.left", "eye.right", "follow"
-ROLES = (SKIN, SKULL, JAW, EYE_LEFT, EYE_RIGHT, FOLLOW)
+MOUTH = "mouth"
+ROLES = (SKIN, SKULL, JAW, EYE_LEFT, EYE_RIGHT, FOLLOW, MOUTH)
 
 # ICT-FaceKit's geometries (vertex ranges, end exclusive) and what each is
 ICT_PARTS = [("skin", 0, 11248), ("mouth socket", 11248, 13294), ("eye socket", 13294, 14062),
@@ -36,12 +41,14 @@ ICT_PARTS = [("skin", 0, 11248), ("mouth socket", 11248, 13294), ("eye socket", 
              ("eyeball.right", 23021, 24591), ("tear shells", 24591, 25047), ("occlusion shells", 25047, 25351),
              ("lashes", 25351, 26719)]
 OCCLUSAL_TILT_DEG = 5.0
+LINING = "inside of the mouth"
 ICT_SKIN_FACES = 11144                       # polygons [0:11144) are the face, head and neck
 
 _NAMED = [(re.compile(r"teeth|tooth|dent", re.I), "teeth"), (re.compile(r"gum|tongue", re.I), "gums and tongue"),
           (re.compile(r"sclera|iris|pupil|cornea|eyeball|eye_?ball", re.I), "eyeball"),
           (re.compile(r"lash", re.I), "lashes"), (re.compile(r"brow", re.I), "brows"),
-          (re.compile(r"lacrimal|tear|occlusion|eye_?blend|meniscus", re.I), "eye shells")]
+          (re.compile(r"lacrimal|tear|occlusion|eye_?blend|meniscus", re.I), "eye shells"),
+          (re.compile(r"mouth|oral|cavity|throat", re.I), LINING)]
 
 
 @dataclass
@@ -142,6 +149,7 @@ def _ict_parts(mesh: Mesh, lm) -> Parts:
         label[11248:] = len(names)
         names.append("other")
     if n >= ICT_N_VERTICES:
+        role[11248:13294] = ROLES.index(MOUTH)
         role[21451:23021] = ROLES.index(EYE_LEFT)
         role[23021:24591] = ROLES.index(EYE_RIGHT)
         _split_mouth(mesh, lm, np.arange(14062, 21451), role)
@@ -165,9 +173,14 @@ def _split_mouth(mesh, lm, idx, role):
     sub[idx] = True
     a = mesh.adjacency[sub][:, sub]
     nc, comp = connected_components(a, directed=False)
-    mean_h = np.bincount(comp, h, nc) / np.bincount(comp, minlength=nc)
-    span = np.array([np.ptp(h[comp == c]) for c in range(nc)])
-    lower = np.where(span[comp] > 0.25 * width, h < 0, mean_h[comp] < 0)
+    count = np.bincount(comp, minlength=nc)
+    mean_h = np.bincount(comp, h, nc) / count
+    below = np.bincount(comp, h < 0, nc) / count
+    # a piece spans both arches where a quarter of it lies on each side; a tooth whose tip
+    # crosses the plane (ICT's upper incisors: 7-16 % of their vertices, roots included) does
+    # not, and is not torn from its root
+    spans = np.minimum(below, 1 - below) > 0.25
+    lower = np.where(spans[comp], h < 0, mean_h[comp] < 0)
     role[idx] = np.where(lower, ROLES.index(JAW), ROLES.index(SKULL))
 
 
@@ -208,6 +221,8 @@ def split_parts(mesh: Mesh, landmarks=None, eyes: dict | None = None) -> Parts:
     frame = _mouth_frame(lm) if lm is not None else None          # once for every component
     width = frame[4] if frame is not None else None
     mouth = []
+    edge = np.zeros(mesh.n_vertices, bool)
+    edge[mesh.boundary_vertices()] = True
     cut_eye = {int(comp[v[0]]): side for side, v in (eyes or {}).items() if len(v)}
     for c in range(nc):
         idx = np.nonzero(comp == c)[0]
@@ -233,8 +248,12 @@ def split_parts(mesh: Mesh, landmarks=None, eyes: dict | None = None) -> Parts:
                     role_c[c] = ROLES.index(side)
                 else:
                     role_c[c] = ROLES.index(SKULL)
-        if kind in ("teeth", "gums and tongue") or (kind is None and lm is not None and
-                                                     _inside_mouth(mesh.vertices[idx], lm, frame)):
+        if kind is None and lm is not None and c != skin_c and _opens_at_the_lips(mesh, idx, edge, lm, width):
+            kind = LINING
+        if kind == LINING:
+            role_c[c] = ROLES.index(MOUTH)
+        elif kind in ("teeth", "gums and tongue") or (kind is None and lm is not None and
+                                                       _inside_mouth(mesh.vertices[idx], lm, frame)):
             kind = kind or "teeth, gums or tongue"
             mouth.append(idx)
             role_c[c] = ROLES.index(SKULL)
@@ -243,8 +262,76 @@ def split_parts(mesh: Mesh, landmarks=None, eyes: dict | None = None) -> Parts:
     if mouth:
         _split_mouth(mesh, lm, np.concatenate(mouth), role)
     skin_v = comp == skin_c
+    label = comp.astype(np.int64)
+    lining = mouth_lining(mesh, skin_v, lm) if lm is not None else None
+    if lining is not None:
+        skin_v[lining] = False
+        role[lining] = ROLES.index(MOUTH)
+        label[lining] = len(names)
+        names.append(LINING)
     faces = np.nonzero(np.add.reduceat(~skin_v[mesh.face_indices], mesh.face_starts[:-1]) == 0)[0]
-    return Parts(comp.astype(np.int64), names, role, faces)
+    return Parts(label, names, role, faces)
+
+
+def mouth_lining(mesh: Mesh, skin: np.ndarray, lm) -> np.ndarray | None:
+    """The skin's mouth bag: what a loop along the inner lips (the shortest paths over the skin
+    between landmarks 60-67) cuts off from the face, lying behind the lips.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    skin : (n,) bool array
+        The skin's vertices.
+    lm : (68, 3) float array
+
+    Returns
+    -------
+    (k,) int array or None
+        The lining's vertices (the loop's own stay skin); None where the lips have no bag
+        behind them (separate lips, a sealed mouth, a cut one).
+    """
+    from scipy.sparse.csgraph import dijkstra
+    lm = np.asarray(lm, float)
+    if not np.isfinite(lm[60:68]).all():
+        return None
+    sv = np.nonzero(skin)[0]
+    if len(sv) < 100:
+        return None
+    e = mesh.edges
+    e = e[skin[e[:, 0]] & skin[e[:, 1]]]
+    w = np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1)
+    n = mesh.n_vertices
+    graph = sp.coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
+    ends = sv[cKDTree(mesh.vertices[sv]).query(lm[60:68])[1]]
+    _, pred = dijkstra(graph, indices=ends, return_predecessors=True)
+    loop = np.zeros(n, bool)
+    for k in range(8):                               # each inner-lip point to the next, round the mouth
+        a, b = ends[k], ends[(k + 1) % 8]
+        x = b
+        while x != a and x >= 0:
+            loop[x] = True
+            x = pred[k, x]
+        if x < 0:
+            return None
+        loop[a] = True
+    rest = skin & ~loop
+    keep = rest[e[:, 0]] & rest[e[:, 1]]
+    a = sp.coo_matrix((np.ones(int(keep.sum())), (e[keep, 0], e[keep, 1])), shape=(n, n))
+    nc, comp = connected_components(a, directed=False)
+    sizes = np.bincount(comp[rest], minlength=nc)
+    face = int(np.argmax(sizes))
+    right, up, fwd, lips, width = _mouth_frame(lm)
+    depth = (mesh.vertices - lips) @ fwd
+    out = []
+    for c in np.nonzero(sizes)[0]:
+        if c == face:
+            continue
+        v = np.nonzero(rest & (comp == c))[0]
+        # behind the lips (a bag reaches back about a third of the eyes' width or more; a strip
+        # of lip between the loop and a cut's edge does not)
+        if depth[v].min() < -0.15 * width and sizes[c] < 0.5 * len(sv):
+            out.append(v)
+    return np.concatenate(out) if out else None
 
 
 def _component_groups(mesh, comp, nc):
@@ -262,6 +349,17 @@ def _component_groups(mesh, comp, nc):
         if ks and len(set(ks)) == 1:
             out[c] = ks[0]
     return out
+
+
+def _opens_at_the_lips(mesh, idx, edge, lm, width) -> bool:
+    """A piece whose open edge runs along the inner lips (within 0.12 of the eyes' width of the
+    corners and the middles, landmarks 60, 62, 64, 66): a mouth bag of its own.  On ICT's bag
+    cut from its lips 0.03-0.08; its gums and tongue 0.25, its teeth 0.68 or more."""
+    b = idx[edge[idx]]
+    if len(b) < 8 or not np.isfinite(lm[[60, 62, 64, 66]]).all():
+        return False
+    p = mesh.vertices[b]
+    return all(np.linalg.norm(p - lm[k], axis=1).min() < 0.12 * width for k in (60, 62, 64, 66))
 
 
 def _inside_mouth(p, lm, frame):

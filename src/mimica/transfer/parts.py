@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..align import Similarity, fit_similarity
-from ..correspond.parts import EYE_LEFT, EYE_RIGHT, FOLLOW, JAW, Parts, fit_sphere
+from ..correspond.parts import EYE_LEFT, EYE_RIGHT, FOLLOW, JAW, MOUTH, ROLES, SKIN, Parts, fit_sphere
 from ..mesh import Mesh
 from ..mesh.query import TriangleLocator
 
@@ -69,6 +69,7 @@ class PartMotion:
             tri, bary, _, _ = TriangleLocator(skin.vertices, skin.triangles).closest(target.vertices[self.follow])
             self._corners, self._bary = skin.triangles[tri], bary
         self._skin_rest = skin.vertices
+        self.lining = _Lining(source, ps, target, pt, skin_index, similarity) if len(pt.of(MOUTH)) else None
 
     def rigid(self, frame: np.ndarray, sv: np.ndarray) -> Similarity:
         """The source part's best rigid motion from rest to `frame` (in the source's frame)."""
@@ -92,7 +93,67 @@ class PartMotion:
             d = skin_out - self._skin_rest                         # (F, n_skin, 3)
             out[:, self.follow] = self.target[self.follow] + np.einsum("kc,fkcd->fkd", self._bary,
                                                                        d[:, self._corners])
+        if self.lining is not None:
+            out[:, self.lining.vertices] = self.lining.apply(frames, out)
         return out
+
+
+class _Lining:
+    """The target's mouth lining moved as the source's (see the module's docstring)."""
+
+    def __init__(self, source: Mesh, ps: Parts, target: Mesh, pt: Parts, skin_index, similarity: Similarity):
+        import scipy.sparse as sp
+        from scipy.sparse.linalg import splu
+        self.similarity, self._back = similarity, similarity.inverse()
+        self.rest, self.target = source.vertices, target.vertices
+        lining = pt.role == ROLES.index(MOUTH)
+        self.vertices = np.nonzero(lining)[0]
+        on = (ps.role == ROLES.index(MOUTH)) | (ps.role == ROLES.index(SKIN))
+        tri = source.triangles
+        tri = tri[on[tri].all(1)]
+        self._aligned = similarity.apply(target.vertices[self.vertices])
+        locate = TriangleLocator(source.vertices, tri).closest
+        t, bary, _, _ = locate(self._aligned)
+        self._corners, self._bary = tri[t], bary
+        # where the lining meets the skin: those skin vertices' transferred motion is the boundary
+        e = target.edges
+        cross = lining[e[:, 0]] != lining[e[:, 1]]
+        rim = np.unique(np.where(lining[e[cross, 0]], e[cross, 1], e[cross, 0]))
+        self.rim = rim
+        if len(rim):
+            ta, ba, _, _ = locate(similarity.apply(target.vertices[rim]))
+            self._rim_corners, self._rim_bary = tri[ta], ba
+            both = np.r_[self.vertices, rim]
+            at = np.full(target.n_vertices, -1)
+            at[both] = np.arange(len(both))
+            e = e[(at[e[:, 0]] >= 0) & (at[e[:, 1]] >= 0)]
+            i, j = at[e[:, 0]], at[e[:, 1]]
+            n = len(both)
+            a = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
+            lap = sp.diags(np.asarray(a.sum(1)).ravel()) - a          # the graph Laplacian
+            m = len(self.vertices)
+            # a lining piece that meets no skin keeps the source's motion (the small diagonal)
+            self._solve = splu((lap[:m, :m] + 1e-9 * sp.eye(m)).tocsc()).solve
+            self._couple = lap[:m, m:].tocsr()
+
+    def _source_motion(self, frames, corners, bary, aligned):
+        """The source's displacement at the given points, carried into the target's frame."""
+        d = np.einsum("kc,fkcd->fkd", bary, frames[:, corners] - self.rest[corners])
+        return self._back.apply((aligned[None] + d).reshape(-1, 3)).reshape(d.shape)
+
+    def apply(self, frames: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """The lining's positions (F, k, 3) for source frames (F, n_S, 3) and the target's other
+        vertices already placed in `out`."""
+        moved = self._source_motion(frames, self._corners, self._bary, self._aligned)
+        if not len(self.rim):
+            return moved
+        rim_src = self._source_motion(frames, self._rim_corners, self._rim_bary,
+                                      self.similarity.apply(self.target[self.rim]))
+        gap = out[:, self.rim] - rim_src                           # (F, r, 3): the skin's motion less the source's
+        f, r = gap.shape[:2]
+        rhs = -(self._couple @ gap.transpose(1, 0, 2).reshape(r, -1))
+        h = self._solve(np.asarray(rhs)).reshape(len(self.vertices), f, 3).transpose(1, 0, 2)
+        return moved + h
 
 
 def _chin(source: Mesh, ps: Parts, lm) -> np.ndarray:
