@@ -15,8 +15,9 @@ vertices shuffled, for the rigid parts.  Figures (the issue's):
 - damaged shapes: shapes whose share of triangles turned past 90 degrees, or of edges
   stretched past 2.5x or shrunk under 0.4x, exceeds max(0.5%, 1.5x) ICT's own shape's share
 - rigid residual: teeth and eyeballs, distance from their best rigid motion / their size
-- bag_err_worst: on the same mesh, ICT's mouth bag (joined to its lips) against ICT's own
-  sculpted bag: the worst ARKit shape's median distance over the bag's size
+- pocket_err_worst: on the same mesh, ICT's mouth bag and eye sockets (joined to its lips and
+  lids) against ICT's own sculpted ones: the worst ARKit shape's median distance over the
+  pocket's size, the worse pocket
 - rel_err_remeshed: bench/transfer.py's remeshed figure (held-out identity, 12k vertices)
 - watertight_jaw_min: jaw (as above) on heads that are one closed surface (held-out identities
   remeshed, lips and lids sealed, nostrils and the back capped: tools/hard_heads.py), and the
@@ -147,32 +148,37 @@ def rigid_residual(full_model):
     return worst, parts.summary(), bag_error(full_model, m, perm, shapes)
 
 
-def bag_error(full_model, m, perm, shapes) -> tuple:
-    """The mouth bag of ICT's whole mesh as a head of another topology against ICT's own sculpted
-    bag: per ARKit shape the median distance over its size; the median shape's and the worst.
-    Baseline in the same run: the bag transferred as skin, as before its detection (the lining's
-    finding switched off here)."""
+def bag_error(full_model, m, perm, shapes) -> dict:
+    """The pockets of ICT's whole mesh as a head of another topology (its mouth bag and eye
+    sockets, joined to the lips and lids) against ICT's own sculpted ones: per ARKit shape the
+    median distance over the pocket's size; {pocket: (median shape's, worst shape's)} for ours
+    and, in the same run, the baseline: the pockets transferred as skin, as before they were
+    found (their finding switched off here)."""
     from mimica.correspond import parts as parts_module
-    bag = np.nonzero((perm >= 11248) & (perm < 13294))[0]     # ICT's mouth socket, in m's order
     rest = full_model.neutral[perm]
-    size = float(np.ptp(rest[bag], axis=0).max())
+    pockets = {"mouth bag": np.nonzero((perm >= 11248) & (perm < 13294))[0],
+               "eye sockets": np.nonzero((perm >= 13294) & (perm < 14062))[0]}
 
     def errors(sh):
-        out = []
-        for a in ARKIT_52:
-            truth = rest[bag] + sum((full_model.shape(n)[perm][bag] - rest[bag] for n in ict_sources(a)),
-                                    np.zeros((len(bag), 3)))
-            out.append(np.median(np.linalg.norm(sh[a][bag] - truth, axis=1)) / size)
-        return np.array(out)
+        out = {}
+        for name, v in pockets.items():
+            size = float(np.ptp(rest[v], axis=0).max())
+            e = []
+            for a in ARKIT_52:
+                truth = rest[v] + sum((full_model.shape(n)[perm][v] - rest[v] for n in ict_sources(a)),
+                                      np.zeros((len(v), 3)))
+                e.append(np.median(np.linalg.norm(sh[a][v] - truth, axis=1)) / size)
+            out[name] = (float(np.median(e)), float(np.max(e)))
+        return out
 
     ours = errors(shapes)
-    found = parts_module.mouth_lining
-    parts_module.mouth_lining = lambda *a: None
+    found = parts_module.pockets
+    parts_module.pockets = lambda *a: {}
     try:
         base = errors(arkit_blendshapes(m, Landmarks.snap(m, m.vertices[np.argsort(perm)[ICT_LANDMARKS_68]])))
     finally:
-        parts_module.mouth_lining = found
-    return float(np.median(ours)), float(ours.max()), float(np.median(base)), float(base.max())
+        parts_module.pockets = found
+    return {"ours": ours, "baseline": base}
 
 
 def main():
@@ -271,16 +277,19 @@ def main():
         arkit_blendshapes(big, None)
         detect_s = min(detect_s, time.perf_counter() - t)
     print(f"blendshapes on a {big.n_vertices}-vertex head, landmarks detected: {detect_s:.1f}s (best of 3)")
-    rigid, parts, (bag_med, bag_worst, base_med, base_worst) = rigid_residual(full_model)
+    rigid, parts, pockets = rigid_residual(full_model)
     print(f"whole ICT mesh, shuffled (parts: {parts}): rigid residual {rigid:.1e} of the part's size")
-    print(f"its mouth bag against ICT's own, median over the bag / its size: median shape {bag_med:.4f}, "
-          f"worst {bag_worst:.4f} (baseline, the bag transferred as skin: {base_med:.4f}, {base_worst:.4f})")
+    for name, (med, worst) in pockets["ours"].items():
+        b = pockets["baseline"][name]
+        print(f"its {name} against ICT's own, median distance / the pocket's size: median shape {med:.4f}, "
+              f"worst {worst:.4f} (baseline, transferred as skin: {b[0]:.4f}, {b[1]:.4f})")
+    pocket_worst = max(w for _, w in pockets["ours"].values())
     rel = rel_err_remeshed(model)
     print(f"blink_min={min(blinks):.3f} jaw_min={min(jaws):.3f} damaged_shapes={damaged} "
           f"rigid_residual={rigid:.1e} rel_err_remeshed={rel:.4f} watertight_jaw_min={min(wt_jaws):.3f} "
           f"closed_eye_blink_min={min(ce_blinks):.3f} detected_jaw_min={min(det_jaws):.3f} "
           f"detected_blink_min={min(det_blinks):.3f} detected_closed_eye_blink_min={min(det_ce):.4f} "
-          f"bag_err_worst={bag_worst:.4f}")
+          f"pocket_err_worst={pocket_worst:.4f}")
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ from mimica.transfer import ExpressionTransfer, static_vertices
 MOUTH = np.arange(14062, 21451)          # ICT: gums, tongue and teeth
 TEETH = np.arange(17039, 21451)
 LINING = np.arange(11248, 13294)         # ICT's mouth socket: the bag behind the lips
+SOCKETS = np.arange(13294, 14062)        # ICT's eye sockets, behind the lids
 EYE_L, EYE_R, LASHES = np.arange(21451, 23021), np.arange(23021, 24591), np.arange(25351, 26719)
 
 
@@ -45,7 +46,7 @@ def test_ict_parts_from_its_table(full, full_model):
     assert p.skin.sum() == 11248 and p.skin[:11248].all()
     assert (p.role[EYE_L] == ROLES.index("eye.left")).all() and (p.role[EYE_R] == ROLES.index("eye.right")).all()
     assert (p.role[LASHES] == ROLES.index("follow")).all()
-    assert (p.role[LINING] == ROLES.index("mouth")).all()
+    assert (p.role[LINING] == ROLES.index("pocket")).all() and (p.role[SOCKETS] == ROLES.index("pocket")).all()
     jaw = p.role[MOUTH] == ROLES.index("jaw")
     assert (jaw == _jaw_truth(full_model)[MOUTH]).mean() > 0.95           # 96.8% measured
     # every tooth whole: an upper incisor's tip crosses the plane between the arches, and was
@@ -62,16 +63,18 @@ def test_parts_of_another_topology(full, full_model, shuffled, names):
     lm = m.vertices[inv[ICT_LANDMARKS_68]]
     p = split_parts(m, lm)
     role = p.role[inv]                              # back in ICT's order
-    # the bag joined to the lips is found: ICT's whole socket, and the lips' inner faces behind
-    # the loop along the inner-lip landmarks (skin on ICT's table; 171 / 559 vertices measured)
-    assert (role[LINING] == ROLES.index("mouth")).all()
+    # the pockets joined to the lips and lids are found: ICT's whole mouth and eye sockets, and
+    # the lips' and lids' inner faces behind the loops along their landmarks (skin on ICT's
+    # table: 559 and 2 x 116 vertices measured), none of the face's outer skin
+    assert (role[LINING] == ROLES.index("pocket")).all() and (role[SOCKETS] == ROLES.index("pocket")).all()
     head = role[:11248]
-    inside = np.nonzero(head == ROLES.index("mouth"))[0]
-    assert ((head == ROLES.index("skin")) | (head == ROLES.index("mouth"))).all() and len(inside) < 700
-    lips = lm[60:68].mean(0)
+    inside = np.nonzero(head == ROLES.index("pocket"))[0]
+    assert ((head == ROLES.index("skin")) | (head == ROLES.index("pocket"))).all() and len(inside) < 900
+    rings = np.array([lm[60:68].mean(0), lm[36:42].mean(0), lm[42:48].mean(0)])
+    nearest = np.argmin(np.linalg.norm(full.vertices[inside, None] - rings[None], axis=2), axis=1)
     ahead = np.cross(lm[8] - lm[27], lm[16] - lm[0])                 # the face's forward direction
     ahead /= np.linalg.norm(ahead)
-    assert ((full.vertices[inside] - lips) @ ahead).max() < 0.1 * np.linalg.norm(lm[45] - lm[36])
+    assert ((full.vertices[inside] - rings[nearest]) @ ahead).max() < 0.05 * np.linalg.norm(lm[45] - lm[36])
     assert (role[EYE_L] == ROLES.index("eye.left")).all() and (role[EYE_R] == ROLES.index("eye.right")).all()
     jaw = role[MOUTH] == ROLES.index("jaw")
     assert (jaw == _jaw_truth(full_model)[MOUTH]).mean() > 0.95
@@ -100,9 +103,19 @@ def test_full_source_gives_the_head_only_result(full_model, head_model):
     np.testing.assert_allclose(a.apply(frames), b.apply(frames[:, :11248]), atol=1e-6 * np.ptp(idv))
 
 
+def _rigid(pt, inv) -> np.ndarray:
+    """The vertices (in ICT's order) that move as rigid bodies: all but those of a piece spanning
+    both arches that take a share of the jaw's motion."""
+    w = np.full(len(pt.role), np.nan) if pt.jaw_weight is None else pt.jaw_weight
+    return ~((w > 0) & (w < 1))[inv]
+
+
 def test_rigid_parts_move_rigidly(full_model, head_model, shuffled):
     """Onto the whole head of another topology: teeth and eyeballs move as rigid bodies (the
-    jaw's from the source), the upper teeth stay, the lashes ride on the closing lid."""
+    jaw's from the source), the upper teeth stay, the lashes ride on the closing lid, and the
+    gums and tongue, one piece spanning both arches, stretch where the arches meet instead of
+    tearing (split vertex by vertex: 92 edges between the arches stretched past 3x where ICT's
+    own stay under 2x; now 8)."""
     m, inv = shuffled
     src = full_model.mesh
     x = ExpressionTransfer(src, m, ict_landmarks(src), Landmarks.snap(m, m.vertices[inv[ICT_LANDMARKS_68]]))
@@ -111,13 +124,20 @@ def test_rigid_parts_move_rigidly(full_model, head_model, shuffled):
     rest = full_model.neutral
     pt = x.parts[1]
     role = pt.role[inv]
+    rigid = _rigid(pt, inv)
+    assert (~rigid).sum() > 100 and rigid[TEETH].all()
     truth = _jaw_truth(full_model)
+    e = src.edges
+    gums = (e >= 14062).all(1) & (e < 17039).all(1)
+    stretch = [np.linalg.norm(f[e[gums, 0]] - f[e[gums, 1]], axis=1) / np.linalg.norm(rest[e[gums, 0]] - rest[e[gums, 1]], axis=1)
+               for f in (out[0], full_model.shape("jawOpen"))]
+    assert ((stretch[0] > 3) & (stretch[1] < 2)).sum() < 20
     for k, name in enumerate(names):
         for r in ("jaw", "skull", "eye.left", "eye.right"):
-            v = np.nonzero(role == ROLES.index(r))[0]
+            v = np.nonzero((role == ROLES.index(r)) & rigid)[0]
             fit = fit_similarity(rest[v], out[k, v], scale=False)
             assert np.abs(fit.apply(rest[v]) - out[k, v]).max() < 1e-6 * np.ptp(rest[v]), (name, r)
-        upper = MOUTH[(role[MOUTH] == ROLES.index("skull"))]
+        upper = MOUTH[(role[MOUTH] == ROLES.index("skull")) & rigid[MOUTH]]
         assert np.abs(out[k, upper] - rest[upper]).max() < 1e-9
     lower = MOUTH[(role[MOUTH] == ROLES.index("jaw")) & truth[MOUTH]]
     ict_move = np.linalg.norm(full_model.shape("jawOpen")[lower] - rest[lower], axis=1).mean()
@@ -160,7 +180,7 @@ def test_the_mouth_bag_moves_as_the_sources(full_model, shuffled, bag_apart, bag
     m, inv = shuffled if bag == "joined" else bag_apart
     src = full_model.mesh
     p = split_parts(m, m.vertices[inv[ICT_LANDMARKS_68]])
-    assert (p.role[inv[LINING]] == ROLES.index("mouth")).all()
+    assert (p.role[inv[LINING]] == ROLES.index("pocket")).all()
     x = ExpressionTransfer(src, m, ict_landmarks(src), Landmarks.snap(m, m.vertices[inv[ICT_LANDMARKS_68]]))
     names = ("jawOpen", "mouthClose", "mouthLeft", "mouthFunnel", "mouthSmile_L")
     truth = np.stack([full_model.shape(s) for s in names])
@@ -172,6 +192,22 @@ def test_the_mouth_bag_moves_as_the_sources(full_model, shuffled, bag_apart, bag
         # and the lips it joins are where ICT has them (the loop between the two stays skin)
         lips = np.linalg.norm(out[k, :11248] - truth[k, :11248], axis=1).max() / size
         assert lips < 0.03, (name, lips)
+
+
+def test_the_eye_sockets_move_as_the_sources(full_model, shuffled):
+    """The same for ICT's eye sockets, joined to the lids: as skin they moved up to 0.17 of a
+    socket's size from ICT's own in eyeBlink_L (more than the socket moves, 0.12); as the
+    source's pockets within 0.009."""
+    m, inv = shuffled
+    src = full_model.mesh
+    x = ExpressionTransfer(src, m, ict_landmarks(src), Landmarks.snap(m, m.vertices[inv[ICT_LANDMARKS_68]]))
+    names = ("eyeBlink_L", "eyeWide_L", "eyeSquint_R", "browDown_L")
+    truth = np.stack([full_model.shape(s) for s in names])
+    out = x.apply(truth)[:, inv]
+    size = np.ptp(src.vertices[SOCKETS[:384]], axis=0).max()                # one eye's socket
+    for k, name in enumerate(names):
+        err = np.linalg.norm(out[k, SOCKETS] - truth[k, SOCKETS], axis=1) / size
+        assert err.max() < 0.03, (name, err.max())
 
 
 def test_fused_parts_are_still_found(full_model):
@@ -200,16 +236,17 @@ def test_fused_parts_are_still_found(full_model):
     role = p.role[idx]
     for part, r in ((EYE_L, "eye.left"), (EYE_R, "eye.right")):
         assert (role[part] == ROLES.index(r)).all()
-    assert np.isin(role[:11248], [ROLES.index("skin"), ROLES.index("mouth")]).all()
-    assert (role[LINING] == ROLES.index("mouth")).all()
+    assert np.isin(role[:11248], [ROLES.index("skin"), ROLES.index("pocket")]).all()
+    assert (role[LINING] == ROLES.index("pocket")).all()
     jaw = role[MOUTH] == ROLES.index("jaw")
     assert (jaw == _jaw_truth(full_model)[MOUTH]).mean() > 0.95
     src = full
     x = ExpressionTransfer(src, m, ict_landmarks(src), Landmarks.snap(m, m.vertices[idx[ICT_LANDMARKS_68]]))
     out = x.apply(np.stack([full_model.shape(s) for s in ("jawOpen", "mouthSmile_L")]))[:, idx]
     rest = full_model.neutral
+    rigid = _rigid(x.parts[1], idx)
     for k in range(2):
         for r in ("jaw", "skull", "eye.left", "eye.right"):
-            sel = np.nonzero(role == ROLES.index(r))[0]
+            sel = np.nonzero((role == ROLES.index(r)) & rigid)[0]
             fit = fit_similarity(rest[sel], out[k, sel], scale=False)
             assert np.abs(fit.apply(rest[sel]) - out[k, sel]).max() < 1e-6 * np.ptp(rest[sel]), r

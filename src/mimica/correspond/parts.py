@@ -7,13 +7,14 @@ an expression is transferred:
 - `skull`: stays (upper teeth and gums),
 - `jaw`: the jaw's rigid motion (lower teeth and gums, tongue),
 - `eye.left` / `eye.right`: rigid, rotating about the eyeball's centre,
-- `follow`: each vertex follows the skin nearest to it (lashes, shells, sockets),
-- `mouth`: the mouth's lining behind the lips (a mouth bag), moving as the source's lining.
+- `follow`: each vertex follows the skin nearest to it (lashes, shells),
+- `pocket`: the skin's pockets behind the lips and lids (a mouth bag, eye sockets), moving as
+  the source's.
 
 How parts are found: ICT-FaceKit's own topology from its table (README.upstream.md, "Face
 Model Topology"); any other head from its connected components and OBJ materials/groups:
-the skin is the component with the largest area (less a mouth bag joined to its lips: what
-a loop along the inner lips cuts off behind them); a component named like an eye, tooth,
+the skin is the component with the largest area (less the pockets joined to its lips and lids:
+what a loop along the inner lips or an eye's rim cuts off behind them); a component named like an eye, tooth,
 gum or tongue part (material or group names), or shaped like one where the landmarks say
 (a sphere behind an eye; a piece inside the mouth), gets that role; the rest follow.
 """
@@ -32,8 +33,8 @@ from ..align import face_cylinder
 from ..mesh import Mesh
 
 SKIN, SKULL, JAW, EYE_LEFT, EYE_RIGHT, FOLLOW = "skin", "skull", "jaw", "eye.left", "eye.right", "follow"
-MOUTH = "mouth"
-ROLES = (SKIN, SKULL, JAW, EYE_LEFT, EYE_RIGHT, FOLLOW, MOUTH)
+POCKET = "pocket"
+ROLES = (SKIN, SKULL, JAW, EYE_LEFT, EYE_RIGHT, FOLLOW, POCKET)
 
 # ICT-FaceKit's geometries (vertex ranges, end exclusive) and what each is
 ICT_PARTS = [("skin", 0, 11248), ("mouth socket", 11248, 13294), ("eye socket", 13294, 14062),
@@ -41,7 +42,7 @@ ICT_PARTS = [("skin", 0, 11248), ("mouth socket", 11248, 13294), ("eye socket", 
              ("eyeball.right", 23021, 24591), ("tear shells", 24591, 25047), ("occlusion shells", 25047, 25351),
              ("lashes", 25351, 26719)]
 OCCLUSAL_TILT_DEG = 5.0
-LINING = "inside of the mouth"
+LINING, SOCKET = "inside of the mouth", "eye socket"
 ICT_SKIN_FACES = 11144                       # polygons [0:11144) are the face, head and neck
 
 _NAMED = [(re.compile(r"teeth|tooth|dent", re.I), "teeth"), (re.compile(r"gum|tongue", re.I), "gums and tongue"),
@@ -63,15 +64,20 @@ class Parts:
         The name of each part.
     role : (n,) int array
         Index into ROLES: skin, skull (still with the head), jaw (moves with it), the left and
-        right eye (rigid), follow (lashes, shells: ride with the skin).
+        right eye (rigid), follow (lashes, shells: ride with the skin), pocket (a mouth bag, eye
+        sockets: move as the source's).
     skin_faces : (f,) int array
         The skin's polygons (all their corners skin).
+    jaw_weight : (n,) float array or None
+        Where a piece spans both arches (gums and tongue as one): how much of the jaw's motion
+        each of its vertices takes, 0 to 1 (NaN elsewhere); None where no piece does.
     """
 
     label: np.ndarray            # (n,) part index of each vertex
     names: list                  # name of each part
     role: np.ndarray             # (n,) index into ROLES
     skin_faces: np.ndarray       # polygon indices of the skin (all their corners skin)
+    jaw_weight: np.ndarray | None = None
 
     @property
     def skin(self) -> np.ndarray:
@@ -145,24 +151,28 @@ def _ict_parts(mesh: Mesh, lm) -> Parts:
         label[a:min(b, n)] = k
     role = np.full(n, ROLES.index(FOLLOW))
     role[:11248] = ROLES.index(SKIN)
+    weight = None
     if n < ICT_N_VERTICES and n > 11248:
         label[11248:] = len(names)
         names.append("other")
     if n >= ICT_N_VERTICES:
-        role[11248:13294] = ROLES.index(MOUTH)
+        role[11248:14062] = ROLES.index(POCKET)      # the mouth and eye sockets
         role[21451:23021] = ROLES.index(EYE_LEFT)
         role[23021:24591] = ROLES.index(EYE_RIGHT)
-        _split_mouth(mesh, lm, np.arange(14062, 21451), role)
-    return Parts(label, names, role, np.arange(min(ICT_SKIN_FACES, mesh.n_faces)))
+        weight = _split_mouth(mesh, lm, np.arange(14062, 21451), role)
+    return Parts(label, names, role, np.arange(min(ICT_SKIN_FACES, mesh.n_faces)), weight)
 
 
-def _split_mouth(mesh, lm, idx, role):
+def _split_mouth(mesh, lm, idx, role) -> np.ndarray | None:
     """Teeth, gums and tongue: each connected piece above the line between the lips stays with
     the skull, below it moves with the jaw; a piece spanning both (gums and tongue as one
-    component) is split vertex by vertex, the tongue with the jaw."""
+    component) takes the jaw's motion in part, by a weight harmonic over the piece between its
+    vertices clearly below the plane (1: the tongue, the lower gums) and clearly above (0), so
+    that it stretches where the arches meet instead of tearing there.  Returns the weights
+    (Parts.jaw_weight), or None where no piece spans both."""
     if lm is None:
         role[idx] = ROLES.index(SKULL)
-        return
+        return None
     idx = np.unique(idx)                              # in the order of the submatrix below
     right, up, fwd, lips, width = _mouth_frame(lm)
     q = mesh.vertices[idx] - lips
@@ -182,6 +192,29 @@ def _split_mouth(mesh, lm, idx, role):
     spans = np.minimum(below, 1 - below) > 0.25
     lower = np.where(spans[comp], h < 0, mean_h[comp] < 0)
     role[idx] = np.where(lower, ROLES.index(JAW), ROLES.index(SKULL))
+    if not spans.any():
+        return None
+    weight = np.full(mesh.n_vertices, np.nan)
+    weight[idx[spans[comp]]] = _jaw_weight(a, h, spans[comp], 0.05 * width)
+    return weight
+
+
+def _jaw_weight(a, h, span, band) -> np.ndarray:
+    """The jaw's share for the vertices of spanning pieces (span: mask over the rows of the
+    adjacency `a`, heights h over the plane between the arches): 1 below -band, 0 above band,
+    harmonic (the graph Laplacian's) in between; a stretch reaching neither keeps its side."""
+    from scipy.sparse.linalg import spsolve
+    v = np.nonzero(span)[0]
+    a = a[v][:, v].tocsr()
+    h = h[v]
+    w = (h < 0).astype(float)
+    free = np.abs(h) <= band
+    if free.any():
+        lap = (sp.diags(np.asarray(a.sum(1)).ravel()) - a).tocsr()
+        lff = lap[free][:, free] + 1e-6 * sp.eye(int(free.sum()))   # the small pull: to its side
+        rhs = -(lap[free][:, ~free] @ w[~free]) + 1e-6 * w[free]
+        w[free] = spsolve(lff.tocsc(), rhs)
+    return np.clip(w, 0.0, 1.0)
 
 
 def split_parts(mesh: Mesh, landmarks=None, eyes: dict | None = None) -> Parts:
@@ -251,7 +284,7 @@ def split_parts(mesh: Mesh, landmarks=None, eyes: dict | None = None) -> Parts:
         if kind is None and lm is not None and c != skin_c and _opens_at_the_lips(mesh, idx, edge, lm, width):
             kind = LINING
         if kind == LINING:
-            role_c[c] = ROLES.index(MOUTH)
+            role_c[c] = ROLES.index(POCKET)
         elif kind in ("teeth", "gums and tongue") or (kind is None and lm is not None and
                                                        _inside_mouth(mesh.vertices[idx], lm, frame)):
             kind = kind or "teeth, gums or tongue"
@@ -259,23 +292,22 @@ def split_parts(mesh: Mesh, landmarks=None, eyes: dict | None = None) -> Parts:
             role_c[c] = ROLES.index(SKULL)
         names.append(kind or ("part" if len(idx) > 50 else "piece"))
         role[idx] = role_c[c]
-    if mouth:
-        _split_mouth(mesh, lm, np.concatenate(mouth), role)
+    weight = _split_mouth(mesh, lm, np.concatenate(mouth), role) if mouth else None
     skin_v = comp == skin_c
     label = comp.astype(np.int64)
-    lining = mouth_lining(mesh, skin_v, lm) if lm is not None else None
-    if lining is not None:
-        skin_v[lining] = False
-        role[lining] = ROLES.index(MOUTH)
-        label[lining] = len(names)
-        names.append(LINING)
+    for name, v in (pockets(mesh, skin_v, lm) if lm is not None else {}).items():
+        skin_v[v] = False
+        role[v] = ROLES.index(POCKET)
+        label[v] = len(names)
+        names.append(name)
     faces = np.nonzero(np.add.reduceat(~skin_v[mesh.face_indices], mesh.face_starts[:-1]) == 0)[0]
-    return Parts(label, names, role, faces)
+    return Parts(label, names, role, faces, weight)
 
 
-def mouth_lining(mesh: Mesh, skin: np.ndarray, lm) -> np.ndarray | None:
-    """The skin's mouth bag: what a loop along the inner lips (the shortest paths over the skin
-    between landmarks 60-67) cuts off from the face, lying behind the lips.
+def pockets(mesh: Mesh, skin: np.ndarray, lm) -> dict:
+    """The skin's pockets: a mouth bag and eye sockets joined to the lips and lids -- what a loop
+    along the inner lips (landmarks 60-67) or an eye's rim (36-41, 42-47), the shortest paths over
+    the skin from each point to the next, cuts off from the face behind them.
 
     Parameters
     ----------
@@ -286,31 +318,49 @@ def mouth_lining(mesh: Mesh, skin: np.ndarray, lm) -> np.ndarray | None:
 
     Returns
     -------
-    (k,) int array or None
-        The lining's vertices (the loop's own stay skin); None where the lips have no bag
-        behind them (separate lips, a sealed mouth, a cut one).
+    dict
+        {LINING or SOCKET: (k,) int array of the pockets' vertices} (the loops' own vertices stay
+        skin); empty where the lips and lids have nothing behind them (holes, sealed or cut).
     """
-    from scipy.sparse.csgraph import dijkstra
     lm = np.asarray(lm, float)
-    if not np.isfinite(lm[60:68]).all():
-        return None
     sv = np.nonzero(skin)[0]
     if len(sv) < 100:
-        return None
+        return {}
     e = mesh.edges
     e = e[skin[e[:, 0]] & skin[e[:, 1]]]
     w = np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1)
     n = mesh.n_vertices
     graph = sp.coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
-    ends = sv[cKDTree(mesh.vertices[sv]).query(lm[60:68])[1]]
+    near = cKDTree(mesh.vertices[sv])
+    _, _, fwd, _, width = _mouth_frame(lm)
+    out = {}
+    # a mouth bag reaches back a third of the eyes' width or more (ICT's), an eye socket 0.3 (its
+    # median 0.15); a strip of lip or lid between a loop and an edge a cut made does not
+    for name, ring, deep in ((LINING, range(60, 68), 0.15), (SOCKET, range(36, 42), 0.1),
+                             (SOCKET, range(42, 48), 0.1)):
+        ring = lm[list(ring)]
+        if not np.isfinite(ring).all():
+            continue
+        v = _cut_off(graph, skin, e, sv[near.query(ring)[1]], (mesh.vertices - ring.mean(0)) @ fwd,
+                     deep * width, 0.5 * len(sv))
+        if v is not None:
+            out[name] = v if name not in out else np.r_[out[name], v]
+    return out
+
+
+def _cut_off(graph, skin, e, ends, depth, deep, most) -> np.ndarray | None:
+    """The skin a closed loop through `ends` (shortest paths) cuts off from the rest of it,
+    reaching deeper than `deep` behind (depth: per vertex, negative behind) and smaller than
+    `most` vertices; None where nothing is."""
+    from scipy.sparse.csgraph import dijkstra
+    n, k = graph.shape[0], len(ends)
     _, pred = dijkstra(graph, indices=ends, return_predecessors=True)
     loop = np.zeros(n, bool)
-    for k in range(8):                               # each inner-lip point to the next, round the mouth
-        a, b = ends[k], ends[(k + 1) % 8]
-        x = b
+    for i in range(k):                                # each point to the next, round the ring
+        a, x = ends[i], ends[(i + 1) % k]
         while x != a and x >= 0:
             loop[x] = True
-            x = pred[k, x]
+            x = pred[i, x]
         if x < 0:
             return None
         loop[a] = True
@@ -320,16 +370,10 @@ def mouth_lining(mesh: Mesh, skin: np.ndarray, lm) -> np.ndarray | None:
     nc, comp = connected_components(a, directed=False)
     sizes = np.bincount(comp[rest], minlength=nc)
     face = int(np.argmax(sizes))
-    right, up, fwd, lips, width = _mouth_frame(lm)
-    depth = (mesh.vertices - lips) @ fwd
     out = []
     for c in np.nonzero(sizes)[0]:
-        if c == face:
-            continue
         v = np.nonzero(rest & (comp == c))[0]
-        # behind the lips (a bag reaches back about a third of the eyes' width or more; a strip
-        # of lip between the loop and a cut's edge does not)
-        if depth[v].min() < -0.15 * width and sizes[c] < 0.5 * len(sv):
+        if c != face and depth[v].min() < -deep and sizes[c] < most:
             out.append(v)
     return np.concatenate(out) if out else None
 

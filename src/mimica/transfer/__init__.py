@@ -441,7 +441,8 @@ class ExpressionTransfer:
         from ..correspond.parts import Parts
         n = self.target.n_vertices
         idx = np.r_[self._copies, np.arange(n - self._appended, n)]
-        return Parts(pt.label[idx], pt.names, pt.role[idx], pt.skin_faces)
+        return Parts(pt.label[idx], pt.names, pt.role[idx], pt.skin_faces,
+                     None if pt.jaw_weight is None else pt.jaw_weight[idx])
 
     def _to_user(self, out: np.ndarray) -> np.ndarray:
         """Solved vertices -> the user's (each copy of a welded vertex, then a cut's copies)."""

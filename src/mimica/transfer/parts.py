@@ -4,8 +4,13 @@ The skin is transferred skin to skin (Song et al.); the other target parts take 
 motion (correspond.parts): rigid bodies take the rigid motion that best fits the source's
 part of the same role in each frame (Challis 1995 without scale) -- the jaw's from the
 source's lower teeth, gums and tongue, or, where the source has none, from its chin; an eye's
-rotation about the target eyeball's own centre; the skull stays -- and `follow` parts move
-with the skin under them (the displacement of their closest skin point).
+rotation about the target eyeball's own centre; the skull stays; a piece spanning both
+arches takes its vertices' shares of the jaw's motion (Parts.jaw_weight) -- `follow` parts move
+with the skin under them (the displacement of their closest skin point), and the pockets (a
+mouth bag, eye sockets) as the source's: each vertex takes the displacement of its closest point
+on the source's pockets and skin, and the difference this leaves to the transferred skin where
+the two meet (the loops along the inner lips and the lids' rims) is spread over the pocket
+harmonically, so the bag joins the lips and a socket the lids.
 """
 
 from __future__ import annotations
@@ -13,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..align import Similarity, fit_similarity
-from ..correspond.parts import EYE_LEFT, EYE_RIGHT, FOLLOW, JAW, MOUTH, ROLES, SKIN, Parts, fit_sphere
+from ..correspond.parts import EYE_LEFT, EYE_RIGHT, FOLLOW, JAW, POCKET, ROLES, SKIN, Parts, fit_sphere
 from ..mesh import Mesh
 from ..mesh.query import TriangleLocator
 
@@ -63,13 +68,17 @@ class PartMotion:
                     ct = cs                                        # about where the source's turns
                 centres = (ct, cs)
             self.bodies.append((tv, sv, centres))
+        # a piece spanning both arches: each vertex takes its share of the jaw's motion
+        w = pt.jaw_weight if pt.jaw_weight is not None else np.zeros(0)
+        part = np.nonzero(np.isfinite(w) & (w > 0) & (w < 1))[0]
+        self._shared = (part, w[part])
         self.follow = pt.of(FOLLOW)
         self.skin_index = skin_index
         if len(self.follow):
             tri, bary, _, _ = TriangleLocator(skin.vertices, skin.triangles).closest(target.vertices[self.follow])
             self._corners, self._bary = skin.triangles[tri], bary
         self._skin_rest = skin.vertices
-        self.lining = _Lining(source, ps, target, pt, skin_index, similarity) if len(pt.of(MOUTH)) else None
+        self.pockets = _Pockets(source, ps, target, pt, similarity) if len(pt.of(POCKET)) else None
 
     def rigid(self, frame: np.ndarray, sv: np.ndarray) -> Similarity:
         """The source part's best rigid motion from rest to `frame` (in the source's frame)."""
@@ -89,36 +98,40 @@ class PartMotion:
                     ct, cs = centres
                     moved = ct + (m.apply(cs) - cs) + (a - ct) @ m.rotation.T
                 out[f, tv] = self._back.apply(moved)
+                if centres is None and len(self._shared[0]):               # the jaw: its shares
+                    v, share = self._shared
+                    jaw = self._back.apply(m.apply(self.similarity.apply(self.target[v])))
+                    out[f, v] = self.target[v] + share[:, None] * (jaw - self.target[v])
         if len(self.follow):
             d = skin_out - self._skin_rest                         # (F, n_skin, 3)
             out[:, self.follow] = self.target[self.follow] + np.einsum("kc,fkcd->fkd", self._bary,
                                                                        d[:, self._corners])
-        if self.lining is not None:
-            out[:, self.lining.vertices] = self.lining.apply(frames, out)
+        if self.pockets is not None:
+            out[:, self.pockets.vertices] = self.pockets.apply(frames, out)
         return out
 
 
-class _Lining:
-    """The target's mouth lining moved as the source's (see the module's docstring)."""
+class _Pockets:
+    """The target's pockets (mouth bag, eye sockets) moved as the source's (see the module's docstring)."""
 
-    def __init__(self, source: Mesh, ps: Parts, target: Mesh, pt: Parts, skin_index, similarity: Similarity):
+    def __init__(self, source: Mesh, ps: Parts, target: Mesh, pt: Parts, similarity: Similarity):
         import scipy.sparse as sp
         from scipy.sparse.linalg import splu
         self.similarity, self._back = similarity, similarity.inverse()
         self.rest, self.target = source.vertices, target.vertices
-        lining = pt.role == ROLES.index(MOUTH)
-        self.vertices = np.nonzero(lining)[0]
-        on = (ps.role == ROLES.index(MOUTH)) | (ps.role == ROLES.index(SKIN))
+        pocket = pt.role == ROLES.index(POCKET)
+        self.vertices = np.nonzero(pocket)[0]
+        on = (ps.role == ROLES.index(POCKET)) | (ps.role == ROLES.index(SKIN))
         tri = source.triangles
         tri = tri[on[tri].all(1)]
         self._aligned = similarity.apply(target.vertices[self.vertices])
         locate = TriangleLocator(source.vertices, tri).closest
         t, bary, _, _ = locate(self._aligned)
         self._corners, self._bary = tri[t], bary
-        # where the lining meets the skin: those skin vertices' transferred motion is the boundary
+        # where a pocket meets the skin: those skin vertices' transferred motion is the boundary
         e = target.edges
-        cross = lining[e[:, 0]] != lining[e[:, 1]]
-        rim = np.unique(np.where(lining[e[cross, 0]], e[cross, 1], e[cross, 0]))
+        cross = pocket[e[:, 0]] != pocket[e[:, 1]]
+        rim = np.unique(np.where(pocket[e[cross, 0]], e[cross, 1], e[cross, 0]))
         self.rim = rim
         if len(rim):
             ta, ba, _, _ = locate(similarity.apply(target.vertices[rim]))
@@ -132,7 +145,7 @@ class _Lining:
             a = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
             lap = sp.diags(np.asarray(a.sum(1)).ravel()) - a          # the graph Laplacian
             m = len(self.vertices)
-            # a lining piece that meets no skin keeps the source's motion (the small diagonal)
+            # a pocket that meets no skin keeps the source's motion (the small diagonal)
             self._solve = splu((lap[:m, :m] + 1e-9 * sp.eye(m)).tocsc()).solve
             self._couple = lap[:m, m:].tocsr()
 
@@ -142,7 +155,7 @@ class _Lining:
         return self._back.apply((aligned[None] + d).reshape(-1, 3)).reshape(d.shape)
 
     def apply(self, frames: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """The lining's positions (F, k, 3) for source frames (F, n_S, 3) and the target's other
+        """The pockets' positions (F, k, 3) for source frames (F, n_S, 3) and the target's other
         vertices already placed in `out`."""
         moved = self._source_motion(frames, self._corners, self._bary, self._aligned)
         if not len(self.rim):
