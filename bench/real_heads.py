@@ -18,6 +18,8 @@ vertices shuffled, for the rigid parts.  Figures (the issue's):
 - pocket_err_worst: on the same mesh, ICT's mouth bag and eye sockets (joined to its lips and
   lids) against ICT's own sculpted ones: the worst ARKit shape's median distance over the
   pocket's size, the worse pocket
+- riders_err_worst: its lashes and tear and occlusion shells, riding the lids, against ICT's
+  own: the worst ARKit shape's 95th percentile of the distance over an eye socket's size
 - rel_err_remeshed: bench/transfer.py's remeshed figure (held-out identity, 12k vertices)
 - watertight_jaw_min: jaw (as above) on heads that are one closed surface (held-out identities
   remeshed, lips and lids sealed, nostrils and the back capped: tools/hard_heads.py), and the
@@ -151,33 +153,45 @@ def rigid_residual(full_model):
 def bag_error(full_model, m, perm, shapes) -> dict:
     """The pockets of ICT's whole mesh as a head of another topology (its mouth bag and eye
     sockets, joined to the lips and lids) against ICT's own sculpted ones: per ARKit shape the
-    median distance over the pocket's size; {pocket: (median shape's, worst shape's)} for ours
-    and, in the same run, the baseline: the pockets transferred as skin, as before they were
-    found (their finding switched off here)."""
+    median distance over the pocket's size; and its lashes and shells riding the lids: per shape
+    the 95th percentile of their distance over a socket's size.  {set: (median shape's, worst
+    shape's)} for ours and, in the same run, the baselines: the pockets transferred as skin, as
+    before they were found (their finding switched off here); each rider on the skin nearest it
+    (no root's turn)."""
     from mimica.correspond import parts as parts_module
+    from mimica.transfer import parts as motion_module
     rest = full_model.neutral[perm]
-    pockets = {"mouth bag": np.nonzero((perm >= 11248) & (perm < 13294))[0],
-               "eye sockets": np.nonzero((perm >= 13294) & (perm < 14062))[0]}
+    sets = {"mouth bag": (np.nonzero((perm >= 11248) & (perm < 13294))[0], 50),
+            "eye sockets": (np.nonzero((perm >= 13294) & (perm < 14062))[0], 50),
+            "lashes and shells": (np.nonzero(perm >= 24591)[0], 95)}
+    socket = float(np.ptp(full_model.neutral[13294:13294 + 384], axis=0).max())      # one eye's
 
-    def errors(sh):
+    def errors(sh, names):
         out = {}
-        for name, v in pockets.items():
-            size = float(np.ptp(rest[v], axis=0).max())
+        for name in names:
+            v, q = sets[name]
+            size = socket if q == 95 else float(np.ptp(rest[v], axis=0).max())
             e = []
             for a in ARKIT_52:
                 truth = rest[v] + sum((full_model.shape(n)[perm][v] - rest[v] for n in ict_sources(a)),
                                       np.zeros((len(v), 3)))
-                e.append(np.median(np.linalg.norm(sh[a][v] - truth, axis=1)) / size)
+                e.append(np.percentile(np.linalg.norm(sh[a][v] - truth, axis=1), q) / size)
             out[name] = (float(np.median(e)), float(np.max(e)))
         return out
 
-    ours = errors(shapes)
-    found = parts_module.pockets
+    lm = Landmarks.snap(m, m.vertices[np.argsort(perm)[ICT_LANDMARKS_68]])
+    ours = errors(shapes, sets)
+    found, root = parts_module.pockets, motion_module.ROOT
     parts_module.pockets = lambda *a: {}
     try:
-        base = errors(arkit_blendshapes(m, Landmarks.snap(m, m.vertices[np.argsort(perm)[ICT_LANDMARKS_68]])))
+        base = errors(arkit_blendshapes(m, lm), ["mouth bag", "eye sockets"])
     finally:
         parts_module.pockets = found
+    motion_module.ROOT = np.inf
+    try:
+        base.update(errors(arkit_blendshapes(m, lm), ["lashes and shells"]))
+    finally:
+        motion_module.ROOT = root
     return {"ours": ours, "baseline": base}
 
 
@@ -281,15 +295,18 @@ def main():
     print(f"whole ICT mesh, shuffled (parts: {parts}): rigid residual {rigid:.1e} of the part's size")
     for name, (med, worst) in pockets["ours"].items():
         b = pockets["baseline"][name]
-        print(f"its {name} against ICT's own, median distance / the pocket's size: median shape {med:.4f}, "
-              f"worst {worst:.4f} (baseline, transferred as skin: {b[0]:.4f}, {b[1]:.4f})")
-    pocket_worst = max(w for _, w in pockets["ours"].values())
+        how = ("95th percentile of the distance / a socket's size", "each on the skin nearest it") \
+            if name == "lashes and shells" else ("median distance / the pocket's size", "transferred as skin")
+        print(f"its {name} against ICT's own, {how[0]}: median shape {med:.4f}, worst {worst:.4f} "
+              f"(baseline, {how[1]}: {b[0]:.4f}, {b[1]:.4f})")
+    pocket_worst = max(pockets["ours"][k][1] for k in ("mouth bag", "eye sockets"))
+    riders_worst = pockets["ours"]["lashes and shells"][1]
     rel = rel_err_remeshed(model)
     print(f"blink_min={min(blinks):.3f} jaw_min={min(jaws):.3f} damaged_shapes={damaged} "
           f"rigid_residual={rigid:.1e} rel_err_remeshed={rel:.4f} watertight_jaw_min={min(wt_jaws):.3f} "
           f"closed_eye_blink_min={min(ce_blinks):.3f} detected_jaw_min={min(det_jaws):.3f} "
           f"detected_blink_min={min(det_blinks):.3f} detected_closed_eye_blink_min={min(det_ce):.4f} "
-          f"pocket_err_worst={pocket_worst:.4f}")
+          f"pocket_err_worst={pocket_worst:.4f} riders_err_worst={riders_worst:.4f}")
 
 
 if __name__ == "__main__":

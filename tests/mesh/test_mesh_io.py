@@ -135,6 +135,21 @@ def test_welded_merges_exact_copies_only():
     assert apart.welded()[0] is apart
 
 
+def test_pieces_touching_at_a_point_are_not_welded():
+    """Two pieces sharing a point but no edge (a lash's root on a shell, a shell's corner on the
+    lid: ICT's whole mesh has 10 such points) stay apart: welded, they made one piece of skin,
+    lashes and shells (940 of ICT's lash and shell vertices solved as skin).  A fan of copies
+    round a point (a split pole) is welded: its copies share edges once welded."""
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 0], [-1, 0, 0], [0, -1, 0]], float)
+    touch = Mesh.from_faces(v, [[0, 1, 2], [3, 4, 5]])          # 3 coincides with 0, nothing else
+    assert touch.welded()[0] is touch
+    ring = np.array([[np.cos(a), np.sin(a), 0] for a in np.linspace(0, 2 * np.pi, 6, endpoint=False)])
+    pole = np.r_[ring, np.zeros((6, 3))]                          # 6 copies of the centre, one a face
+    fan = Mesh.from_faces(pole, [[6 + i, i, (i + 1) % 6] for i in range(6)])
+    w, index = fan.welded()
+    assert w.n_vertices == 7 and len(set(index[6:].tolist())) == 1
+
+
 def test_ply_keeps_the_uv(head_model, tmp_path):
     """PLY with uv: written per face corner (MeshLab's "texcoord" lists), so the
     vertices keep their order across uv seams; read back, every corner has its uv. A PLY with

@@ -118,7 +118,9 @@ class Mesh:
         of a vertex) and, for each vertex, its index in the welded mesh; (self, arange) when no
         two coincide.  Only exact copies are welded, within one material (OBJ usemtl/group),
         and only where the surface stays a manifold: parts that merely touch (lashes rooted on
-        a lid, a shell on the eye's rim) stay apart; a slit meant to open is not welded.
+        a lid, a shell on the eye's rim) stay apart, along an edge (no third face on it) or at a
+        point (a copy that shares no edge with another once welded); a slit meant to open is
+        not welded.
 
         Parameters
         ----------
@@ -134,19 +136,27 @@ class Mesh:
         first, group, _ = unique_rows(key)
         if len(first) == self.n_vertices:
             return self, np.arange(self.n_vertices)
-        for _ in range(8):                         # un-weld where an edge would get a third face
-            a = group[self.face_indices]
-            b = group[np.roll(self.face_indices, -1)]
-            last = self.face_starts[1:] - 1        # each polygon's closing edge
-            b[last] = group[self.face_indices[self.face_starts[:-1]]]
-            e = np.sort(np.stack([a, b], 1), axis=1)
+        nxt = np.roll(self.face_indices, -1)
+        nxt[self.face_starts[1:] - 1] = self.face_indices[self.face_starts[:-1]]   # each polygon's closing edge
+        raw, _, _ = unique_rows(np.sort(np.stack([self.face_indices, nxt], 1), axis=1))
+        raw = np.sort(np.stack([self.face_indices, nxt], 1), axis=1)[raw]            # each edge once
+        for _ in range(8):
+            e = np.sort(group[raw], axis=1)
             _, eid, cnt = unique_rows(e)
-            bad = np.unique(e[cnt[eid] > 2])
             sizes = np.bincount(group)
-            bad = bad[sizes[bad] > 1]              # only welds can be undone
-            if not len(bad):
+            # un-weld where an edge would get a third face (counted over the faces' half-edges)
+            a, b = group[self.face_indices], group[nxt]
+            he = np.sort(np.stack([a, b], 1), axis=1)
+            _, hid, hcnt = unique_rows(he)
+            bad = np.unique(he[hcnt[hid] > 2])
+            undo = np.isin(group, bad[sizes[bad] > 1])          # only welds can be undone
+            # and a copy that shares no edge with another once welded: pieces touching at a
+            # point (a lash's root on a shell, a shell's corner on the lid), not a split seam
+            joined = np.zeros(self.n_vertices, bool)
+            joined[raw[cnt[eid] > 1].ravel()] = True
+            undo |= (sizes[group] > 1) & ~joined
+            if not undo.any():
                 break
-            undo = np.isin(group, bad)
             group = group.copy()
             group[undo] = group.max() + 1 + np.arange(undo.sum())
         _, first, group = np.unique(group, return_index=True, return_inverse=True)
