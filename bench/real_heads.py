@@ -141,8 +141,10 @@ def rigid_residual(full_model):
     shapes = arkit_blendshapes(m, lt)
     parts = shapes.transfer.parts[1]
     worst = 0.0
+    shared = parts.jaw_weight if parts.jaw_weight is not None else np.full(len(parts.role), np.nan)
+    rigid = ~((shared > 0) & (shared < 1))          # gums and tongue as one piece take a share of the jaw
     for role in ("jaw", "skull", "eye.left", "eye.right"):
-        v = parts.of(role)
+        v = np.intersect1d(parts.of(role), np.nonzero(rigid)[0])
         size = float(np.ptp(m.vertices[v]))
         for a in ARKIT_52:
             fit = fit_similarity(m.vertices[v], shapes[a][v], scale=False)
