@@ -7,16 +7,17 @@ an expression is transferred:
 - `skull`: stays (upper teeth and gums),
 - `jaw`: the jaw's rigid motion (lower teeth and gums, tongue),
 - `eye.left` / `eye.right`: rigid, rotating about the eyeball's centre,
-- `follow`: each vertex follows the skin nearest to it (lashes, shells),
+- `follow`: rides on the skin (lashes, shells, brow cards: transfer.parts),
 - `pocket`: the skin's pockets behind the lips and lids (a mouth bag, eye sockets), moving as
   the source's.
 
 How parts are found: ICT-FaceKit's own topology from its table (README.upstream.md, "Face
 Model Topology"); any other head from its connected components and OBJ materials/groups:
-the skin is the component with the largest area (less the pockets joined to its lips and lids:
-what a loop along the inner lips or an eye's rim cuts off behind them); a component named like an eye, tooth,
-gum or tongue part (material or group names), or shaped like one where the landmarks say
-(a sphere behind an eye; a piece inside the mouth), gets that role; the rest follow.
+the skin is the component with the largest area (less the pockets joined to its lips and
+lids: what a loop along the inner lips or an eye's rim cuts off behind them); a component
+named like an eye, tooth, gum or tongue part or a mouth's inside (material or group names), or
+shaped like one where the landmarks say (a sphere behind an eye; a piece inside the mouth; one
+whose open edge runs along the inner lips), gets that role; the rest follow.
 """
 
 from __future__ import annotations
@@ -341,20 +342,22 @@ def pockets(mesh: Mesh, skin: np.ndarray, lm) -> dict:
         ring = lm[list(ring)]
         if not np.isfinite(ring).all():
             continue
+        # a path between neighbouring points is short: the search stops at the ring's length
+        length = float(np.linalg.norm(ring - np.roll(ring, 1, axis=0), axis=1).sum())
         v = _cut_off(graph, skin, e, sv[near.query(ring)[1]], (mesh.vertices - ring.mean(0)) @ fwd,
-                     deep * width, 0.5 * len(sv))
+                     deep * width, 0.5 * len(sv), length)
         if v is not None:
             out[name] = v if name not in out else np.r_[out[name], v]
     return out
 
 
-def _cut_off(graph, skin, e, ends, depth, deep, most) -> np.ndarray | None:
-    """The skin a closed loop through `ends` (shortest paths) cuts off from the rest of it,
-    reaching deeper than `deep` behind (depth: per vertex, negative behind) and smaller than
-    `most` vertices; None where nothing is."""
+def _cut_off(graph, skin, e, ends, depth, deep, most, limit) -> np.ndarray | None:
+    """The skin a closed loop through `ends` (shortest paths, each no longer than `limit`) cuts
+    off from the rest of it, reaching deeper than `deep` behind (depth: per vertex, negative
+    behind) and smaller than `most` vertices; None where nothing is."""
     from scipy.sparse.csgraph import dijkstra
     n, k = graph.shape[0], len(ends)
-    _, pred = dijkstra(graph, indices=ends, return_predecessors=True)
+    _, pred = dijkstra(graph, indices=ends, return_predecessors=True, limit=limit)
     loop = np.zeros(n, bool)
     for i in range(k):                                # each point to the next, round the ring
         a, x = ends[i], ends[(i + 1) % k]

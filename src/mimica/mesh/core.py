@@ -138,8 +138,8 @@ class Mesh:
             return self, np.arange(self.n_vertices)
         nxt = np.roll(self.face_indices, -1)
         nxt[self.face_starts[1:] - 1] = self.face_indices[self.face_starts[:-1]]   # each polygon's closing edge
-        raw, _, _ = unique_rows(np.sort(np.stack([self.face_indices, nxt], 1), axis=1))
-        raw = np.sort(np.stack([self.face_indices, nxt], 1), axis=1)[raw]            # each edge once
+        pairs = np.sort(np.stack([self.face_indices, nxt], 1), axis=1)
+        raw = pairs[unique_rows(pairs)[0]]                                          # each edge once
         for _ in range(8):
             e = np.sort(group[raw], axis=1)
             _, eid, cnt = unique_rows(e)

@@ -5,8 +5,9 @@ motion (correspond.parts): rigid bodies take the rigid motion that best fits the
 part of the same role in each frame (Challis 1995 without scale) -- the jaw's from the
 source's lower teeth, gums and tongue, or, where the source has none, from its chin; an eye's
 rotation about the target eyeball's own centre; the skull stays; a piece spanning both
-arches takes its vertices' shares of the jaw's motion (Parts.jaw_weight) -- `follow` parts move
-with the skin under them (the displacement of their closest skin point), and the pockets (a
+arches takes its vertices' shares of the jaw's motion (Parts.jaw_weight) -- `follow` parts ride
+on the skin (_Riders: near points with their closest skin point, far ones carried by their
+piece's root and turned with the skin there), and the pockets (a
 mouth bag, eye sockets) as the source's: each vertex takes the displacement of its closest point
 on the source's pockets and skin, and the difference this leaves to the transferred skin where
 the two meet (the loops along the inner lips and the lids' rims) is spread over the pocket
@@ -77,7 +78,6 @@ class PartMotion:
         if len(self.follow):
             width = np.linalg.norm(source_landmarks[45] - source_landmarks[36]) / similarity.scale
             self._follow = _Riders(target, self.follow, skin, ROOT * width, AROUND * width)
-        self._skin_rest = skin.vertices
         self.pockets = _Pockets(source, ps, target, pt, similarity) if len(pt.of(POCKET)) else None
 
     def rigid(self, frame: np.ndarray, sv: np.ndarray) -> Similarity:
@@ -130,6 +130,7 @@ class _Riders:
     def __init__(self, target: Mesh, vertices: np.ndarray, skin: Mesh, root: float, around: float):
         import scipy.sparse as sp
         from scipy.sparse.csgraph import connected_components, dijkstra
+        from scipy.spatial import cKDTree
         p = target.vertices[vertices]
         tri, bary, near, dist = TriangleLocator(skin.vertices, skin.triangles).closest(p)
         at = np.full(target.n_vertices, -1)
@@ -150,11 +151,9 @@ class _Riders:
         self._bary = bary[anchor]
         self._offset = p - near[anchor]                 # from the root's skin point, in the rest frame
         self._turns = anchor != np.arange(n)
-        self._skin_rest = skin.vertices
-        self._skin_mesh = skin
-        # each root's turn: the best rotation of the skin around it (within `around`)
+        self._skin = skin
+        # each root's turn: that of the skin's mean normal around it (within `around`)
         used, self._which = np.unique(anchor[self._turns], return_inverse=True)
-        from scipy.spatial import cKDTree
         balls = cKDTree(skin.vertices).query_ball_point(near[used], around)
         # too few skin points around (a coarse mesh): the root's own triangle's corners with them
         balls = [b if len(b) >= 3 else sorted(set(b) | set(skin.triangles[tri[r]].tolist()))
@@ -171,9 +170,9 @@ class _Riders:
         out = at + self._offset
         if self._turns.any():
             w = self._ball_w[..., None]
-            a = _mean_normal(self._skin_mesh.vertex_normals(self._skin_rest)[self._ball], w)
+            a = _mean_normal(self._skin.vertex_normals()[self._ball], w)
             for f in range(len(skin_out)):
-                b = _mean_normal(self._skin_mesh.vertex_normals(skin_out[f])[self._ball], w)
+                b = _mean_normal(self._skin.vertex_normals(skin_out[f])[self._ball], w)
                 rot = _turn(a, b, np.radians(SLACK_DEG))
                 out[f, self._turns] = at[f, self._turns] + np.einsum("kij,kj->ki", rot[self._which],
                                                                        self._offset[self._turns])
