@@ -318,7 +318,11 @@ class ExpressionTransfer:
         self.similarity = self._skin.similarity
         self.alignment_residual = self._skin.alignment_residual
         self.correspondence = self._skin.correspondence
-        self._parts = PartMotion(self.source, ps, self.target, pt, t_skin, t_idx, self.similarity, ls_pos)
+        match = None
+        if self.correspondence is not None:       # each target skin vertex's place on the source
+            c = self.correspondence
+            match = (np.where(c.matched[:, None], s_idx[s_skin.triangles[np.maximum(c.triangle, 0)]], -1), c.bary)
+        self._parts = PartMotion(self.source, ps, self.target, pt, t_skin, t_idx, self.similarity, ls_pos, match)
 
     def apply(self, frames: np.ndarray, batch: int = 32, workers: int | None = None,
               basis: bool | None = None) -> np.ndarray:

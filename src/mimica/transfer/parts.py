@@ -44,10 +44,13 @@ class PartMotion:
     similarity : Similarity
         The target's alignment onto the source.
     source_landmarks : (68, 3) float array
+    match : ((k, 3) int array, (k, 3) float array) or None
+        The skin's correspondence: each skin vertex's source triangle (its corners, source
+        vertices; -1 where unmatched) and barycentric coordinates there.
     """
 
     def __init__(self, source: Mesh, ps: Parts, target: Mesh, pt: Parts, skin: Mesh, skin_index: np.ndarray,
-                 similarity: Similarity, source_landmarks: np.ndarray):
+                 similarity: Similarity, source_landmarks: np.ndarray, match=None):
         self.similarity, self._back = similarity, similarity.inverse()
         self.rest = source.vertices
         self.target = target.vertices
@@ -78,7 +81,7 @@ class PartMotion:
         if len(self.follow):
             width = np.linalg.norm(source_landmarks[45] - source_landmarks[36]) / similarity.scale
             self._follow = _Riders(target, self.follow, skin, ROOT * width, AROUND * width)
-        self.pockets = _Pockets(source, ps, target, pt, similarity) if len(pt.of(POCKET)) else None
+        self.pockets = _Pockets(source, ps, target, pt, similarity, skin_index, match) if len(pt.of(POCKET)) else None
 
     def rigid(self, frame: np.ndarray, sv: np.ndarray) -> Similarity:
         """The source part's best rigid motion from rest to `frame` (in the source's frame)."""
@@ -198,10 +201,19 @@ def _turn(a, b, slack: float = 0.0):
     return np.eye(3) + x + (x @ x) / np.maximum(1 + c, 1e-9)[:, None, None]
 
 
-class _Pockets:
-    """The target's pockets (mouth bag, eye sockets) moved as the source's (see the module's docstring)."""
+SCREEN = 0.05     # the pockets' screened Laplacian: the rim's say fades over about 1/sqrt(SCREEN) rings
 
-    def __init__(self, source: Mesh, ps: Parts, target: Mesh, pt: Parts, similarity: Similarity):
+
+class _Pockets:
+    """The target's pockets (mouth bag, eye sockets) moved as the source's (see the module's
+    docstring).  Where the skin has a correspondence, a pocket is first carried onto the
+    source's by it: the rim's offsets to their corresponding source points, spread over the
+    pocket harmonically, bring the target's lips and lids onto the source's before each pocket
+    point looks for its closest source point; and the rim's source motion is read at its
+    corresponding points."""
+
+    def __init__(self, source: Mesh, ps: Parts, target: Mesh, pt: Parts, similarity: Similarity,
+                 skin_index=None, match=None):
         import scipy.sparse as sp
         from scipy.sparse.linalg import splu
         self.similarity, self._back = similarity, similarity.inverse()
@@ -213,15 +225,15 @@ class _Pockets:
         tri = tri[on[tri].all(1)]
         self._aligned = similarity.apply(target.vertices[self.vertices])
         locate = TriangleLocator(source.vertices, tri).closest
-        t, bary, _, _ = locate(self._aligned)
-        self._corners, self._bary = tri[t], bary
         # where a pocket meets the skin: those skin vertices' transferred motion is the boundary
         e = target.edges
         cross = pocket[e[:, 0]] != pocket[e[:, 1]]
         rim = np.unique(np.where(pocket[e[cross, 0]], e[cross, 1], e[cross, 0]))
         self.rim = rim
+        m = len(self.vertices)
         if len(rim):
-            ta, ba, _, _ = locate(similarity.apply(target.vertices[rim]))
+            rim_at = similarity.apply(target.vertices[rim])
+            ta, ba, _, _ = locate(rim_at)
             self._rim_corners, self._rim_bary = tri[ta], ba
             both = np.r_[self.vertices, rim]
             at = np.full(target.n_vertices, -1)
@@ -231,10 +243,33 @@ class _Pockets:
             n = len(both)
             a = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
             lap = sp.diags(np.asarray(a.sum(1)).ravel()) - a          # the graph Laplacian
-            m = len(self.vertices)
-            # a pocket that meets no skin keeps the source's motion (the small diagonal)
-            self._solve = splu((lap[:m, :m] + 1e-9 * sp.eye(m)).tocsc()).solve
+            # screened: what the rim says fades over a few rings into the pocket, whose depths
+            # keep the source's motion (a few rim points where the lips' transfer and the
+            # source part ways no longer shift a whole bag: see SCREEN)
+            self._solve = splu((lap[:m, :m] + SCREEN * sp.eye(m)).tocsc()).solve
             self._couple = lap[:m, m:].tocsr()
+            if match is not None and skin_index is not None:
+                local = np.full(target.n_vertices, -1)
+                local[skin_index] = np.arange(len(skin_index))
+                k = local[rim]
+                corners = np.where((k >= 0)[:, None], match[0][np.maximum(k, 0)], -1)
+                ok = (corners >= 0).all(1)
+                if ok.any():
+                    # the rim's source motion where the skin's correspondence puts it
+                    self._rim_corners = np.where(ok[:, None], corners, self._rim_corners)
+                    self._rim_bary = np.where(ok[:, None], match[1][np.maximum(k, 0)], self._rim_bary)
+                    put = np.einsum("kc,kcd->kd", self._rim_bary, source.vertices[self._rim_corners])
+                    offset = np.where(ok[:, None], put - rim_at, 0.0)
+                    self._aligned = self._aligned + self._spread(offset[None])[0]
+        t, bary, _, _ = locate(self._aligned)
+        self._corners, self._bary = tri[t], bary
+        self._rim_at = None if not len(rim) else similarity.apply(target.vertices[rim])
+
+    def _spread(self, gap: np.ndarray) -> np.ndarray:
+        """The screened harmonic extension (F, k, 3) over the pockets of values (F, r, 3) on the rim."""
+        f, r = gap.shape[:2]
+        rhs = -(self._couple @ gap.transpose(1, 0, 2).reshape(r, -1))
+        return self._solve(np.asarray(rhs)).reshape(len(self.vertices), f, 3).transpose(1, 0, 2)
 
     def _source_motion(self, frames, corners, bary, aligned):
         """The source's displacement at the given points, carried into the target's frame."""
@@ -244,16 +279,11 @@ class _Pockets:
     def apply(self, frames: np.ndarray, out: np.ndarray) -> np.ndarray:
         """The pockets' positions (F, k, 3) for source frames (F, n_S, 3) and the target's other
         vertices already placed in `out`."""
-        moved = self._source_motion(frames, self._corners, self._bary, self._aligned)
+        moved = self._source_motion(frames, self._corners, self._bary, self.similarity.apply(self.target[self.vertices]))
         if not len(self.rim):
             return moved
-        rim_src = self._source_motion(frames, self._rim_corners, self._rim_bary,
-                                      self.similarity.apply(self.target[self.rim]))
-        gap = out[:, self.rim] - rim_src                           # (F, r, 3): the skin's motion less the source's
-        f, r = gap.shape[:2]
-        rhs = -(self._couple @ gap.transpose(1, 0, 2).reshape(r, -1))
-        h = self._solve(np.asarray(rhs)).reshape(len(self.vertices), f, 3).transpose(1, 0, 2)
-        return moved + h
+        rim_src = self._source_motion(frames, self._rim_corners, self._rim_bary, self._rim_at)
+        return moved + self._spread(out[:, self.rim] - rim_src)     # the skin's motion less the source's
 
 
 def _chin(source: Mesh, ps: Parts, lm) -> np.ndarray:
