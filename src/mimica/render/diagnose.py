@@ -18,7 +18,7 @@ KEY = [("skin", (0.82, 0.72, 0.64)), ("skull: upper teeth, gums", (0.95, 0.85, 0
        ("rides on the skin: lashes, shells", (0.45, 0.8, 0.45)),
        ("skin with no partner on the source", (0.85, 0.2, 0.85)), ("mouth seam, cut", (0.9, 0.1, 0.1)),
        ("lid rims, paired", (0.1, 0.8, 0.85)), ("mouth: looked for a seam, none cut", (0.1, 0.1, 0.1)),
-       ("mouth bag, eye sockets: move as the source's", (0.8, 0.45, 0.55))]
+       ("pockets: mouth bag, eye sockets", (0.8, 0.45, 0.55))]
 _ROLE_KEY = {"skin": 0, "skull": 1, "jaw": 2, "eye.left": 3, "eye.right": 3, "follow": 4, "pocket": 9}
 
 
