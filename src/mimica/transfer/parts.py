@@ -78,10 +78,14 @@ class PartMotion:
         self._shared = (part, w[part])
         self.follow = pt.of(FOLLOW)
         self.skin_index = skin_index
+        self.pockets = _Pockets(source, ps, target, pt, similarity, skin_index, match) if len(pt.of(POCKET)) else None
         if len(self.follow):
             width = np.linalg.norm(source_landmarks[45] - source_landmarks[36]) / similarity.scale
-            self._follow = _Riders(target, self.follow, skin, ROOT * width, AROUND * width)
-        self.pockets = _Pockets(source, ps, target, pt, similarity, skin_index, match) if len(pt.of(POCKET)) else None
+            # riders ride the surface: the skin and its pockets (a lash's root sits on the lid's
+            # margin, which may fall on the socket's side of the loop round the eye)
+            ride = np.r_[pt.skin_faces, _faces_of(target, pt.role == ROLES.index(POCKET))]
+            surface, self._surface = target.submesh(np.unique(ride)) if self.pockets is not None else (skin, skin_index)
+            self._follow = _Riders(target, self.follow, surface, ROOT * width, AROUND * width)
 
     def rigid(self, frame: np.ndarray, sv: np.ndarray) -> Similarity:
         """The source part's best rigid motion from rest to `frame` (in the source's frame)."""
@@ -105,10 +109,10 @@ class PartMotion:
                     v, share = self._shared
                     jaw = self._back.apply(m.apply(self.similarity.apply(self.target[v])))
                     out[f, v] = self.target[v] + share[:, None] * (jaw - self.target[v])
-        if len(self.follow):
-            out[:, self.follow] = self._follow.apply(skin_out)
         if self.pockets is not None:
             out[:, self.pockets.vertices] = self.pockets.apply(frames, out)
+        if len(self.follow):
+            out[:, self.follow] = self._follow.apply(out[:, self._surface])
         return out
 
 
@@ -248,6 +252,9 @@ class _Pockets:
             # source part ways no longer shift a whole bag: see SCREEN)
             self._solve = splu((lap[:m, :m] + SCREEN * sp.eye(m)).tocsc()).solve
             self._couple = lap[:m, m:].tocsr()
+            # the rim's place on the source is carried over the whole pocket (a harmonic warp;
+            # a pocket that meets no skin keeps its place: the small diagonal)
+            warp = splu((lap[:m, :m] + 1e-9 * sp.eye(m)).tocsc()).solve
             if match is not None and skin_index is not None:
                 local = np.full(target.n_vertices, -1)
                 local[skin_index] = np.arange(len(skin_index))
@@ -260,16 +267,18 @@ class _Pockets:
                     self._rim_bary = np.where(ok[:, None], match[1][np.maximum(k, 0)], self._rim_bary)
                     put = np.einsum("kc,kcd->kd", self._rim_bary, source.vertices[self._rim_corners])
                     offset = np.where(ok[:, None], put - rim_at, 0.0)
-                    self._aligned = self._aligned + self._spread(offset[None])[0]
-        t, bary, _, _ = locate(self._aligned)
+                    self._aligned = self._aligned + self._spread(offset[None], warp)[0]
+        normals = target.vertex_normals()[self.vertices] @ similarity.rotation.T
+        t, bary = _closest_facing(source.vertices, tri, self._aligned, normals)
         self._corners, self._bary = tri[t], bary
         self._rim_at = None if not len(rim) else similarity.apply(target.vertices[rim])
 
-    def _spread(self, gap: np.ndarray) -> np.ndarray:
-        """The screened harmonic extension (F, k, 3) over the pockets of values (F, r, 3) on the rim."""
+    def _spread(self, gap: np.ndarray, solve=None) -> np.ndarray:
+        """The screened harmonic extension (F, k, 3) over the pockets of values (F, r, 3) on the
+        rim (or the extension `solve` gives)."""
         f, r = gap.shape[:2]
         rhs = -(self._couple @ gap.transpose(1, 0, 2).reshape(r, -1))
-        return self._solve(np.asarray(rhs)).reshape(len(self.vertices), f, 3).transpose(1, 0, 2)
+        return (solve or self._solve)(np.asarray(rhs)).reshape(len(self.vertices), f, 3).transpose(1, 0, 2)
 
     def _source_motion(self, frames, corners, bary, aligned):
         """The source's displacement at the given points, carried into the target's frame."""
@@ -284,6 +293,34 @@ class _Pockets:
             return moved
         rim_src = self._source_motion(frames, self._rim_corners, self._rim_bary, self._rim_at)
         return moved + self._spread(out[:, self.rim] - rim_src)     # the skin's motion less the source's
+
+
+def _faces_of(mesh: Mesh, on: np.ndarray) -> np.ndarray:
+    """The polygons with a corner among the vertices `on`."""
+    return np.nonzero(np.add.reduceat(on[mesh.face_indices].astype(int), mesh.face_starts[:-1]) > 0)[0]
+
+
+def _closest_facing(v, tri, p, n, k: int = 24):
+    """Each point's closest point on the triangles among the k whose centroids are nearest it,
+    of those facing its way (normals within 90 degrees of n): a bag's two walls lie close where
+    the mouth is shut, and the closest point alone jumps between them.  Where none faces its
+    way, the closest of them.  Returns (triangle (m,), barycentric (m, 3))."""
+    from scipy.spatial import cKDTree
+    from ..mesh.query import closest_point_on_triangles
+    cent = v[tri].mean(1)
+    k = min(k, len(tri))
+    _, cand = cKDTree(cent).query(p, k=k)
+    cand = cand.reshape(len(p), k)
+    a, b, c = (v[tri[cand, i]].reshape(-1, 3) for i in range(3))
+    q, bary = closest_point_on_triangles(np.repeat(p, k, axis=0), a, b, c)
+    d = np.linalg.norm(q - np.repeat(p, k, axis=0), axis=1).reshape(len(p), k)
+    fn = np.cross(b - a, c - a).reshape(len(p), k, 3)
+    facing = np.einsum("mkd,md->mk", fn, n) > 0
+    best = np.argmin(np.where(facing, d, np.inf), axis=1)
+    none = ~facing.any(1)
+    best[none] = np.argmin(d[none], axis=1)
+    pick = np.arange(len(p)) * k + best
+    return cand[np.arange(len(p)), best], bary[pick]
 
 
 def _chin(source: Mesh, ps: Parts, lm) -> np.ndarray:
