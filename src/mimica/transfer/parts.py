@@ -123,16 +123,17 @@ ROOT = 0.005      # of the eyes' width: a riding vertex this close to the skin r
 
 class _Riders:
     """Parts riding on the skin (lashes, shells, brow cards): a vertex within `root` of the skin
-    moves with its closest skin point; one farther out (a lash's tip) is carried by the skin point
-    of the nearest vertex of its piece that lies on the skin (its root, along the piece), turned
+    (with its pockets: the surface given) moves with its closest point there; one farther out
+    (a lash's tip) is carried by the skin point of the nearest vertex of its piece that lies on
+    the skin (its root, along the piece), turned
     as the skin's mean normal within `around` of that point turns, less SLACK_DEG -- so a lash
     turns with the closing lid instead of each of its points following whatever skin is nearest
     it, and stays as it is when the skin round its root only bends a little.  On ICT's lashes and
     shells on its whole head as another topology, the 95th percentile of their error over a
     socket's size, median / worst of the 52 shapes: each point on its nearest skin 0.0066 /
     0.210; carried and turned 0.0079 / 0.126 (eyeLookDown 0.044 -> 0.096: ICT's sculpted lashes
-    turn in a blink, hardly elsewhere), less 10 degrees 0.0019 / 0.138, less 20 0.0019 / 0.160;
-    the turn by Kabsch over the same skin 0.0080 / 0.158."""
+    turn in a blink, hardly elsewhere), less 10 degrees 0.0019 / 0.138 (0.136 riding the pockets
+    too), less 20 0.0019 / 0.160; the turn by Kabsch over the same skin 0.0080 / 0.158."""
 
     def __init__(self, target: Mesh, vertices: np.ndarray, skin: Mesh, root: float, around: float):
         import scipy.sparse as sp
@@ -213,8 +214,8 @@ class _Pockets:
     docstring).  Where the skin has a correspondence, a pocket is first carried onto the
     source's by it: the rim's offsets to their corresponding source points, spread over the
     pocket harmonically, bring the target's lips and lids onto the source's before each pocket
-    point looks for its closest source point; and the rim's source motion is read at its
-    corresponding points."""
+    point looks for its closest source point on a face turned its way (_closest_facing); and the
+    rim's source motion is read at its corresponding points."""
 
     def __init__(self, source: Mesh, ps: Parts, target: Mesh, pt: Parts, similarity: Similarity,
                  skin_index=None, match=None):
