@@ -19,6 +19,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from ..mesh import Mesh
+from ..mesh.graph import edge_graph
 from ..mesh.query import concave_angles
 from .mouth import CREASE
 
@@ -33,8 +34,7 @@ def _graph(mesh: Mesh) -> sp.csr_matrix:
     b = mesh.boundary_vertices()
     w = np.where(b[e[:, 0]] & b[e[:, 1]], 0.5 * w, w)            # keep to rims where there are
     w = w * np.exp(-CREASE * concave_angles(mesh, e))             # and to the creases of sealed ones
-    n = mesh.n_vertices
-    return sp.coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
+    return edge_graph(mesh.n_vertices, e, w)
 
 
 def _path(g, a: int, b: int, limit: float) -> list[int] | None:

@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 
 from ..align import face_cylinder
 from ..mesh import Mesh
+from ..mesh.graph import edge_graph
 from ..mesh.query import concave_angles, shortest_path
 
 WAYPOINTS = [(60,), (61, 67), (62, 66), (63, 65), (64,)]
@@ -133,8 +134,7 @@ def _seam(mesh: Mesh, lm, crease: float = CREASE, valley_corners: bool = False, 
             # between the lips: the deepest valley vertex, the nearer of equally deep ones
             d = np.linalg.norm(v[near] - p, axis=1)
             stops.append(int(near[np.argmax(depth[near] - 1e-3 * d / reach)]))
-    g = sp.coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
-                      shape=(mesh.n_vertices,) * 2).tocsr()
+    g = edge_graph(mesh.n_vertices, e, w)
     path = [stops[0]]
     for a, b in zip(stops[:-1], stops[1:]):
         if a == b:

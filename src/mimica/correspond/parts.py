@@ -26,12 +26,12 @@ import re
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..align import face_cylinder
 from ..mesh import Mesh
+from ..mesh.graph import HarmonicFill, edge_graph
 
 SKIN, SKULL, JAW, EYE_LEFT, EYE_RIGHT, FOLLOW = "skin", "skull", "jaw", "eye.left", "eye.right", "follow"
 POCKET = "pocket"
@@ -204,17 +204,13 @@ def _jaw_weight(a, h, span, band) -> np.ndarray:
     """The jaw's share for the vertices of spanning pieces (span: mask over the rows of the
     adjacency `a`, heights h over the plane between the arches): 1 below -band, 0 above band,
     harmonic (the graph Laplacian's) in between; a stretch reaching neither keeps its side."""
-    from scipy.sparse.linalg import spsolve
     v = np.nonzero(span)[0]
-    a = a[v][:, v].tocsr()
     h = h[v]
     w = (h < 0).astype(float)
     free = np.abs(h) <= band
-    if free.any():
-        lap = (sp.diags(np.asarray(a.sum(1)).ravel()) - a).tocsr()
-        lff = lap[free][:, free] + 1e-6 * sp.eye(int(free.sum()))   # the small pull: to its side
-        rhs = -(lap[free][:, ~free] @ w[~free]) + 1e-6 * w[free]
-        w[free] = spsolve(lff.tocsc(), rhs)
+    if free.any():                                    # the small screen: a pull to its side
+        fill = HarmonicFill(a[v][:, v], np.nonzero(free)[0], np.nonzero(~free)[0], screen=1e-6)
+        w[free] = fill(w[~free], prior=w[free])
     return np.clip(w, 0.0, 1.0)
 
 
@@ -255,8 +251,7 @@ def split_parts(mesh: Mesh, landmarks=None, eyes: dict | None = None) -> Parts:
     frame = _mouth_frame(lm) if lm is not None else None          # once for every component
     width = frame[4] if frame is not None else None
     mouth = []
-    edge = np.zeros(mesh.n_vertices, bool)
-    edge[mesh.boundary_vertices()] = True
+    edge = mesh.boundary_vertices()
     cut_eye = {int(comp[v[0]]): side for side, v in (eyes or {}).items() if len(v)}
     for c in range(nc):
         idx = np.nonzero(comp == c)[0]
@@ -329,9 +324,7 @@ def pockets(mesh: Mesh, skin: np.ndarray, lm) -> dict:
         return {}
     e = mesh.edges
     e = e[skin[e[:, 0]] & skin[e[:, 1]]]
-    w = np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1)
-    n = mesh.n_vertices
-    graph = sp.coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
+    graph = edge_graph(mesh.n_vertices, e, np.linalg.norm(mesh.vertices[e[:, 0]] - mesh.vertices[e[:, 1]], axis=1))
     near = cKDTree(mesh.vertices[sv])
     _, _, fwd, _, width = _mouth_frame(lm)
     out = {}
@@ -369,8 +362,7 @@ def _cut_off(graph, skin, e, ends, depth, deep, most, limit) -> np.ndarray | Non
         loop[a] = True
     rest = skin & ~loop
     keep = rest[e[:, 0]] & rest[e[:, 1]]
-    a = sp.coo_matrix((np.ones(int(keep.sum())), (e[keep, 0], e[keep, 1])), shape=(n, n))
-    nc, comp = connected_components(a, directed=False)
+    nc, comp = connected_components(edge_graph(n, e[keep]), directed=False)
     sizes = np.bincount(comp[rest], minlength=nc)
     face = int(np.argmax(sizes))
     out = []

@@ -139,16 +139,15 @@ class Mesh:
         nxt = np.roll(self.face_indices, -1)
         nxt[self.face_starts[1:] - 1] = self.face_indices[self.face_starts[:-1]]   # each polygon's closing edge
         pairs = np.sort(np.stack([self.face_indices, nxt], 1), axis=1)
-        raw = pairs[unique_rows(pairs)[0]]                                          # each edge once
+        first, _, uses = unique_rows(pairs)
+        raw = pairs[first]                                  # each edge once, and its faces
         for _ in range(8):
             e = np.sort(group[raw], axis=1)
             _, eid, cnt = unique_rows(e)
             sizes = np.bincount(group)
-            # un-weld where an edge would get a third face (counted over the faces' half-edges)
-            a, b = group[self.face_indices], group[nxt]
-            he = np.sort(np.stack([a, b], 1), axis=1)
-            _, hid, hcnt = unique_rows(he)
-            bad = np.unique(he[hcnt[hid] > 2])
+            # un-weld where an edge would get a third face
+            faces = np.bincount(eid, uses, len(cnt))
+            bad = np.unique(e[faces[eid] > 2])
             undo = np.isin(group, bad[sizes[bad] > 1])          # only welds can be undone
             # and a copy that shares no edge with another once welded: pieces touching at a
             # point (a lash's root on a shell, a shell's corner on the lid), not a split seam
@@ -263,10 +262,8 @@ class Mesh:
     @cached_property
     def adjacency(self) -> sp.csr_matrix:
         """(n, n) symmetric 0/1 vertex adjacency along polygon edges (CSR, sorted)."""
-        e = self.edges
-        n = self.n_vertices
-        a = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
-                          shape=(n, n)).tocsr()
+        from .graph import edge_graph
+        a = edge_graph(self.n_vertices, self.edges)
         a.sum_duplicates()
         a.sort_indices()
         return a

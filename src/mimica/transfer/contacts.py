@@ -23,7 +23,7 @@ from scipy.spatial import cKDTree
 
 from ..align import face_cylinder
 from ..mesh import Mesh
-from ..solver import SPDSolver
+from ..mesh.graph import HarmonicFill
 
 EYES = {"right": (slice(36, 42), [(37, 41), (38, 40)], 36, 39),
         "left": (slice(42, 48), [(43, 47), (44, 46)], 42, 45)}
@@ -129,10 +129,8 @@ class _Eye:
         outer = inside & (np.asarray(a[:, ~inside].sum(1)).ravel() > 0)    # the region's own edge
         free = np.nonzero(inside & ~fixed & ~outer)[0]
         self.cons = np.nonzero(fixed)[0]
-        lap = sp.diags(np.asarray(a.sum(1)).ravel()) - a                   # graph Laplacian
         self.free = free
-        self.solver = SPDSolver(lap[free][:, free].tocsc()) if len(free) else None
-        self.coupling = lap[free][:, self.cons].tocsr()
+        self.fill = HarmonicFill(a, free, self.cons, screen=0.0) if len(free) else None
 
     def _partner(self, v):
         """The lower rim's point across each upper rim vertex; v: (..., n, 3)."""
@@ -160,10 +158,8 @@ class _Eye:
         out = v.copy()
         dc = delta[:, self.cons]                                      # (F, m, 3)
         out[:, self.cons] += dc
-        if self.solver is not None:
-            f = len(v)
-            rhs = -(self.coupling @ dc.transpose(1, 0, 2).reshape(len(self.cons), -1))
-            out[:, self.free] += self.solver.solve(rhs).reshape(len(self.free), f, 3).transpose(1, 0, 2)
+        if self.fill is not None:
+            out[:, self.free] += self.fill(dc.transpose(1, 0, 2)).transpose(1, 0, 2)
         return out
 
 

@@ -14,10 +14,9 @@ Our own step, not the paper's; measured in bench/real_heads.py.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..mesh import Mesh
-from ..solver import SPDSolver
+from ..mesh.graph import HarmonicFill
 
 
 class LowConfidenceFill:
@@ -40,18 +39,16 @@ class LowConfidenceFill:
     def __init__(self, mesh: Mesh, confidence: np.ndarray, low: float):
         c = np.asarray(confidence, float)
         weak = c < low
-        a = mesh.adjacency.tocsr()
-        lap = (sp.diags(np.asarray(a.sum(1)).ravel()) - a).tocsr()
+        a = mesh.adjacency
         inside = np.nonzero(weak)[0]
         ring = np.nonzero(~weak & (np.asarray(a[:, weak].sum(1)).ravel() > 0))[0]
         self.ok = len(inside) > 0 and len(ring) > 0
         if not self.ok:
             return
-        # pieces of the weak region that touch no confident skin keep their own motion
-        m = lap[inside][:, inside] + 1e-9 * sp.identity(len(inside))
+        # pieces of the weak region that touch no confident skin keep their own motion (the
+        # small screen)
         self.inside, self.ring = inside, ring
-        self.solver = SPDSolver(m.tocsc())
-        self.coupling = lap[inside][:, ring].tocsr()
+        self.fill = HarmonicFill(a, inside, ring)
         self.blend = (1.0 - c[inside] / low)[None, :, None]
         self.rest = mesh.vertices
 
@@ -59,9 +56,7 @@ class LowConfidenceFill:
         """out: (F, n, 3) results; the weak skin's displacements blended toward the fill."""
         if not self.ok:
             return out
-        f = len(out)
-        d_ring = (out[:, self.ring] - self.rest[self.ring]).transpose(1, 0, 2).reshape(len(self.ring), -1)
-        filled = self.solver.solve(-(self.coupling @ d_ring)).reshape(len(self.inside), f, 3).transpose(1, 0, 2)
+        filled = self.fill((out[:, self.ring] - self.rest[self.ring]).transpose(1, 0, 2)).transpose(1, 0, 2)
         own = out[:, self.inside] - self.rest[self.inside]
         out[:, self.inside] = self.rest[self.inside] + own + self.blend * (filled - own)
         return out

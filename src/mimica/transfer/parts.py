@@ -20,7 +20,8 @@ import numpy as np
 
 from ..align import Similarity, fit_similarity
 from ..correspond.parts import EYE_LEFT, EYE_RIGHT, FOLLOW, JAW, POCKET, ROLES, SKIN, Parts, fit_sphere
-from ..mesh import Mesh
+from ..mesh import Mesh, vertex_normals
+from ..mesh.graph import HarmonicFill, edge_graph
 from ..mesh.query import TriangleLocator
 
 
@@ -75,7 +76,7 @@ class PartMotion:
         # a piece spanning both arches: each vertex takes its share of the jaw's motion
         w = pt.jaw_weight if pt.jaw_weight is not None else np.zeros(0)
         part = np.nonzero(np.isfinite(w) & (w > 0) & (w < 1))[0]
-        self._shared = (part, w[part])
+        self._shared = (part, w[part], similarity.apply(target.vertices[part]))
         self.follow = pt.of(FOLLOW)
         self.skin_index = skin_index
         self.pockets = _Pockets(source, ps, target, pt, similarity, skin_index, match) if len(pt.of(POCKET)) else None
@@ -106,9 +107,8 @@ class PartMotion:
                     moved = ct + (m.apply(cs) - cs) + (a - ct) @ m.rotation.T
                 out[f, tv] = self._back.apply(moved)
                 if centres is None and len(self._shared[0]):               # the jaw: its shares
-                    v, share = self._shared
-                    jaw = self._back.apply(m.apply(self.similarity.apply(self.target[v])))
-                    out[f, v] = self.target[v] + share[:, None] * (jaw - self.target[v])
+                    v, share, at = self._shared
+                    out[f, v] = self.target[v] + share[:, None] * (self._back.apply(m.apply(at)) - self.target[v])
         if self.pockets is not None:
             out[:, self.pockets.vertices] = self.pockets.apply(frames, out)
         if len(self.follow):
@@ -136,7 +136,6 @@ class _Riders:
     too), less 20 0.0019 / 0.160; the turn by Kabsch over the same skin 0.0080 / 0.158."""
 
     def __init__(self, target: Mesh, vertices: np.ndarray, skin: Mesh, root: float, around: float):
-        import scipy.sparse as sp
         from scipy.sparse.csgraph import connected_components, dijkstra
         from scipy.spatial import cKDTree
         p = target.vertices[vertices]
@@ -146,8 +145,7 @@ class _Riders:
         e = target.edges
         e = at[e[(at[e[:, 0]] >= 0) & (at[e[:, 1]] >= 0)]]
         n = len(vertices)
-        w = np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1)
-        graph = sp.coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
+        graph = edge_graph(n, e, np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1))
         nc, comp = connected_components(graph, directed=False)
         low = np.full(nc, np.inf)
         np.minimum.at(low, comp, dist)
@@ -159,7 +157,6 @@ class _Riders:
         self._bary = bary[anchor]
         self._offset = p - near[anchor]                 # from the root's skin point, in the rest frame
         self._turns = anchor != np.arange(n)
-        self._skin = skin
         # each root's turn: that of the skin's mean normal around it (within `around`)
         used, self._which = np.unique(anchor[self._turns], return_inverse=True)
         balls = cKDTree(skin.vertices).query_ball_point(near[used], around)
@@ -171,6 +168,12 @@ class _Riders:
         self._ball_w = np.zeros((len(used), size))
         for i, b in enumerate(balls):
             self._ball[i, :len(b)], self._ball_w[i, :len(b)] = b, 1.0
+        # the ball's normals need only the triangles round its vertices
+        touch = np.zeros(skin.n_vertices, bool)
+        touch[self._ball[self._ball_w > 0]] = True
+        self._near_tri = skin.triangles[touch[skin.triangles].any(1)]
+        self._rest_normal = _mean_normal(vertex_normals(skin.vertices, self._near_tri)[self._ball],
+                                         self._ball_w[..., None])
 
     def apply(self, skin_out: np.ndarray) -> np.ndarray:
         """The riders' positions (F, k, 3) on the transferred skin (F, n_skin, 3)."""
@@ -178,10 +181,9 @@ class _Riders:
         out = at + self._offset
         if self._turns.any():
             w = self._ball_w[..., None]
-            a = _mean_normal(self._skin.vertex_normals()[self._ball], w)
             for f in range(len(skin_out)):
-                b = _mean_normal(self._skin.vertex_normals(skin_out[f])[self._ball], w)
-                rot = _turn(a, b, np.radians(SLACK_DEG))
+                b = _mean_normal(vertex_normals(skin_out[f], self._near_tri)[self._ball], w)
+                rot = _turn(self._rest_normal, b, np.radians(SLACK_DEG))
                 out[f, self._turns] = at[f, self._turns] + np.einsum("kij,kj->ki", rot[self._which],
                                                                        self._offset[self._turns])
         return out
@@ -219,81 +221,61 @@ class _Pockets:
 
     def __init__(self, source: Mesh, ps: Parts, target: Mesh, pt: Parts, similarity: Similarity,
                  skin_index=None, match=None):
-        import scipy.sparse as sp
-        from scipy.sparse.linalg import splu
         self.similarity, self._back = similarity, similarity.inverse()
-        self.rest, self.target = source.vertices, target.vertices
+        self.rest = source.vertices
         pocket = pt.role == ROLES.index(POCKET)
         self.vertices = np.nonzero(pocket)[0]
         on = (ps.role == ROLES.index(POCKET)) | (ps.role == ROLES.index(SKIN))
         tri = source.triangles
         tri = tri[on[tri].all(1)]
-        self._aligned = similarity.apply(target.vertices[self.vertices])
-        locate = TriangleLocator(source.vertices, tri).closest
+        self._at = similarity.apply(target.vertices[self.vertices])     # in the source's frame
+        looked = self._at
         # where a pocket meets the skin: those skin vertices' transferred motion is the boundary
         e = target.edges
         cross = pocket[e[:, 0]] != pocket[e[:, 1]]
-        rim = np.unique(np.where(pocket[e[cross, 0]], e[cross, 1], e[cross, 0]))
-        self.rim = rim
-        m = len(self.vertices)
+        self.rim = rim = np.unique(np.where(pocket[e[cross, 0]], e[cross, 1], e[cross, 0]))
         if len(rim):
-            rim_at = similarity.apply(target.vertices[rim])
-            ta, ba, _, _ = locate(rim_at)
-            self._rim_corners, self._rim_bary = tri[ta], ba
-            both = np.r_[self.vertices, rim]
-            at = np.full(target.n_vertices, -1)
-            at[both] = np.arange(len(both))
-            e = e[(at[e[:, 0]] >= 0) & (at[e[:, 1]] >= 0)]
-            i, j = at[e[:, 0]], at[e[:, 1]]
-            n = len(both)
-            a = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
-            lap = sp.diags(np.asarray(a.sum(1)).ravel()) - a          # the graph Laplacian
+            self._rim_at = similarity.apply(target.vertices[rim])
             # screened: what the rim says fades over a few rings into the pocket, whose depths
             # keep the source's motion (a few rim points where the lips' transfer and the
             # source part ways no longer shift a whole bag: see SCREEN)
-            self._solve = splu((lap[:m, :m] + SCREEN * sp.eye(m)).tocsc()).solve
-            self._couple = lap[:m, m:].tocsr()
-            # the rim's place on the source is carried over the whole pocket (a harmonic warp;
-            # a pocket that meets no skin keeps its place: the small diagonal)
-            warp = splu((lap[:m, :m] + 1e-9 * sp.eye(m)).tocsc()).solve
+            self._join = HarmonicFill(target.adjacency, self.vertices, rim, SCREEN)
+            # the rim's source points: where the skin's correspondence puts them, else closest
+            corners, bary = np.full((len(rim), 3), -1), np.zeros((len(rim), 3))
             if match is not None and skin_index is not None:
                 local = np.full(target.n_vertices, -1)
                 local[skin_index] = np.arange(len(skin_index))
                 k = local[rim]
-                corners = np.where((k >= 0)[:, None], match[0][np.maximum(k, 0)], -1)
-                ok = (corners >= 0).all(1)
-                if ok.any():
-                    # the rim's source motion where the skin's correspondence puts it
-                    self._rim_corners = np.where(ok[:, None], corners, self._rim_corners)
-                    self._rim_bary = np.where(ok[:, None], match[1][np.maximum(k, 0)], self._rim_bary)
-                    put = np.einsum("kc,kcd->kd", self._rim_bary, source.vertices[self._rim_corners])
-                    offset = np.where(ok[:, None], put - rim_at, 0.0)
-                    self._aligned = self._aligned + self._spread(offset[None], warp)[0]
+                corners[k >= 0], bary[k >= 0] = match[0][k[k >= 0]], match[1][k[k >= 0]]
+            ok = (corners >= 0).all(1)
+            if not ok.all():
+                ta, ba, _, _ = TriangleLocator(source.vertices, tri).closest(self._rim_at[~ok])
+                corners[~ok], bary[~ok] = tri[ta], ba
+            self._rim_corners, self._rim_bary = corners, bary
+            if ok.any():
+                # the rim's place on the source carried over the whole pocket (a harmonic warp;
+                # a pocket that meets no skin keeps its place)
+                put = np.einsum("kc,kcd->kd", bary, source.vertices[corners])
+                looked = looked + HarmonicFill(target.adjacency, self.vertices, rim)(
+                    np.where(ok[:, None], put - self._rim_at, 0.0))
         normals = target.vertex_normals()[self.vertices] @ similarity.rotation.T
-        t, bary = _closest_facing(source.vertices, tri, self._aligned, normals)
+        t, bary = _closest_facing(source.vertices, tri, looked, normals)
         self._corners, self._bary = tri[t], bary
-        self._rim_at = None if not len(rim) else similarity.apply(target.vertices[rim])
 
-    def _spread(self, gap: np.ndarray, solve=None) -> np.ndarray:
-        """The screened harmonic extension (F, k, 3) over the pockets of values (F, r, 3) on the
-        rim (or the extension `solve` gives)."""
-        f, r = gap.shape[:2]
-        rhs = -(self._couple @ gap.transpose(1, 0, 2).reshape(r, -1))
-        return (solve or self._solve)(np.asarray(rhs)).reshape(len(self.vertices), f, 3).transpose(1, 0, 2)
-
-    def _source_motion(self, frames, corners, bary, aligned):
-        """The source's displacement at the given points, carried into the target's frame."""
+    def _source_motion(self, frames, corners, bary, at):
+        """The source's displacement at the given points (`at`, in the source's frame), carried
+        into the target's frame."""
         d = np.einsum("kc,fkcd->fkd", bary, frames[:, corners] - self.rest[corners])
-        return self._back.apply((aligned[None] + d).reshape(-1, 3)).reshape(d.shape)
+        return self._back.apply((at[None] + d).reshape(-1, 3)).reshape(d.shape)
 
     def apply(self, frames: np.ndarray, out: np.ndarray) -> np.ndarray:
         """The pockets' positions (F, k, 3) for source frames (F, n_S, 3) and the target's other
         vertices already placed in `out`."""
-        moved = self._source_motion(frames, self._corners, self._bary, self.similarity.apply(self.target[self.vertices]))
+        moved = self._source_motion(frames, self._corners, self._bary, self._at)
         if not len(self.rim):
             return moved
-        rim_src = self._source_motion(frames, self._rim_corners, self._rim_bary, self._rim_at)
-        return moved + self._spread(out[:, self.rim] - rim_src)     # the skin's motion less the source's
+        gap = out[:, self.rim] - self._source_motion(frames, self._rim_corners, self._rim_bary, self._rim_at)
+        return moved + self._join(gap.transpose(1, 0, 2)).transpose(1, 0, 2)   # the skin's motion less the source's
 
 
 def _faces_of(mesh: Mesh, on: np.ndarray) -> np.ndarray:
