@@ -245,7 +245,7 @@ def main():
     issues = sum(r["errors"] + r["warnings"] for r in reports)
     print("validator: " + ", ".join(f"{n} {r['errors']} errors {r['warnings']} warnings" for n, r in zip(kinds, reports)))
     verr, vzero, vfps, vlines = video_takes(model, tmp / "arkit.glb", tmp)
-    print("weights from video (animate --video, dlib's points): " + "; ".join(vlines))
+    print("weights from video (animate --video, its default tracker): " + "; ".join(vlines))
     print(f"  mean error {verr:.3f} against {vzero:.3f} for the head kept still")
     print(f"validator_issues={issues} clip_mb={sim_mb:.1f} clip_ratio={sim_mb / sim_pf:.3f} "
           f"clip_err_mm={sim_err:.3f} arkit_mb={arkit_mb:.1f} video_weights_err={verr:.3f} video_fps={vfps:.0f}")

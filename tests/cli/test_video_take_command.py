@@ -13,12 +13,12 @@ from mimica.cli import main
 from mimica.export import ARKIT_52
 
 
-@pytest.mark.parametrize("tracker", [None, "mediapipe"])
+@pytest.mark.parametrize("tracker", [None, "dlib"])
 def test_video_to_animation_and_live_link_csv(head_glb, tmp_path, capsys, tracker, mediapipe):
     """A folder of rendered frames (ICT's face opening its jaw) -> take.glb and take.csv: the
     GLB passes the validator, the CSV reads back as a take with the GLB's weights, and jawOpen
-    rises and falls with the rendered jaw; with either tracker (dlib's, the default, or
-    MediaPipe's face mesh)."""
+    rises and falls with the rendered jaw; with either tracker (MediaPipe's face mesh, the
+    default, or dlib's)."""
     import pygltflib as gl
     from mimica.export.take import read_take
     from mimica.image.ictphotos import ICTPhotos

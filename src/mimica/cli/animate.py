@@ -102,8 +102,8 @@ def add_args(sub) -> None:
                     help="with --video: a frame where the performer's face is at rest (default: the first)")
     an.add_argument("--landmarks", help="with --video: the head's 68 landmarks (JSON) where its GLB stores none "
                                         "(a head from another tool; default: found on renders of it)")
-    an.add_argument("--tracker", choices=["dlib", "mediapipe"], help="with --video: the face's tracker (default dlib; "
-                    "mediapipe, the photo extra: a turning head's fewer false weights)")
+    an.add_argument("--tracker", choices=["dlib", "mediapipe"], help="with --video: the face's tracker (default "
+                    "mediapipe where the photo extra is installed, else dlib)")
     an.add_argument("--fps", type=float, help="the frame rate of a Timecode column (default: from its frame numbers)")
     an.add_argument("--head-rotation", action="store_true",
                     help="also turn the head by the take's HeadYaw, HeadPitch, HeadRoll (radians)")

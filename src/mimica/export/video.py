@@ -299,28 +299,29 @@ def trackers() -> list[str]:
     Returns
     -------
     list of str
-        "dlib" (always), then "mediapipe" where the photo extra is installed.
+        "mediapipe" where the photo extra is installed, then "dlib" (always).
     """
     import importlib.util
-    return ["dlib"] + (["mediapipe"] if importlib.util.find_spec("mediapipe") else [])
+    return (["mediapipe"] if importlib.util.find_spec("mediapipe") else []) + ["dlib"]
 
 
 def track_video(path, progress=None, max_frames: int | None = None, tracker: str | None = None):
     """The face's 68 points through a video or a folder of frames.
 
-    "dlib" (the default): dlib's detector and shape predictor, each frame's points fitted inside
-    the box of the last frame's; the detector confirms the face every CHECK_EVERY frames, and
-    where it finds none, the frames since the last confirmation (the last frames too) are checked
-    one by one, so that the frames without a face are known exactly; then it looks for the face
-    again on every frame.
-    "mediapipe" (the photo extra): MediaPipe's face mesh in its tracking mode, the 68 of its
-    points that read as the iBUG points (detect2d.mediapipe_68).  On rendered takes turning up
-    to 30 degrees (dev identities 1007, 1008, painted) its points' motion is off by 2.0-6.8
-    pixels against dlib's 6.5-78 (dlib's box loses the face on the turn) and it runs at 102
-    frames/s against 78, but the fit -- its pulls tuned on dlib's points -- reads the weights no
-    better from it (where they act: 0.361 / 0.390 against 0.393 / 0.407; on bench/export.py's
-    grey takes turning 8 degrees 0.327 / 0.332 against 0.256 / 0.275), so it is not the default;
-    a still face's turn reads as expression far less through it (TURN_TRUSTED's measurement).
+    "mediapipe" (the default where the photo extra is installed): MediaPipe's face mesh with
+    attention in its tracking mode (detect2d.mediapipe_tracker), the 68 of its points that read
+    as the iBUG points (detect2d.mediapipe_68).
+    "dlib": dlib's detector and shape predictor, each frame's points fitted inside the box of the
+    last frame's; the detector confirms the face every CHECK_EVERY frames, and where it finds
+    none, the frames since the last confirmation (the last frames too) are checked one by one, so
+    that the frames without a face are known exactly; then it looks for the face again on every
+    frame.
+    Where the weights act the fit reads them with an error of 0.361 / 0.391 through MediaPipe's
+    points against 0.388 / 0.405 through dlib's on painted takes turning up to 30 degrees (dev
+    identities 1007, 1008), and 0.278 / 0.231 against 0.261 / 0.246 on bench/export.py's grey
+    takes turning 8 degrees; dlib's box loses the face on a turn (its points' motion off by
+    6.5-78 pixels against 2.0-6.8), and a still face's turn reads as expression far less through
+    MediaPipe's points (TURN_TRUSTED's measurement).
 
     Parameters
     ----------

@@ -164,18 +164,26 @@ def _face_mesh():
 
 
 def mediapipe_tracker():
-    """MediaPipe's face mesh in its tracking mode (each frame's face found from the last one's,
-    the detector run only where it is lost), for the frames of one video (the photo extra).
+    """MediaPipe's face mesh with attention in its tracking mode (each frame's face found from
+    the last one's, the detector run only where it is lost), for the frames of one video (the
+    photo extra).
+
+    The attention mesh (`refine_landmarks`) refines the lids, the lips and the irises.  Without
+    it the lids hardly follow a blink: on a painted take (dev identity 1007) the left eye's
+    opening went from 0.38 to 0.04 of its width through a blink of 0.87 with it, 0.44 to 0.39
+    without; the ARKit fit through its 68 points read the weights where they act with an error
+    of 0.376 against 0.420 (dev identities 1007, 1008 pooled), at the same speed.
 
     Returns
     -------
     callable
-        img ((h, w, 3) array) -> the face's (468, 2) points in pixels, or None where it shows none.
+        img ((h, w, 3) array) -> the face's (478, 2) points in pixels (the 468 of the face mesh,
+        then each iris's centre and four points on its rim), or None where it shows none.
     """
     from .._extras import require
     with _quiet():
         mp = require("mediapipe", "photo", "MediaPipe's face tracker")
-        fm = mp.solutions.face_mesh.FaceMesh(static_image_mode=False, max_num_faces=1, refine_landmarks=False)
+        fm = mp.solutions.face_mesh.FaceMesh(static_image_mode=False, max_num_faces=1, refine_landmarks=True)
 
     def points(img):
         faces = _mediapipe_run(fm, img)
@@ -185,7 +193,7 @@ def mediapipe_tracker():
 
 def _mediapipe_run(fm, img) -> list:
     """A MediaPipe face mesh run on a picture (grey or RGB, any dtype): each face's (468, 2)
-    points in pixels (pixel centres at integers)."""
+    points in pixels, (478, 2) with the attention mesh's irises (pixel centres at integers)."""
     from ..image.io import to_uint8
     a = np.asarray(img)
     a = to_uint8(a) if a.dtype != np.uint8 else a
