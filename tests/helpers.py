@@ -134,16 +134,16 @@ def ramp(frames, start, length, peak):
     return w
 
 
-def jaw_frames(folder, jaw, blank=(), size=(320, 400)):
-    """Rendered frames of ICT's face opening its jaw by `jaw` (one a frame); frames in `blank`
-    show no face (the background alone)."""
+def jaw_frames(folder, jaw, blank=(), size=(320, 400), shape="jawOpen"):
+    """Rendered frames of ICT's face opening its jaw by `jaw` (one a frame; or making another of
+    ICT's shapes); frames in `blank` show no face (the background alone)."""
     from mimica.image.ictphotos import ICTPhotos
     from mimica.image.io import write_image
     photos = ICTPhotos(size=size)
     folder.mkdir()
     for f, a in enumerate(jaw):
         img = np.full((size[1], size[0], 3), 0.8) if f in blank else \
-            photos.photo(np.zeros(20), "jawOpen" if a > 0 else None, amount=max(a, 1e-9))[0]
+            photos.photo(np.zeros(20), shape if a > 0 else None, amount=max(a, 1e-9))[0]
         write_image(folder / f"f{f:03d}.png", img)
     return folder
 
