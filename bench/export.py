@@ -114,12 +114,34 @@ def painted(model, rest):
     return mesh, old, col[old]
 
 
+def turned_eyes(rest, w, degrees):
+    """(index ranges, eyeballs' vertices) of ICT's eyeballs turned by the eyeLook weights w (52,):
+    `degrees` for a weight of 1, about each eyeball's own centre (a sphere fitted to it).  ICT's
+    eyeLook shapes move the lids only, as ARKit's are defined ("the eyelids consistent with a
+    gaze"); a performer's eyes turn with them."""
+    from scipy.spatial.transform import Rotation
+    from mimica.correspond.parts import ICT_PARTS
+    part = {name: (a, b) for name, a, b in ICT_PARTS}
+    out = []
+    for side, key, away in (("Left", "eyeball.left", 1.0), ("Right", "eyeball.right", -1.0)):
+        a, b = part[key]
+        e = rest[a:b]
+        x = np.linalg.lstsq(np.c_[2 * e, np.ones(len(e))], (e ** 2).sum(1), rcond=None)[0]
+        g = {d: w[ARKIT_52.index(f"eyeLook{d}{side}")] for d in ("Out", "In", "Up", "Down")}
+        # the subject's left is +x, the head looks along +z: out turns the left eye toward +x
+        r = Rotation.from_euler("YX", [degrees * away * (g["Out"] - g["In"]), -degrees * (g["Up"] - g["Down"])],
+                                degrees=True).as_matrix()
+        out.append(((a, b), (e - x[:3]) @ r.T + x[:3]))
+    return out
+
+
 def render_take(model, w, seed, path, fps=30, size=(640, 480), turn=(8.0, 4.0), rates=(0.9, 0.6), zoom=1.4,
-                paint=False):
+                paint=False, eye_turn=0.0):
     """The take as an MP4: ICT's identity of `seed` (+1000: never tuned on) with the ARKit
     weights w (ICT's shapes summed as `blendshapes` maps them), lit from the right, the head
     turning (yaw and pitch up to `turn` degrees, at `rates` radians a second), framed at `zoom`
-    times the face's half height; grey, or `paint`ed (painted())."""
+    times the face's half height; grey, or `paint`ed (painted()); the eyes turned `eye_turn`
+    degrees at a full eyeLook weight (turned_eyes; 0: they stay still, as ICT's shapes leave them)."""
     from mimica.data import ICT_LANDMARKS_68
     from mimica.export.blendshapes import ict_sources
     from mimica.image.ictphotos import LIGHT_RIGHT
@@ -134,7 +156,11 @@ def render_take(model, w, seed, path, fps=30, size=(640, 480), turn=(8.0, 4.0), 
     yaw, pitch = turn[0] * np.sin(tt * rates[0] + seed), turn[1] * np.sin(tt * rates[1] + 2 * seed)
     out = VideoWriter(path, fps)
     for f in range(len(w)):
-        v = (ident + np.einsum("k,knd->nd", w[f], deltas))[keep]
+        v = ident + np.einsum("k,knd->nd", w[f], deltas)
+        if eye_turn:
+            for (a, b), e in turned_eyes(ident, w[f], eye_turn):
+                v[a:b] = e
+        v = v[keep]
         out.write(render_mesh(mesh, v, size=size, frame=(c, zoom * half), light=LIGHT_RIGHT, colors=colors,
                               background=(90, 90, 90), yaw=yaw[f], pitch=pitch[f]))
     out.close()

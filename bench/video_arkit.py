@@ -66,10 +66,12 @@ def take_weights(frames: int, seed: int) -> np.ndarray:
 
 def render_take(model, w, seed, path, turn=True):
     """The take as an H.264 MP4 (bench/export.py's renderer, painted: skin, lips, brows, irises):
-    the head turning up to 30 degrees of yaw and 10 of pitch, or still."""
+    the head turning up to 30 degrees of yaw and 10 of pitch, or still; the eyes turning with the
+    eyeLook weights (GAZE_FULL_DEG at 1: ICT's shapes move only the lids)."""
     from export import render_take as render
+    from mimica.export.video import GAZE_FULL_DEG
     render(model, w, seed, path, fps=FPS, turn=(30.0, 10.0) if turn else (0.0, 0.0), rates=(0.45, 0.3), zoom=1.5,
-           paint=True)
+           paint=True, eye_turn=GAZE_FULL_DEG)
 
 
 def ours(head_glb, video, out_csv, tracker=None):

@@ -173,3 +173,36 @@ def test_other_tools_names_play_the_arkit_shapes(head_glb, tmp_path):
     anim = read_accessor(out, out.animations[0].samplers[0].output).reshape(3, len(names))
     for j, n in enumerate(names):
         np.testing.assert_allclose(anim[:, j], weights[n], atol=1e-6)
+
+
+def _eyes(frames, right_out, yaw, depth=0.1):
+    """(F, 2, 3, 2) eyes of a face 40 px an eye, the head turning by yaw (radians; the irises,
+    `depth` eye widths before the corners, move across them) and the right eye turning out by
+    right_out (degrees)."""
+    from mimica.export.video import EYE_RADIUS
+    eyes = np.zeros((frames, 2, 3, 2))
+    for k, (outer, inner) in enumerate((((100.0, 200.0), (140.0, 200.0)), ((220.0, 200.0), (180.0, 200.0)))):
+        eyes[:, k, 0], eyes[:, k, 1] = outer, inner
+        eyes[:, k, 2] = ((np.array(outer) + inner) / 2)[None] + np.c_[40 * depth * np.sin(yaw), np.zeros(frames)]
+    eyes[:, 0, 2, 0] -= 40 * EYE_RADIUS * np.sin(np.radians(right_out))      # toward its outer corner
+    return eyes
+
+
+def test_gaze_from_the_irises():
+    """An iris moving toward its eye's outer corner reads as that eye looking out, by the angle its
+    offset gives over GAZE_FULL_DEG; the other shapes stay 0; a head turning alone (the irises
+    moving across the corners by their depth) reads as no gaze."""
+    from scipy.spatial.transform import Rotation
+    from mimica.export.video import GAZE_FULL_DEG, gaze_weights
+    frames = 90
+    turn = ramp(frames, 30, 40, 0.5 * GAZE_FULL_DEG)                  # half a full look out
+    still = np.broadcast_to(np.eye(3), (frames, 3, 3))
+    g = gaze_weights(_eyes(frames, turn, np.zeros(frames)), still)
+    assert abs(g["eyeLookOutRight"].max() - 0.5) < 0.05, g["eyeLookOutRight"].max()
+    assert np.corrcoef(g["eyeLookOutRight"], turn)[0, 1] > 0.98
+    assert max(w.max() for n, w in g.items() if n != "eyeLookOutRight") < 0.02
+    yaw = np.radians(25) * np.sin(np.arange(frames) / 10)
+    rot = Rotation.from_euler("Y", yaw[:, None]).as_matrix()
+    g = gaze_weights(_eyes(frames, np.zeros(frames), yaw), rot)
+    assert max(w.max() for w in g.values()) < 0.02, {n: w.max() for n, w in g.items()}
+    assert gaze_weights(np.full((5, 2, 3, 2), np.nan), still[:5]) == {}   # dlib's: no irises

@@ -17,8 +17,10 @@ points little (a brow) is seen only from about 0.3 of its weight.
 
 The performer is not the head: their rest landmarks are the head's plus the offset that the
 take's first frame (or the one named) shows, lifted into the head's frame at zero depth -- the
-take must start from a rest face, as Live Link Face's calibration also asks.  The gaze shapes
-(eyeLook*) and tongueOut are not fitted (68 points do not see them): they stay 0.
+take must start from a rest face, as Live Link Face's calibration also asks.  tongueOut is not
+fitted (the points do not see it): it stays 0.  The gaze shapes (eyeLook*) are read from the
+irises of MediaPipe's attention mesh (gaze_weights), not through the fit: through dlib's points
+they stay 0.
 """
 
 from __future__ import annotations
@@ -51,6 +53,13 @@ CHECK_EVERY = 5            # frames: the face detector confirms the tracked face
 # over 0.3 in 15-24 % of the frames within 15 degrees and in 97-100 % past it through MediaPipe's
 # points; through dlib's in 59-100 % at any turn
 TURN_TRUSTED = 15.0
+# the gaze (gaze_weights): an eyeLook weight of 1 turns the eye GAZE_FULL_DEG -- ARKit's eyeLook
+# shapes are the lids' movement "consistent with" a gaze and state no angle, so this is a
+# convention (bench/video_arkit.py's takes turn their eyes by it)
+GAZE_FULL_DEG = 30.0
+EYE_RADIUS = 0.4           # the iris's distance before the eye's centre of turning over the eye's width: ~11 of 28 mm (anatomy)
+# MediaPipe's attention mesh: each eye's outer corner, inner corner and iris centre (the subject's right eye, left eye)
+EYE_POINTS = ((33, 133, 468), (263, 362, 473))
 HELD_WEIGHT = 0.99         # a weight at its bound (1) ...
 HELD_SECONDS = 1.0         # ... this long is said
 
@@ -305,8 +314,9 @@ def trackers() -> list[str]:
     return (["mediapipe"] if importlib.util.find_spec("mediapipe") else []) + ["dlib"]
 
 
-def track_video(path, progress=None, max_frames: int | None = None, tracker: str | None = None):
-    """The face's 68 points through a video or a folder of frames.
+def track_video(path, progress=None, max_frames: int | None = None, tracker: str | None = None,
+                eyes: bool = False):
+    """The face's 68 points through a video or a folder of frames (and, asked for, its eyes).
 
     "mediapipe" (the default where the photo extra is installed): MediaPipe's face mesh with
     attention in its tracking mode (detect2d.mediapipe_tracker), the 68 of its points that read
@@ -332,12 +342,17 @@ def track_video(path, progress=None, max_frames: int | None = None, tracker: str
         Stop after this many.
     tracker : str or None
         "mediapipe" or "dlib" (None: the first of trackers()).
+    eyes : bool
+        Also return the eyes' corners and irises (MediaPipe's attention mesh: EYE_POINTS).
 
     Returns
     -------
     fps : float
     points : (F, 68, 2) float array
         NaN rows where a frame shows no face.
+    eyes : (F, 2, 3, 2) float array
+        Only where asked for: the subject's right and left eye's outer corner, inner corner and
+        iris centre in pixels; NaN where no face, and throughout for dlib (it sees no irises).
     """
     from ..image.video import frame_source
     from ..landmarks.detect2d import box_of, detect_faces, fit_points
@@ -347,7 +362,9 @@ def track_video(path, progress=None, max_frames: int | None = None, tracker: str
     n, fps, frames = frame_source(path)
     none = np.full((68, 2), np.nan)
     if tracker == "mediapipe":
-        return fps, _checked(path, n, max_frames, _tracked_mediapipe(frames, n, progress, max_frames, path))
+        tracked = _tracked_mediapipe(frames, n, progress, max_frames, path)
+        pts = _checked(path, n, max_frames, [p for p, _ in tracked])
+        return (fps, pts, np.stack([e for _, e in tracked])) if eyes else (fps, pts)
     out, raw, since = [], None, []          # since: (frame, image) tracked since the detector last saw the face
 
     def nearest(boxes, c):
@@ -390,17 +407,20 @@ def track_video(path, progress=None, max_frames: int | None = None, tracker: str
             out[gone:] = [none] * (len(out) - gone)
     except (RuntimeError, OSError) as e:                        # ffmpeg stopping inside the stream
         raise _broken_off(path, len(out), e) from None
-    return fps, _checked(path, n, max_frames, out)
+    pts = _checked(path, n, max_frames, out)
+    return (fps, pts, np.full((len(pts), 2, 3, 2), np.nan)) if eyes else (fps, pts)
 
 
 def _tracked_mediapipe(frames, n, progress, max_frames, path) -> list:
-    """The 68 points of each frame by MediaPipe's face mesh in its tracking mode (track_video)."""
+    """(the 68 points, the eyes (2, 3, 2): EYE_POINTS) of each frame by MediaPipe's face mesh in
+    its tracking mode (track_video)."""
     from ..landmarks.detect2d import mediapipe_68, mediapipe_tracker
     track, pick, out = mediapipe_tracker(), mediapipe_68(), []
+    eye = np.array(EYE_POINTS)
     try:
         for _, img in _counted(frames, n, progress, max_frames):
             pts = track(img)
-            out.append(np.full((68, 2), np.nan) if pts is None else pts[pick])
+            out.append((np.full((68, 2), np.nan), np.full((2, 3, 2), np.nan)) if pts is None else (pts[pick], pts[eye]))
     except (RuntimeError, OSError) as e:                        # ffmpeg stopping inside the stream
         raise _broken_off(path, len(out), e) from None
     return out
@@ -435,6 +455,69 @@ def _checked(path, n, max_frames, out: list) -> np.ndarray:
     if not np.isfinite(pts).any():
         raise MimicaError(f"{path}: no face in any of its {len(pts)} frames")
     return pts
+
+
+def gaze_weights(eyes: np.ndarray, rotations: np.ndarray, smooth_points: float = SMOOTH_POINTS) -> dict:
+    """The eyeLook* weights of a take from its irises: each iris's offset from the middle of its
+    eye's corners, across and along the eye, over the eye's width, read as the eye's turn
+    (asin(offset / EYE_RADIUS)) and the turn as weights (GAZE_FULL_DEG for 1).  The iris lies in
+    front of the corners, so the head's turn moves it across them too, by a depth that is the
+    performer's own: that share (on the sines of the fitted yaw and pitch, and the rest offset)
+    is regressed out over the whole take, whose gaze shifts are brief.  Smoothed over time as the
+    points are.
+
+    Parameters
+    ----------
+    eyes : (F, 2, 3, 2) float array
+        track_video's eyes (NaN where unseen: filled from the neighbouring frames).
+    rotations : (F, 3, 3) float array
+        The head's rotations relative to the rest frame (VideoFit.rotations).
+    smooth_points : float
+        Frames: the Gaussian over time.
+
+    Returns
+    -------
+    dict
+        {eyeLook name: (F,) float array in [0, 1]}, the eight of them; empty where no frame
+        shows the irises.
+    """
+    from scipy.ndimage import gaussian_filter1d
+    e = np.asarray(eyes, np.float64).reshape(len(eyes), 6, 2)
+    if not np.isfinite(e).any():
+        return {}
+    e, _ = _fill_missing(e)
+    e = e.reshape(-1, 2, 3, 2)
+    ang = head_angles(rotations)
+    X = np.c_[np.sin(ang[:, :2]), np.ones(len(e))]
+    out = {}
+    for k, side in enumerate(("Right", "Left")):
+        outer, inner, iris = e[:, k, 0], e[:, k, 1], e[:, k, 2]
+        along = inner - outer
+        width = np.maximum(np.linalg.norm(along, axis=1), 1e-9)
+        along = along / width[:, None]
+        up = np.stack([along[:, 1], -along[:, 0]], 1) * (1.0 if side == "Right" else -1.0)   # the image's up (y down)
+        rel = iris - 0.5 * (outer + inner)
+        turn = {}
+        for name, c in (("out", -(rel * along).sum(1) / width), ("up", (rel * up).sum(1) / width)):
+            c = c - X @ _l1_fit(X, c)                                   # the head's share, and the rest
+            if smooth_points and len(c) > 1:
+                c = gaussian_filter1d(c, smooth_points, mode="nearest")
+            turn[name] = np.degrees(np.arcsin(np.clip(c / EYE_RADIUS, -1.0, 1.0))) / GAZE_FULL_DEG
+        out[f"eyeLookOut{side}"] = np.clip(turn["out"], 0.0, 1.0)
+        out[f"eyeLookIn{side}"] = np.clip(-turn["out"], 0.0, 1.0)
+        out[f"eyeLookUp{side}"] = np.clip(turn["up"], 0.0, 1.0)
+        out[f"eyeLookDown{side}"] = np.clip(-turn["up"], 0.0, 1.0)
+    return out
+
+
+def _l1_fit(X: np.ndarray, y: np.ndarray, rounds: int = 10, floor: float = 1e-3) -> np.ndarray:
+    """Coefficients c minimising sum |X c - y| (reweighted least squares): the brief gaze shifts
+    of a take are outliers to the head's share, which a least-squares fit would lean toward."""
+    c = np.linalg.lstsq(X, y, rcond=None)[0]
+    for _ in range(rounds):
+        sw = 1.0 / np.sqrt(np.maximum(np.abs(X @ c - y), floor))
+        c = np.linalg.lstsq(X * sw[:, None], y * sw, rcond=None)[0]
+    return c
 
 
 def head_angles(rotations: np.ndarray) -> np.ndarray:

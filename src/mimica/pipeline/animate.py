@@ -69,9 +69,9 @@ class AnimateResult:
         A video's weights as a Live Link Face CSV, beside `out`.
     video : dict
         A video's figures: {"frames", "track_fps", "fit_fps", "misfit_median" (of the face's width),
-        "unseen" (shapes the points cannot see), "saw" (export.video.what_it_saw: frames without a
-        face, turned past what the fit trusts, weights held at 1), "fit" (the VideoFit),
-        "landmarks" (where the head's came from)}.
+        "unseen" (the names of the shapes the tracker cannot see), "saw" (export.video.what_it_saw:
+        frames without a face, turned past what the fit trusts, weights held at 1), "fit" (the
+        VideoFit), "landmarks" (where the head's came from)}.
     preview : Path or None
         The video beside the head playing its weights, where asked for.
     notes : list of str
@@ -151,23 +151,27 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
         {ARKit name, headYaw, headPitch, headRoll: (F,) float array}.
     fps : float
     figures : dict
-        {"frames", "track_fps", "fit_fps", "misfit_median" (face widths), "unseen": shapes 68
-        points cannot see, "saw": export.video.what_it_saw's report, "fit": the VideoFit}.
+        {"frames", "track_fps", "fit_fps", "misfit_median" (face widths), "unseen": the names of
+        the shapes the tracker cannot see (the tongue; the gaze too through dlib's points), "saw":
+        export.video.what_it_saw's report, "fit": the VideoFit}.
     """
     from ..export import ARKIT_52
-    from ..export.video import UNSEEN, fit_weights, head_angles, landmark_basis, track_video, what_it_saw
+    from ..export.video import UNSEEN, fit_weights, gaze_weights, head_angles, landmark_basis, track_video, what_it_saw
     basis = landmark_basis(head, landmarks, read)
     t0 = time.perf_counter()
-    fps, pts = track_video(video, progress=progress, tracker=tracker)
+    fps, pts, eyes = track_video(video, progress=progress, tracker=tracker, eyes=True)
     t1 = time.perf_counter()
     fit = fit_weights(pts, basis, rest_frame=rest_frame)
+    gaze = gaze_weights(eyes, fit.rotations)
+    for n, w in gaze.items():                          # the irises' gaze, into the fit's weights
+        fit.weights[:, ARKIT_52.index(n)] = w
     t2 = time.perf_counter()
     weights = {n: fit.weights[:, j] for j, n in enumerate(ARKIT_52)}
     angles = head_angles(fit.rotations)
     weights.update(zip(HEAD_ANGLES, angles.T))
     figures = {"frames": len(pts), "track_fps": len(pts) / max(t1 - t0, 1e-9),
                "fit_fps": len(pts) / max(t2 - t1, 1e-9), "misfit_median": float(np.median(fit.residual)),
-               "unseen": len(UNSEEN), "saw": what_it_saw(fit, fps, angles=angles), "fit": fit,
+               "unseen": [n for n in UNSEEN if n not in gaze], "saw": what_it_saw(fit, fps, angles=angles), "fit": fit,
                "landmarks": basis.landmarks}
     return np.arange(len(pts)) / fps, weights, fps, figures
 
