@@ -24,6 +24,7 @@ still_max (mimica's largest weight on the still take, its first second left out)
 track, fit and the CSV written, frames per second of the whole); mimica's active error tracking
 with dlib's points (the `tracker` option) on a line of its own.  MediaPipe's left and right are
 the image's: its scores are compared with the truth's mirror where that reads better (said).
+Picture: docs/figures/video_arkit.png (take 1041 beside the head playing mimica's weights).
 """
 
 from __future__ import annotations
@@ -85,6 +86,31 @@ def ours(head_glb, video, out_csv, tracker=None):
     return w, len(w) / (time.perf_counter() - t)
 
 
+def picture(head_glb, video, truth, tmp):
+    """docs/figures/video_arkit.png: frames of a take beside the head playing mimica's weights (the
+    preview `animate --preview` writes), where a few shapes peak, each captioned with its true and
+    fitted weight."""
+    from mimica.export.video import write_preview
+    from mimica.image.io import to_uint8
+    from mimica.image.video import frame_source
+    from mimica.pipeline.animate import weights_from_video
+    from mimica.render import contact_sheet, save_png
+    _, _, fps, figures = weights_from_video(head_glb, video)
+    fit = figures["fit"]
+    write_preview(tmp / "preview.mp4", video, head_glb, fit.weights, fit.rotations, fps, missing=fit.missing)
+    shown = {}
+    for n in ("eyeBlinkLeft", "eyeLookOutLeft", "eyeLookUpRight", "jawOpen", "mouthSmileRight", "browInnerUp"):
+        shown.setdefault(int(np.argmax(truth[:, ARKIT_52.index(n)])), n)
+    tiles, labels = [], []
+    for f, img in enumerate(frame_source(tmp / "preview.mp4")[2]):
+        if f in shown:
+            j = ARKIT_52.index(shown[f])
+            tiles.append(to_uint8(img))
+            labels.append(f"{shown[f]}: true {truth[f, j]:.2f}, mimica {fit.weights[f, j]:.2f}")
+    save_png(ROOT / "docs" / "figures" / "video_arkit.png",
+             contact_sheet(tiles, labels, columns=2, title="a held-out take (left) and the head playing mimica's weights"))
+
+
 def mediapipe_scores(video, model_path):
     """(F, 52) MediaPipe's blendshape scores frame by frame (NaN rows where it found no face),
     and its frames/s."""
@@ -143,6 +169,8 @@ def main():
         truth.append(w), fit.append(f), peer.append(p), rates.append(rate), peer_rates.append(prate)
         print(f"take {seed}: {len(w)} frames; mimica {rate:.0f} frames/s end to end; MediaPipe {prate:.0f} frames/s "
               f"(its face found on {np.isfinite(p).all(1).mean():.0%} of frames)")
+        if seed == 41:
+            picture(tmp / "arkit.glb", tmp / f"take{seed}.mp4", w, tmp)
     truth, fit, peer, fit_dlib = np.concatenate(truth), np.concatenate(fit), np.concatenate(peer), np.concatenate(fit_dlib)
     seen = np.isfinite(peer).all(1)
     straight = {n: j for j, n in enumerate(ARKIT_52)}
