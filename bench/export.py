@@ -114,24 +114,27 @@ def painted(model, rest):
     return mesh, old, col[old]
 
 
-def turned_eyes(rest, w, degrees):
-    """(index ranges, eyeballs' vertices) of ICT's eyeballs turned by the eyeLook weights w (52,):
-    `degrees` for a weight of 1, about each eyeball's own centre (a sphere fitted to it).  ICT's
-    eyeLook shapes move the lids only, as ARKit's are defined ("the eyelids consistent with a
-    gaze"); a performer's eyes turn with them."""
-    from scipy.spatial.transform import Rotation
-    from mimica.correspond.parts import ICT_PARTS
+def eyeball_centres(rest):
+    """((index range, centre) of ICT's left and right eyeball): each a sphere fitted to it
+    (correspond.parts.fit_sphere); the eyeballs do not deform, so once a take."""
+    from mimica.correspond.parts import ICT_PARTS, fit_sphere
     part = {name: (a, b) for name, a, b in ICT_PARTS}
+    return [(part[key], fit_sphere(rest[slice(*part[key])])[0]) for key in ("eyeball.left", "eyeball.right")]
+
+
+def turned_eyes(rest, centres, w, degrees):
+    """(index range, eyeball's vertices) of ICT's eyeballs turned by the eyeLook weights w (52,):
+    `degrees` for a weight of 1, about each eyeball's centre (eyeball_centres).  ICT's eyeLook
+    shapes move the lids only, as ARKit's are defined ("the eyelids consistent with a gaze"); a
+    performer's eyes turn with them."""
+    from scipy.spatial.transform import Rotation
     out = []
-    for side, key, away in (("Left", "eyeball.left", 1.0), ("Right", "eyeball.right", -1.0)):
-        a, b = part[key]
-        e = rest[a:b]
-        x = np.linalg.lstsq(np.c_[2 * e, np.ones(len(e))], (e ** 2).sum(1), rcond=None)[0]
+    for ((a, b), c), side, away in zip(centres, ("Left", "Right"), (1.0, -1.0)):
         g = {d: w[ARKIT_52.index(f"eyeLook{d}{side}")] for d in ("Out", "In", "Up", "Down")}
         # the subject's left is +x, the head looks along +z: out turns the left eye toward +x
         r = Rotation.from_euler("YX", [degrees * away * (g["Out"] - g["In"]), -degrees * (g["Up"] - g["Down"])],
                                 degrees=True).as_matrix()
-        out.append(((a, b), (e - x[:3]) @ r.T + x[:3]))
+        out.append(((a, b), (rest[a:b] - c) @ r.T + c))
     return out
 
 
@@ -154,11 +157,12 @@ def render_take(model, w, seed, path, fps=30, size=(640, 480), turn=(8.0, 4.0), 
     c, half = face_framing(model.neutral[ICT_LANDMARKS_68])
     tt = np.arange(len(w)) / fps
     yaw, pitch = turn[0] * np.sin(tt * rates[0] + seed), turn[1] * np.sin(tt * rates[1] + 2 * seed)
+    centres = eyeball_centres(ident) if eye_turn else None
     out = VideoWriter(path, fps)
     for f in range(len(w)):
         v = ident + np.einsum("k,knd->nd", w[f], deltas)
         if eye_turn:
-            for (a, b), e in turned_eyes(ident, w[f], eye_turn):
+            for (a, b), e in turned_eyes(ident, centres, w[f], eye_turn):
                 v[a:b] = e
         v = v[keep]
         out.write(render_mesh(mesh, v, size=size, frame=(c, zoom * half), light=LIGHT_RIGHT, colors=colors,

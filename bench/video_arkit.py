@@ -76,27 +76,25 @@ def render_take(model, w, seed, path, turn=True):
 
 
 def ours(head_glb, video, out_csv, tracker=None):
-    """(F, 52) weights and frames/s of the whole: decode, track, fit, the CSV written."""
+    """(F, 52) weights, frames/s of the whole (decode, track, fit, the CSV written), the video's
+    frame rate and the fit (VideoFit)."""
     from mimica.export.video import write_live_link_csv
     from mimica.pipeline.animate import weights_from_video
     t = time.perf_counter()
-    times, weights, fps, _ = weights_from_video(head_glb, video, tracker=tracker)
+    times, weights, fps, figures = weights_from_video(head_glb, video, tracker=tracker)
     w = np.stack([weights[n] for n in ARKIT_52], 1)
     write_live_link_csv(out_csv, times, w, fps, np.stack([weights[n] for n in ("headYaw", "headPitch", "headRoll")], 1))
-    return w, len(w) / (time.perf_counter() - t)
+    return w, len(w) / (time.perf_counter() - t), fps, figures["fit"]
 
 
-def picture(head_glb, video, truth, tmp):
-    """docs/figures/video_arkit.png: frames of a take beside the head playing mimica's weights (the
-    preview `animate --preview` writes), where a few shapes peak, each captioned with its true and
-    fitted weight."""
+def picture(head_glb, video, truth, fps, fit, tmp):
+    """docs/figures/video_arkit.png: frames of a take beside the head playing mimica's weights
+    (fit: ours()'s; the preview `animate --preview` writes), where a few shapes peak, each
+    captioned with its true and fitted weight."""
     from mimica.export.video import write_preview
     from mimica.image.io import to_uint8
     from mimica.image.video import frame_source
-    from mimica.pipeline.animate import weights_from_video
     from mimica.render import contact_sheet, save_png
-    _, _, fps, figures = weights_from_video(head_glb, video)
-    fit = figures["fit"]
     write_preview(tmp / "preview.mp4", video, head_glb, fit.weights, fit.rotations, fps, missing=fit.missing)
     shown = {}
     for n in ("eyeBlinkLeft", "eyeLookOutLeft", "eyeLookUpRight", "jawOpen", "mouthSmileRight", "browInnerUp"):
@@ -162,15 +160,15 @@ def main():
     for seed in (41, 42):
         w = take_weights(args.frames, seed)
         render_take(model, w, seed, tmp / f"take{seed}.mp4")
-        f, rate = ours(tmp / "arkit.glb", tmp / f"take{seed}.mp4", tmp / f"take{seed}.csv")
-        f2, rate2 = ours(tmp / "arkit.glb", tmp / f"take{seed}.mp4", tmp / f"take{seed}_dlib.csv", tracker="dlib")
+        f, rate, fps, fitted = ours(tmp / "arkit.glb", tmp / f"take{seed}.mp4", tmp / f"take{seed}.csv")
+        f2, rate2, _, _ = ours(tmp / "arkit.glb", tmp / f"take{seed}.mp4", tmp / f"take{seed}_dlib.csv", tracker="dlib")
         fit_dlib.append(f2), rates_dlib.append(rate2)
         p, prate = mediapipe_scores(tmp / f"take{seed}.mp4", task)
         truth.append(w), fit.append(f), peer.append(p), rates.append(rate), peer_rates.append(prate)
         print(f"take {seed}: {len(w)} frames; mimica {rate:.0f} frames/s end to end; MediaPipe {prate:.0f} frames/s "
               f"(its face found on {np.isfinite(p).all(1).mean():.0%} of frames)")
         if seed == 41:
-            picture(tmp / "arkit.glb", tmp / f"take{seed}.mp4", w, tmp)
+            picture(tmp / "arkit.glb", tmp / f"take{seed}.mp4", w, fps, fitted, tmp)
     truth, fit, peer, fit_dlib = np.concatenate(truth), np.concatenate(fit), np.concatenate(peer), np.concatenate(fit_dlib)
     seen = np.isfinite(peer).all(1)
     straight = {n: j for j, n in enumerate(ARKIT_52)}
@@ -201,7 +199,7 @@ def main():
     print("mimica's worst correlations: " + ", ".join(f"{n} {corr[n]:.2f}" for n in worst))
     still = np.zeros((min(150, args.frames), 52))
     render_take(model, still, 43, tmp / "still.mp4", turn=False)
-    fs, _ = ours(tmp / "arkit.glb", tmp / "still.mp4", tmp / "still.csv")
+    fs, _, _, _ = ours(tmp / "arkit.glb", tmp / "still.mp4", tmp / "still.csv")
     still_max = float(fs[FPS:].max())
     print(f"still take: mimica's largest weight {still_max:.3f} ({ARKIT_52[int(np.argmax(fs[FPS:].max(0)))]})")
     print(f"active_mae={ours_mae:.3f} mediapipe_active_mae={mp_mae:.3f} groups_beaten={beaten}/{len(GROUPS)} "

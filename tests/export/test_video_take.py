@@ -193,16 +193,16 @@ def test_gaze_from_the_irises():
     offset gives over GAZE_FULL_DEG; the other shapes stay 0; a head turning alone (the irises
     moving across the corners by their depth) reads as no gaze."""
     from scipy.spatial.transform import Rotation
-    from mimica.export.video import GAZE_FULL_DEG, gaze_weights
+    from mimica.export.video import GAZE_FULL_DEG, gaze_weights, head_angles
     frames = 90
     turn = ramp(frames, 30, 40, 0.5 * GAZE_FULL_DEG)                  # half a full look out
-    still = np.broadcast_to(np.eye(3), (frames, 3, 3))
+    still = np.zeros((frames, 3))
     g = gaze_weights(_eyes(frames, turn, np.zeros(frames)), still)
     assert abs(g["eyeLookOutRight"].max() - 0.5) < 0.05, g["eyeLookOutRight"].max()
     assert np.corrcoef(g["eyeLookOutRight"], turn)[0, 1] > 0.98
     assert max(w.max() for n, w in g.items() if n != "eyeLookOutRight") < 0.02
     yaw = np.radians(25) * np.sin(np.arange(frames) / 10)
     rot = Rotation.from_euler("Y", yaw[:, None]).as_matrix()
-    g = gaze_weights(_eyes(frames, np.zeros(frames), yaw), rot)
+    g = gaze_weights(_eyes(frames, np.zeros(frames), yaw), head_angles(rot))
     assert max(w.max() for w in g.values()) < 0.02, {n: w.max() for n, w in g.items()}
     assert gaze_weights(np.full((5, 2, 3, 2), np.nan), still[:5]) == {}   # dlib's: no irises

@@ -457,7 +457,7 @@ def _checked(path, n, max_frames, out: list) -> np.ndarray:
     return pts
 
 
-def gaze_weights(eyes: np.ndarray, rotations: np.ndarray, smooth_points: float = SMOOTH_POINTS) -> dict:
+def gaze_weights(eyes: np.ndarray, angles: np.ndarray, smooth_points: float = SMOOTH_POINTS) -> dict:
     """The eyeLook* weights of a take from its irises: each iris's offset from the middle of its
     eye's corners, across and along the eye, over the eye's width, read as the eye's turn
     (asin(offset / EYE_RADIUS)) and the turn as weights (GAZE_FULL_DEG for 1).  The iris lies in
@@ -470,8 +470,9 @@ def gaze_weights(eyes: np.ndarray, rotations: np.ndarray, smooth_points: float =
     ----------
     eyes : (F, 2, 3, 2) float array
         track_video's eyes (NaN where unseen: filled from the neighbouring frames).
-    rotations : (F, 3, 3) float array
-        The head's rotations relative to the rest frame (VideoFit.rotations).
+    angles : (F, 3) float array
+        The head's yaw, pitch and roll relative to the rest frame (head_angles of the fit's
+        rotations).
     smooth_points : float
         Frames: the Gaussian over time.
 
@@ -487,8 +488,7 @@ def gaze_weights(eyes: np.ndarray, rotations: np.ndarray, smooth_points: float =
         return {}
     e, _ = _fill_missing(e)
     e = e.reshape(-1, 2, 3, 2)
-    ang = head_angles(rotations)
-    X = np.c_[np.sin(ang[:, :2]), np.ones(len(e))]
+    X = np.c_[np.sin(np.asarray(angles)[:, :2]), np.ones(len(e))]
     out = {}
     for k, side in enumerate(("Right", "Left")):
         outer, inner, iris = e[:, k, 0], e[:, k, 1], e[:, k, 2]
@@ -512,7 +512,8 @@ def gaze_weights(eyes: np.ndarray, rotations: np.ndarray, smooth_points: float =
 
 def _l1_fit(X: np.ndarray, y: np.ndarray, rounds: int = 10, floor: float = 1e-3) -> np.ndarray:
     """Coefficients c minimising sum |X c - y| (reweighted least squares): the brief gaze shifts
-    of a take are outliers to the head's share, which a least-squares fit would lean toward."""
+    of a take are outliers to the head's share, which a least-squares fit would lean toward.
+    (Three columns: ten small solves, where scipy's least_squares would only smooth the L1 loss.)"""
     c = np.linalg.lstsq(X, y, rcond=None)[0]
     for _ in range(rounds):
         sw = 1.0 / np.sqrt(np.maximum(np.abs(X @ c - y), floor))

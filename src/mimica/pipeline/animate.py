@@ -162,12 +162,12 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
     fps, pts, eyes = track_video(video, progress=progress, tracker=tracker, eyes=True)
     t1 = time.perf_counter()
     fit = fit_weights(pts, basis, rest_frame=rest_frame)
-    gaze = gaze_weights(eyes, fit.rotations)
+    angles = head_angles(fit.rotations)
+    gaze = gaze_weights(eyes, angles)
     for n, w in gaze.items():                          # the irises' gaze, into the fit's weights
         fit.weights[:, ARKIT_52.index(n)] = w
     t2 = time.perf_counter()
     weights = {n: fit.weights[:, j] for j, n in enumerate(ARKIT_52)}
-    angles = head_angles(fit.rotations)
     weights.update(zip(HEAD_ANGLES, angles.T))
     figures = {"frames": len(pts), "track_fps": len(pts) / max(t1 - t0, 1e-9),
                "fit_fps": len(pts) / max(t2 - t1, 1e-9), "misfit_median": float(np.median(fit.residual)),
