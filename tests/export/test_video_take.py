@@ -82,9 +82,9 @@ def test_the_takes_turns_place_the_performers_points_in_depth(head_glb):
     """A performer whose jaw line lies deeper and brows further forward than the head's (by 5 and
     3 % of the face's width; a tracker's points sit at depths of their own too), the head turning
     from 25 degrees to -25 and back, the jaw opening once: one rest frame cannot show depth, so
-    read through the rest frame alone the turn reads as expression (a shape over 0.1 while the
-    jaw rests); with the depths found from the turns, every other weight stays under 0.05 and
-    jawOpen is found within 0.05 where it acts."""
+    read through the rest frame alone the turn reads as expression (another shape over 0.1:
+    browDownLeft reaches 0.5); with the depths found from the turns, every other weight stays
+    under 0.05 and jawOpen is found within 0.05 where it acts."""
     from mimica.export.video import fit_weights, landmark_basis
     basis = landmark_basis(head_glb)
     width = np.linalg.norm(basis.rest[16] - basis.rest[0])
