@@ -128,8 +128,8 @@ def test_both_trackers_find_the_same_points(tmp_path):
     from mimica.export.video import track_video, trackers
     assert trackers() == ["mediapipe", "dlib"]         # CI installs the photo extra
     frames = jaw_frames(tmp_path / "frames", ramp(8, 1, 6, 1.0), blank=(7,))
-    _, a = track_video(frames)
-    _, b = track_video(frames, tracker="dlib")
+    a = track_video(frames).points
+    b = track_video(frames, tracker="dlib").points
     assert np.isnan(a[7]).all() and np.isnan(b[7]).all() and np.isfinite(a[:7]).all()
     width = np.ptp(b[:7, :, 0], axis=1).mean()
     gap = np.linalg.norm(a[:7] - b[:7], axis=2)
@@ -147,7 +147,7 @@ def test_the_default_tracker_sees_a_blink(head_glb, tmp_path, mediapipe):
     from mimica.export.video import fit_weights, landmark_basis, track_video
     blink = ramp(16, 2, 12, 1.0)
     frames = jaw_frames(tmp_path / "frames", blink, shape="eyeBlink_L")
-    _, pts = track_video(frames)
+    pts = track_video(frames).points
     w = fit_weights(pts, landmark_basis(head_glb)).weights
     left, right = w[:, ARKIT_52.index("eyeBlinkLeft")], w[:, ARKIT_52.index("eyeBlinkRight")]
     assert np.corrcoef(left, blink)[0, 1] > 0.75 and left.max() > 0.4, np.round(left, 2)

@@ -374,9 +374,28 @@ def trackers() -> list[str]:
     return (["mediapipe"] if importlib.util.find_spec("mediapipe") else []) + ["dlib"]
 
 
-def track_video(path, progress=None, max_frames: int | None = None, tracker: str | None = None,
-                eyes: bool = False):
-    """The face's 68 points through a video or a folder of frames (and, asked for, its eyes).
+@dataclass
+class Tracked:
+    """A take's tracked face (track_video).
+
+    Attributes
+    ----------
+    fps : float
+        The video's frame rate.
+    points : (F, 68, 2) float array
+        Pixels; NaN rows where a frame shows no face.
+    eyes : (F, 2, 3, 2) float array
+        The subject's right and left eye's outer corner, inner corner and iris centre in pixels
+        (MediaPipe's attention mesh: EYE_POINTS); NaN where no face, and throughout for dlib (it
+        sees no irises).
+    """
+    fps: float
+    points: np.ndarray
+    eyes: np.ndarray
+
+
+def track_video(path, progress=None, max_frames: int | None = None, tracker: str | None = None) -> Tracked:
+    """The face's 68 points and its eyes through a video or a folder of frames.
 
     "mediapipe" (the default where the photo extra is installed): MediaPipe's face mesh with
     attention in its tracking mode (detect2d.mediapipe_tracker), the 68 of its points that read
@@ -386,12 +405,9 @@ def track_video(path, progress=None, max_frames: int | None = None, tracker: str
     none, the frames since the last confirmation (the last frames too) are checked one by one, so
     that the frames without a face are known exactly; then it looks for the face again on every
     frame.
-    Where the weights act the fit reads them with an error of 0.361 / 0.391 through MediaPipe's
-    points against 0.388 / 0.405 through dlib's on painted takes turning up to 30 degrees (dev
-    identities 1007, 1008), and 0.278 / 0.231 against 0.261 / 0.246 on bench/export.py's grey
-    takes turning 8 degrees; dlib's box loses the face on a turn (its points' motion off by
-    6.5-78 pixels against 2.0-6.8), and a still face's turn reads as expression far less through
-    MediaPipe's points (TURN_TRUSTED's measurement).
+    dlib's box loses the face on a turn (its points' motion off by 6.5-78 pixels against
+    MediaPipe's 2.0-6.8), and a still face's turn reads as expression far less through MediaPipe's
+    points; the fit through each: docs/benchmarks.md (bench/video_arkit.py, bench/export.py).
 
     Parameters
     ----------
@@ -402,17 +418,10 @@ def track_video(path, progress=None, max_frames: int | None = None, tracker: str
         Stop after this many.
     tracker : str or None
         "mediapipe" or "dlib" (None: the first of trackers()).
-    eyes : bool
-        Also return the eyes' corners and irises (MediaPipe's attention mesh: EYE_POINTS).
 
     Returns
     -------
-    fps : float
-    points : (F, 68, 2) float array
-        NaN rows where a frame shows no face.
-    eyes : (F, 2, 3, 2) float array
-        Only where asked for: the subject's right and left eye's outer corner, inner corner and
-        iris centre in pixels; NaN where no face, and throughout for dlib (it sees no irises).
+    Tracked
     """
     from ..image.video import frame_source
     from ..landmarks.detect2d import box_of, detect_faces, fit_points
@@ -424,7 +433,7 @@ def track_video(path, progress=None, max_frames: int | None = None, tracker: str
     if tracker == "mediapipe":
         tracked = _tracked_mediapipe(frames, n, progress, max_frames, path)
         pts = _checked(path, n, max_frames, [p for p, _ in tracked])
-        return (fps, pts, np.stack([e for _, e in tracked])) if eyes else (fps, pts)
+        return Tracked(fps, pts, np.stack([e for _, e in tracked]))
     out, raw, since = [], None, []          # since: (frame, image) tracked since the detector last saw the face
 
     def nearest(boxes, c):
@@ -468,7 +477,7 @@ def track_video(path, progress=None, max_frames: int | None = None, tracker: str
     except (RuntimeError, OSError) as e:                        # ffmpeg stopping inside the stream
         raise _broken_off(path, len(out), e) from None
     pts = _checked(path, n, max_frames, out)
-    return (fps, pts, np.full((len(pts), 2, 3, 2), np.nan)) if eyes else (fps, pts)
+    return Tracked(fps, pts, np.full((len(pts), 2, 3, 2), np.nan))
 
 
 def _tracked_mediapipe(frames, n, progress, max_frames, path) -> list:

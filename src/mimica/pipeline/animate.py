@@ -159,7 +159,8 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
     from ..export.video import UNSEEN, fit_weights, gaze_weights, head_angles, landmark_basis, track_video, what_it_saw
     basis = landmark_basis(head, landmarks, read)
     t0 = time.perf_counter()
-    fps, pts, eyes = track_video(video, progress=progress, tracker=tracker, eyes=True)
+    tracked = track_video(video, progress=progress, tracker=tracker)
+    fps, pts, eyes = tracked.fps, tracked.points, tracked.eyes
     t1 = time.perf_counter()
     fit = fit_weights(pts, basis, rest_frame=rest_frame)
     angles = head_angles(fit.rotations)
