@@ -196,7 +196,8 @@ def main():
     cv = np.array(list(corr.values()))
     worst = sorted(corr, key=corr.get)[:5]
     print("active error by group, mimica/MediaPipe: " + ", ".join(lines))
-    print("mimica's worst correlations: " + ", ".join(f"{n} {corr[n]:.2f}" for n in worst))
+    print(f"mimica's per-shape correlations: mean {cv.mean():.2f}, {int((cv > 0.5).sum())} of {len(cv)} above 0.5; worst: "
+          + ", ".join(f"{n} {corr[n]:.2f}" for n in worst))
     still = np.zeros((min(150, args.frames), 52))
     render_take(model, still, 43, tmp / "still.mp4", turn=False)
     fs, _, _, _ = ours(tmp / "arkit.glb", tmp / "still.mp4", tmp / "still.csv")
