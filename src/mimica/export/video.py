@@ -1,6 +1,6 @@
 """ARKit weights from a video, without an iPhone: the face's 68 points are
-tracked frame by frame (dlib's detector, or MediaPipe's face mesh in its tracking mode:
-track_video), and the 52 weights fitted to them through the head's own blendshapes.
+tracked frame by frame (MediaPipe's face mesh with attention in its tracking mode, or dlib's
+detector: track_video), and the 52 weights fitted to them through the head's own blendshapes.
 
 The model of a frame is a scaled orthographic camera looking at the head's landmarks moved by
 its blendshapes:  x = s P R (L + sum_k w_k B_k) + t,  with L the performer's rest landmarks,
@@ -16,8 +16,10 @@ error over the jaw, mouth, brow and blink weights 0.071 against 0.027 on the tra
 points little (a brow) is seen only from about 0.3 of its weight.
 
 The performer is not the head: their rest landmarks are the head's plus the offset that the
-take's first frame (or the one named) shows, lifted into the head's frame at zero depth -- the
-take must start from a rest face, as Live Link Face's calibration also asks.  tongueOut is not
+take's first frame (or the one named) shows, lifted into the head's frame at the head's depth --
+the take must start from a rest face, as Live Link Face's calibration also asks -- and then each
+point's depth as the take's own turns show it (_depth_offsets), the take fitted again through
+them.  tongueOut is not
 fitted (the points do not see it): it stays 0.  The gaze shapes (eyeLook*) are read from the
 irises of MediaPipe's attention mesh (gaze_weights), not through the fit: through dlib's points
 they stay 0.
@@ -49,9 +51,9 @@ SMOOTH_POINTS = 1.5        # frames: the points' Gaussian over time
 POINT_WEIGHTS = np.r_[np.full(17, 0.3), np.ones(51)]   # the face's outline, where detectors err most, counts less
 CHECK_EVERY = 5            # frames: the face detector confirms the tracked face this often
 # degrees of yaw or pitch from the rest frame past which a still face's turn reads as expression:
-# neutral takes turning up to 30 degrees (identities 1009, 1010, painted; 600 frames) put a weight
-# over 0.3 in 15-24 % of the frames within 15 degrees and in 97-100 % past it through MediaPipe's
-# points; through dlib's in 59-100 % at any turn
+# neutral takes turning up to 30 degrees (identities 1009, 1010, painted; 300 frames) put a weight
+# over 0.3 in 0-59 % of the frames within 15 degrees and in 58-100 % past it through MediaPipe's
+# points (the depths found from the turns); through dlib's in 71-100 % at any turn
 TURN_TRUSTED = 15.0
 # the gaze (gaze_weights): an eyeLook weight of 1 turns the eye GAZE_FULL_DEG -- ARKit's eyeLook
 # shapes are the lids' movement "consistent with" a gaze and state no angle, so this is a
@@ -270,13 +272,12 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
     return VideoFit(out, R @ R0.T, res, missing)
 
 
-def _fit_frames(img, rest, motion, pulls):
-    """Each frame's pose (s, R, t) and weights (F, k) through `motion` from `rest` (fit_weights;
-    img y up, lengths in face widths), and its RMS misfit."""
+def _fit_frames(img, Ls, Bf, pulls):
+    """Each frame's pose (s, R, t) and weights (F, k) through the motion Bf (k, 68, 3) from the
+    rest Ls (68, 3) (fit_weights; img y up, lengths in face widths), and its RMS misfit."""
     from scipy.optimize import lsq_linear
     from scipy.spatial.transform import Rotation
     rest_pull, sparse_pull, smooth_pull = pulls
-    Ls, Bf = rest, motion
     n = len(img)
     k = len(Bf)
     smo = np.c_[np.zeros((k, 6)), np.sqrt(smooth_pull) * np.eye(k)]

@@ -171,8 +171,7 @@ def mediapipe_tracker():
     The attention mesh (`refine_landmarks`) refines the lids, the lips and the irises.  Without
     it the lids hardly follow a blink: on a painted take (dev identity 1007) the left eye's
     opening went from 0.38 to 0.04 of its width through a blink of 0.87 with it, 0.48 to 0.39
-    without; the ARKit fit through its 68 points read the weights where they act with an error
-    of 0.376 against 0.420 (dev identities 1007, 1008 pooled), at the same speed.
+    without, at the same speed (the ARKit fit through each: docs/benchmarks.md).
 
     Returns
     -------
