@@ -233,3 +233,26 @@ def test_gaze_from_the_irises():
     g = gaze_weights(_eyes(frames, np.zeros(frames), yaw), head_angles(rot))
     assert max(w.max() for w in g.values()) < 0.02, {n: w.max() for n, w in g.items()}
     assert gaze_weights(np.full((5, 2, 3, 2), np.nan), still[:5]) == {}   # dlib's: no irises
+
+
+def test_fit_take_joins_the_gaze_to_the_fit(head_glb):
+    """fit_take: the points' weights as fit_weights finds them, the eyeLook weights from the irises
+    in their columns, and what stays 0 named -- the tongue; the gaze too where the tracker gave no
+    irises (dlib's)."""
+    from mimica.export.video import UNSEEN, GAZE_FULL_DEG, Tracked, fit_take, fit_weights, landmark_basis
+    basis = landmark_basis(head_glb)
+    frames = 60
+    w = np.zeros((frames, 52))
+    w[:, ARKIT_52.index("jawOpen")] = ramp(frames, 5, 30, 0.8)
+    pts = _projected(basis.rest, basis.motion, w, np.zeros(frames), 0.0)
+    turn = ramp(frames, 20, 30, 0.5 * GAZE_FULL_DEG)
+    fit = fit_take(Tracked(30.0, pts, _eyes(frames, turn, np.zeros(frames))), basis)
+    alone = fit_weights(pts, basis)
+    look = ARKIT_52.index("eyeLookOutRight")
+    assert abs(fit.weights[:, look].max() - 0.5) < 0.05, fit.weights[:, look].max()
+    others = [j for j, n in enumerate(ARKIT_52) if not n.startswith("eyeLook")]
+    np.testing.assert_allclose(fit.weights[:, others], alone.weights[:, others])
+    assert fit.unseen == ("tongueOut",)
+    blind = fit_take(Tracked(30.0, pts, np.full((frames, 2, 3, 2), np.nan)), basis)
+    assert blind.unseen == UNSEEN and not blind.weights[:, look].any()
+    np.testing.assert_allclose(blind.angles[:, 0], 0.0, atol=1e-3)

@@ -21,13 +21,14 @@ the take must start from a rest face, as Live Link Face's calibration also asks 
 point's depth as the take's own turns show it (_depth_offsets), the take fitted again through
 them.  tongueOut is not
 fitted (the points do not see it): it stays 0.  The gaze shapes (eyeLook*) are read from the
-irises of MediaPipe's attention mesh (gaze_weights), not through the fit: through dlib's points
-they stay 0.
+irises of MediaPipe's attention mesh (gaze_weights), not through the fit, and joined to its
+weights by fit_take: through dlib's points they stay 0.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -172,11 +173,20 @@ class VideoFit:
         RMS misfit of the 68 points, in face widths.
     missing : (F,) bool array
         Frames that showed no face: fitted to points interpolated from their neighbours.
+    unseen : tuple of str
+        The shapes nothing in the take showed: they stay 0 (the tongue; the gaze too where the
+        tracker gave no irises).
     """
     weights: np.ndarray          # (F, 52) in ARKIT_52's order
     rotations: np.ndarray        # (F, 3, 3): the head's rotation relative to the rest frame
     residual: np.ndarray         # (F,) RMS misfit of the 68 points, in face widths
     missing: np.ndarray = None   # (F,) frames without a face
+    unseen: tuple = UNSEEN
+
+    @cached_property
+    def angles(self) -> np.ndarray:
+        """(F, 3) the head's yaw, pitch and roll from the rest frame, radians (head_angles)."""
+        return head_angles(self.rotations)
 
 
 def _fill_missing(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -270,6 +280,32 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
     out = np.zeros((len(pts), len(basis.names)))
     out[:, free] = w
     return VideoFit(out, R @ R0.T, res, missing)
+
+
+def fit_take(tracked: Tracked, basis: LandmarkBasis, rest_frame: int = 0) -> VideoFit:
+    """A tracked take's ARKit weights: fit_weights through its points, then the eyeLook weights
+    from its irises where the tracker gave them (gaze_weights, which reads the head's turn the fit
+    found).
+
+    Parameters
+    ----------
+    tracked : Tracked
+        track_video's.
+    basis : LandmarkBasis
+    rest_frame : int
+        The frame showing the performer at rest (fit_weights).
+
+    Returns
+    -------
+    VideoFit
+        Its `unseen` names what stays 0: the tongue, and the gaze where no frame showed the irises.
+    """
+    fit = fit_weights(tracked.points, basis, rest_frame=rest_frame)
+    gaze = gaze_weights(tracked.eyes, fit.angles)
+    for n, w in gaze.items():
+        fit.weights[:, ARKIT_52.index(n)] = w
+    fit.unseen = tuple(n for n in UNSEEN if n not in gaze)
+    return fit
 
 
 def _fit_frames(img, Ls, Bf, pulls):
@@ -656,7 +692,7 @@ def _spans(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.nonzero(d == 1)[0].tolist(), (np.nonzero(d == -1)[0] - 1).tolist()))
 
 
-def what_it_saw(fit: VideoFit, fps: float, names=ARKIT_52, angles: np.ndarray | None = None) -> dict:
+def what_it_saw(fit: VideoFit, fps: float, names=ARKIT_52) -> dict:
     """What a video's fit should tell its user: the frames without a face, the frames turned
     further than the fit can be trusted (TURN_TRUSTED: past it a still face's turn reads as
     expression), and the weights held at their bound for long.
@@ -668,8 +704,6 @@ def what_it_saw(fit: VideoFit, fps: float, names=ARKIT_52, angles: np.ndarray | 
         The video's rate.
     names : list of str
         The weights' names (fit.weights' columns).
-    angles : (F, 3) float array or None
-        head_angles(fit.rotations) where the caller has them already; None: computed here.
 
     Returns
     -------
@@ -680,8 +714,7 @@ def what_it_saw(fit: VideoFit, fps: float, names=ARKIT_52, angles: np.ndarray | 
         HELD_SECONDS or longer}.
     """
     missing = np.zeros(len(fit.weights), bool) if fit.missing is None else fit.missing
-    angles = head_angles(fit.rotations) if angles is None else angles
-    ang = np.degrees(np.abs(angles[:, :2])).max(1)
+    ang = np.degrees(np.abs(fit.angles[:, :2])).max(1)
     ang[missing] = 0.0
     long = max(1, int(round(HELD_SECONDS * fps)))
     held = {}

@@ -148,6 +148,36 @@ class TriangleLocator:
                 kk = min(2 * kk, len(ids))
         return tri, bary, qq, dist
 
+    def closest_facing(self, points, normals, k: int = 24):
+        """Each point's closest point among the k triangles whose centroids are nearest it, of
+        those facing its way (normals within 90 degrees of its normal): where two walls lie close
+        (a shut mouth's bag) the closest point alone jumps between them.  Where none faces its
+        way, the closest of them.
+
+        Parameters
+        ----------
+        points, normals : (m, 3) float arrays
+
+        Returns
+        -------
+        triangle : (m,) int array
+        barycentric : (m, 3) float array
+        """
+        p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        k = min(k, len(self.t))
+        if "_centroid_tree" not in self.__dict__:
+            self._centroid_tree = cKDTree(self.centroids)
+        _, cand = self._centroid_tree.query(p, k=k)
+        cand = cand.reshape(len(p), k)
+        a, b, c = (self.v[self.t[cand, i]].reshape(-1, 3) for i in range(3))
+        q, bary = closest_point_on_triangles(np.repeat(p, k, axis=0), a, b, c)
+        d = np.linalg.norm(q - np.repeat(p, k, axis=0), axis=1).reshape(len(p), k)
+        facing = np.einsum("mkd,md->mk", np.cross(b - a, c - a).reshape(len(p), k, 3), normals) > 0
+        best = np.argmin(np.where(facing, d, np.inf), axis=1)
+        none = ~facing.any(1)
+        best[none] = np.argmin(d[none], axis=1)
+        return cand[np.arange(len(p)), best], bary[np.arange(len(p)) * k + best]
+
 
 def barycentric_2d(p, a, b, c):
     """Barycentric coordinates of 2D points in triangles (a, b, c), pairwise.

@@ -156,25 +156,21 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
         export.video.what_it_saw's report, "fit": the VideoFit}.
     """
     from ..export import ARKIT_52
-    from ..export.video import UNSEEN, fit_weights, gaze_weights, head_angles, landmark_basis, track_video, what_it_saw
+    from ..export.video import fit_take, landmark_basis, track_video, what_it_saw
     basis = landmark_basis(head, landmarks, read)
     t0 = time.perf_counter()
     tracked = track_video(video, progress=progress, tracker=tracker)
-    fps, pts, eyes = tracked.fps, tracked.points, tracked.eyes
+    fps, n = tracked.fps, len(tracked.points)
     t1 = time.perf_counter()
-    fit = fit_weights(pts, basis, rest_frame=rest_frame)
-    angles = head_angles(fit.rotations)
-    gaze = gaze_weights(eyes, angles)
-    for n, w in gaze.items():                          # the irises' gaze, into the fit's weights
-        fit.weights[:, ARKIT_52.index(n)] = w
+    fit = fit_take(tracked, basis, rest_frame=rest_frame)
     t2 = time.perf_counter()
-    weights = {n: fit.weights[:, j] for j, n in enumerate(ARKIT_52)}
-    weights.update(zip(HEAD_ANGLES, angles.T))
-    figures = {"frames": len(pts), "track_fps": len(pts) / max(t1 - t0, 1e-9),
-               "fit_fps": len(pts) / max(t2 - t1, 1e-9), "misfit_median": float(np.median(fit.residual)),
-               "unseen": [n for n in UNSEEN if n not in gaze], "saw": what_it_saw(fit, fps, angles=angles), "fit": fit,
+    weights = {name: fit.weights[:, j] for j, name in enumerate(ARKIT_52)}
+    weights.update(zip(HEAD_ANGLES, fit.angles.T))
+    figures = {"frames": n, "track_fps": n / max(t1 - t0, 1e-9),
+               "fit_fps": n / max(t2 - t1, 1e-9), "misfit_median": float(np.median(fit.residual)),
+               "unseen": list(fit.unseen), "saw": what_it_saw(fit, fps), "fit": fit,
                "landmarks": basis.landmarks}
-    return np.arange(len(pts)) / fps, weights, fps, figures
+    return np.arange(n) / fps, weights, fps, figures
 
 
 def take_usd(head: Path, out, times, weights: dict, rate: float, read=None) -> dict:

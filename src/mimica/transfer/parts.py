@@ -216,8 +216,9 @@ class _Pockets:
     docstring).  Where the skin has a correspondence, a pocket is first carried onto the
     source's by it: the rim's offsets to their corresponding source points, spread over the
     pocket harmonically, bring the target's lips and lids onto the source's before each pocket
-    point looks for its closest source point on a face turned its way (_closest_facing); and the
-    rim's source motion is read at its corresponding points."""
+    point looks for its closest source point on a face turned its way
+    (TriangleLocator.closest_facing); and the rim's source motion is read at its corresponding
+    points."""
 
     def __init__(self, source: Mesh, ps: Parts, target: Mesh, pt: Parts, similarity: Similarity,
                  skin_index=None, match=None):
@@ -259,7 +260,7 @@ class _Pockets:
                 looked = looked + HarmonicFill(target.adjacency, self.vertices, rim)(
                     np.where(ok[:, None], put - self._rim_at, 0.0))
         normals = target.vertex_normals()[self.vertices] @ similarity.rotation.T
-        t, bary = _closest_facing(source.vertices, tri, looked, normals)
+        t, bary = TriangleLocator(source.vertices, tri).closest_facing(looked, normals)
         self._corners, self._bary = tri[t], bary
 
     def _source_motion(self, frames, corners, bary, at):
@@ -281,29 +282,6 @@ class _Pockets:
 def _faces_of(mesh: Mesh, on: np.ndarray) -> np.ndarray:
     """The polygons with a corner among the vertices `on`."""
     return np.nonzero(np.add.reduceat(on[mesh.face_indices].astype(int), mesh.face_starts[:-1]) > 0)[0]
-
-
-def _closest_facing(v, tri, p, n, k: int = 24):
-    """Each point's closest point on the triangles among the k whose centroids are nearest it,
-    of those facing its way (normals within 90 degrees of n): a bag's two walls lie close where
-    the mouth is shut, and the closest point alone jumps between them.  Where none faces its
-    way, the closest of them.  Returns (triangle (m,), barycentric (m, 3))."""
-    from scipy.spatial import cKDTree
-    from ..mesh.query import closest_point_on_triangles
-    cent = v[tri].mean(1)
-    k = min(k, len(tri))
-    _, cand = cKDTree(cent).query(p, k=k)
-    cand = cand.reshape(len(p), k)
-    a, b, c = (v[tri[cand, i]].reshape(-1, 3) for i in range(3))
-    q, bary = closest_point_on_triangles(np.repeat(p, k, axis=0), a, b, c)
-    d = np.linalg.norm(q - np.repeat(p, k, axis=0), axis=1).reshape(len(p), k)
-    fn = np.cross(b - a, c - a).reshape(len(p), k, 3)
-    facing = np.einsum("mkd,md->mk", fn, n) > 0
-    best = np.argmin(np.where(facing, d, np.inf), axis=1)
-    none = ~facing.any(1)
-    best[none] = np.argmin(d[none], axis=1)
-    pick = np.arange(len(p)) * k + best
-    return cand[np.arange(len(p)), best], bary[pick]
 
 
 def _chin(source: Mesh, ps: Parts, lm) -> np.ndarray:
