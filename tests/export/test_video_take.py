@@ -105,6 +105,22 @@ def test_the_takes_turns_place_the_performers_points_in_depth(head_glb):
     assert np.abs(fit[on, j] - w[on, j]).mean() < 0.05, np.abs(fit[on, j] - w[on, j]).mean()
 
 
+def test_a_take_that_never_turns_keeps_the_rest_frames_lift(head_glb):
+    """The head turning under DEPTH_MIN_TURN: no depth is read from the take (its points'
+    misfit -- here the tracker's noise -- would be), so the weights are those of the rest frame's
+    lift alone; turning past it, the depths are found."""
+    from mimica.export.video import DEPTH_MIN_TURN, fit_weights, landmark_basis
+    basis = landmark_basis(head_glb)
+    frames = 60
+    w = np.zeros((frames, 52))
+    w[:, ARKIT_52.index("eyeBlinkLeft")] = ramp(frames, 10, 30, 0.9)
+    noise = np.random.default_rng(7).normal(0, 0.4, (frames, 68, 2))
+    for turn, same in ((0.5 * DEPTH_MIN_TURN, True), (3 * DEPTH_MIN_TURN, False)):
+        pts = _projected(basis.rest, basis.motion, w, np.radians(turn) * np.sin(np.arange(frames) / 9), 0.05) + noise
+        lifted = fit_weights(pts, basis, depth_rounds=0).weights
+        assert np.array_equal(fit_weights(pts, basis).weights, lifted) == same, turn
+
+
 def test_live_link_csv_keeps_the_video_rate(tmp_path):
     """The CSV's timecode counts frames at the video's rate: a 30 fps take of 2.5 s reads back at
     30 fps with its times (a 60 fps count would read as 59)."""

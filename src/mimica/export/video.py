@@ -49,12 +49,17 @@ RELAX_STAY = 0.02          # ... or above this when it was kept in the frame bef
 RELAX_KEEP = 0.1           # a weight the L1 pull keeps above this is refitted without it
 GAUSS_NEWTON_STEPS = 3     # per frame (and one to refit), from the last frame's pose and weights
 SMOOTH_POINTS = 1.5        # frames: the points' Gaussian over time
-POINT_WEIGHTS = np.r_[np.full(17, 0.3), np.ones(51)]   # the face's outline, where detectors err most, counts less
+# the face's outline and the brows' outer ends, where detectors err most, count less: MediaPipe's
+# points sit 1.4-4.6 % of the face's width from the true projections there (the brows' ends 3.8 %)
+# against 0.9-2.4 % elsewhere (six painted training takes, identities 1011-1016, after each
+# frame's similarity); the brows' ends at 1 stood browOuterUp at 0.1-0.2 where it did not act
+POINT_WEIGHTS = np.r_[np.full(17, 0.3), 0.3, 0.3, np.ones(6), 0.3, 0.3, np.ones(41)]
 CHECK_EVERY = 5            # frames: the face detector confirms the tracked face this often
 # degrees of yaw or pitch from the rest frame past which a still face's turn reads as expression:
 # neutral takes turning up to 30 degrees (identities 1009, 1010, painted; 300 frames) put a weight
-# over 0.3 in 0-59 % of the frames within 15 degrees and in 58-100 % past it through MediaPipe's
-# points (the depths found from the turns); through dlib's in 71-100 % at any turn
+# over 0.3 in 0-9 % of the frames within 15 degrees and in 45-88 % past it through MediaPipe's
+# points (the depths found from the turns, the brows' ends counting less); through dlib's in
+# 71-100 % at any turn
 TURN_TRUSTED = 15.0
 # the gaze (gaze_weights): an eyeLook weight of 1 turns the eye GAZE_FULL_DEG -- ARKit's eyeLook
 # shapes are the lids' movement "consistent with" a gaze and state no angle, so this is a
@@ -67,6 +72,10 @@ DEPTH_ROUNDS = 2           # the points' depths found from the take's turns, the
 DEPTH_RIDGE = 1e-3         # ... the weights' ridge while the depths are found (face widths)
 DEPTH_PRIOR = 1e-3         # ... and the pull toward no depth offset, per frame
 DEPTH_STRIDE = 3           # ... from every third frame's fit (against every frame's: weights 0.001 apart on average)
+# ... where the head turns past this many degrees from the rest frame somewhere in the take: under
+# it a frame's depth moves a point by under sin(5 deg) of it, and a 16-frame frontal take's
+# misfit (a blink) was read as depths of 0.05-0.08 of the face's width
+DEPTH_MIN_TURN = 5.0
 HELD_WEIGHT = 0.99         # a weight at its bound (1) ...
 HELD_SECONDS = 1.0         # ... this long is said
 
@@ -268,15 +277,17 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
         s0, R0, t0 = _pose(Ls, img[rest_frame])
     pulls = (rest_pull, sparse_pull, smooth_pull)
     depth = np.zeros(len(L))
-    for r in range(depth_rounds + 1):
+    r = 0
+    while r < depth_rounds:                          # the depths from every DEPTH_STRIDE-th frame
+        pick = slice(None, None, DEPTH_STRIDE)
         X0 = Ls + np.outer(depth, R0[2])             # the rest frame's view of them is unchanged
-        if r < depth_rounds:                         # the depths from every DEPTH_STRIDE-th frame
-            pick = slice(None, None, DEPTH_STRIDE)
-            w, s, R, t, res = _fit_frames(img[pick], X0, Bf, pulls)
-            use = ~missing[pick] & (res < 0.05)
-            depth = depth + _depth_offsets(img[pick], X0, Bf, s, R, t, R0[2], use=use)
-        else:
-            w, s, R, t, res = _fit_frames(img, X0, Bf, pulls)
+        w, s, R, t, res = _fit_frames(img[pick], X0, Bf, pulls)
+        use = ~missing[pick] & (res < 0.05)
+        if r == 0 and not (np.abs(head_angles(R[use] @ R0.T)[:, :2]) > np.radians(DEPTH_MIN_TURN)).any():
+            break                                    # a take that never turns shows no depth
+        depth = depth + _depth_offsets(img[pick], X0, Bf, s, R, t, R0[2], use=use)
+        r += 1
+    w, s, R, t, res = _fit_frames(img, Ls + np.outer(depth, R0[2]), Bf, pulls)
     out = np.zeros((len(pts), len(basis.names)))
     out[:, free] = w
     return VideoFit(out, R @ R0.T, res, missing)
