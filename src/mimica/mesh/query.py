@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
@@ -89,14 +91,20 @@ class TriangleLocator:
         self.centroids = tri.mean(axis=1)
         self.radius = np.linalg.norm(tri - self.centroids[:, None], axis=2).max(axis=1)
         self.rmax = float(self.radius.max()) if len(self.radius) else 0.0
-        # bands of triangle radius, doubling from twice the median: (triangle ids, tree, rmax)
-        self.bands = []
+
+    @cached_property
+    def bands(self) -> list:
+        """Bands of triangle radius, doubling from twice the median: (triangle ids, k-d tree of
+        their centroids, largest radius); built at the first query that needs them (not with
+        libigl's tree, nor for closest_facing)."""
+        out = []
         if len(self.t):
             r0 = 2.0 * float(np.median(self.radius)) + 1e-300
             band = np.maximum(0, np.ceil(np.log2(np.maximum(self.radius, 1e-300) / r0))).astype(int)
             for b in np.unique(band):
                 ids = np.nonzero(band == b)[0]
-                self.bands.append((ids, cKDTree(self.centroids[ids]), float(self.radius[ids].max())))
+                out.append((ids, cKDTree(self.centroids[ids]), float(self.radius[ids].max())))
+        return out
 
     def _candidates(self, p, ids, cand, tri, bary, qq, dist):
         """Update the best (tri, bary, point, dist) of points p with candidate triangles cand."""
@@ -148,6 +156,10 @@ class TriangleLocator:
                 kk = min(2 * kk, len(ids))
         return tri, bary, qq, dist
 
+    @cached_property
+    def _centroid_tree(self):
+        return cKDTree(self.centroids)
+
     def closest_facing(self, points, normals, k: int = 24):
         """Each point's closest point among the k triangles whose centroids are nearest it, of
         those facing its way (normals within 90 degrees of its normal): where two walls lie close
@@ -165,8 +177,6 @@ class TriangleLocator:
         """
         p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         k = min(k, len(self.t))
-        if "_centroid_tree" not in self.__dict__:
-            self._centroid_tree = cKDTree(self.centroids)
         _, cand = self._centroid_tree.query(p, k=k)
         cand = cand.reshape(len(p), k)
         a, b, c = (self.v[self.t[cand, i]].reshape(-1, 3) for i in range(3))
