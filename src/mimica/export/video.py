@@ -59,7 +59,7 @@ CHECK_EVERY = 5            # frames: the face detector confirms the tracked face
 # neutral takes turning up to 30 degrees (identities 1009, 1010, painted; 300 frames) put a weight
 # over 0.3 in 0-9 % of the frames within 15 degrees and in 45-88 % past it through MediaPipe's
 # points (the depths found from the turns, the brows' ends counting less); through dlib's in
-# 71-100 % at any turn
+# 73-100 % at any turn
 TURN_TRUSTED = 15.0
 # the gaze (gaze_weights): an eyeLook weight of 1 turns the eye GAZE_FULL_DEG -- ARKit's eyeLook
 # shapes are the lids' movement "consistent with" a gaze and state no angle, so this is a
