@@ -22,7 +22,8 @@ squints and widening, gaze, cheeks, nose -- where mimica's active error is below
 corr_median and corr_worst (mimica's per-shape correlation with the truth over the 51 shapes),
 still_max (mimica's largest weight on the still take, its first second left out), fps (decode,
 track, fit and the CSV written, frames per second of the whole); mimica's active error tracking
-with dlib's points (the `tracker` option) on a line of its own.  MediaPipe's left and right are
+with dlib's points (the `tracker` option) on a line of its own, and the weights standing where
+none acts (the truth under 0.02) by the head's turn from the rest frame, mimica's and MediaPipe's.  MediaPipe's left and right are
 the image's: its scores are compared with the truth's mirror where that reads better (said).
 Picture: docs/figures/video_arkit.png (take 1041 beside the head playing mimica's weights).
 """
@@ -142,6 +143,18 @@ def active_mae(fit, truth, cols):
     return float(np.abs(fit[:, cols] - truth[:, cols])[act].mean()) if act.any() else np.nan
 
 
+def standing(fit, peer, truth, turn, cols, edges=(0, 15, 30, 45, 90)) -> str:
+    """The mean weight over the (frame, shape) pairs where the true weight is under 0.02, in bands of
+    the head's turn from the rest frame (degrees; the fitted turn), for mimica and the peer."""
+    out = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        f = (turn >= lo) & (turn < hi)
+        off = truth[f][:, cols] < 0.02
+        if off.any():
+            out.append(f"{lo}-{hi} deg {fit[f][:, cols][off].mean():.3f}/{peer[f][:, cols][off].mean():.3f}")
+    return ", ".join(out)
+
+
 def main():
     import argparse
     ap = argparse.ArgumentParser()
@@ -156,7 +169,7 @@ def main():
     write_mesh(tmp / "ict.obj", model.mesh)
     make_blendshapes(tmp / "ict.obj", tmp / "arkit.glb", options=BlendshapesOptions())
     task = blendshape_model()
-    truth, fit, peer, rates, peer_rates, fit_dlib, rates_dlib = [], [], [], [], [], [], []
+    truth, fit, peer, rates, peer_rates, fit_dlib, rates_dlib, turns = [], [], [], [], [], [], [], []
     for seed in (41, 42):
         w = take_weights(args.frames, seed)
         render_take(model, w, seed, tmp / f"take{seed}.mp4")
@@ -165,6 +178,7 @@ def main():
         fit_dlib.append(f2), rates_dlib.append(rate2)
         p, prate = mediapipe_scores(tmp / f"take{seed}.mp4", task)
         truth.append(w), fit.append(f), peer.append(p), rates.append(rate), peer_rates.append(prate)
+        turns.append(np.degrees(np.abs(fitted.angles[:, :2])).max(1))
         print(f"take {seed}: {len(w)} frames; mimica {rate:.0f} frames/s end to end; MediaPipe {prate:.0f} frames/s "
               f"(its face found on {np.isfinite(p).all(1).mean():.0%} of frames)")
         if seed == 41:
@@ -198,6 +212,8 @@ def main():
     print("active error by group, mimica/MediaPipe: " + ", ".join(lines))
     print(f"mimica's per-shape correlations: mean {cv.mean():.2f}, {int((cv > 0.5).sum())} of {len(cv)} above 0.5; worst: "
           + ", ".join(f"{n} {corr[n]:.2f}" for n in worst))
+    print("weight where none acts (true < 0.02), by the turn from the rest frame, mimica/MediaPipe: "
+          + standing(fit[seen], peer[seen], truth[seen], np.concatenate(turns)[seen], cols))
     still = np.zeros((min(150, args.frames), 52))
     render_take(model, still, 43, tmp / "still.mp4", turn=False)
     fs, _, _, _ = ours(tmp / "arkit.glb", tmp / "still.mp4", tmp / "still.csv")
