@@ -19,7 +19,8 @@ The performer is not the head: their rest landmarks are the head's plus the offs
 take's first frame (or the one named) shows, lifted into the head's frame at the head's depth --
 the take must start from a rest face, as Live Link Face's calibration also asks -- and then each
 point's depth as the take's own turns show it (_depth_offsets), the take fitted again through
-them.  tongueOut is not
+them; last, each weight's share that follows the head's turn over the take is taken out
+(_turn_share: the tracker's points drift with the turn).  tongueOut is not
 fitted (the points do not see it): it stays 0.  The gaze shapes (eyeLook*) are read from the
 irises of MediaPipe's attention mesh (gaze_weights), not through the fit, and joined to its
 weights by fit_take: through dlib's points they stay 0.
@@ -76,6 +77,10 @@ DEPTH_STRIDE = 3           # ... from every third frame's fit (against every fra
 # it a frame's depth moves a point by under sin(5 deg) of it, and a 16-frame frontal take's
 # misfit (a blink) was read as depths of 0.05-0.08 of the face's width
 DEPTH_MIN_TURN = 5.0
+# the weights' share that follows the turn (_turn_share): its L1 fit's ridge, a thousandth of the
+# frames' weight -- without it, on takes turning 8 degrees, coefficients of 5-46 took smiles and
+# blinks away (grey dev takes 0.287 -> 0.347 where weights act)
+TURN_SHARE_RIDGE = 1e-3
 HELD_WEIGHT = 0.99         # a weight at its bound (1) ...
 HELD_SECONDS = 1.0         # ... this long is said
 
@@ -220,7 +225,7 @@ def _fill_missing(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, rest_pull: float = REST_PULL,
                 smooth_pull: float = SMOOTH_PULL, smooth_points: float = SMOOTH_POINTS,
-                sparse_pull: float = SPARSE_PULL, depth_rounds: int = DEPTH_ROUNDS) -> VideoFit:
+                sparse_pull: float = SPARSE_PULL, depth_rounds: int = DEPTH_ROUNDS, turn_share: bool = True) -> VideoFit:
     """The ARKit weights of each frame of tracked 2D points: the head's pose (scaled orthographic)
     and weights in [0, 1] through its landmark basis, frame by frame (Gauss-Newton on the pose
     joined to a bounded least squares on the weights), pulled toward rest, toward few shapes (a
@@ -246,6 +251,9 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
     depth_rounds : int
         Rounds of the points' depths found from the take and the take fitted again (0: the rest
         frame's points lifted at the head's own depth, as one frame shows them).
+    turn_share : bool
+        Take out of each weight its share that follows the head's turn over the take
+        (_turn_share).
 
     Returns
     -------
@@ -288,6 +296,8 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
         depth = depth + _depth_offsets(img[pick], X0, Bf, s, R, t, R0[2], use=use)
         r += 1
     w, s, R, t, res = _fit_frames(img, Ls + np.outer(depth, R0[2]), Bf, pulls)
+    if turn_share:
+        w = _turn_share(w, head_angles(R @ R0.T))
     out = np.zeros((len(pts), len(basis.names)))
     out[:, free] = w
     return VideoFit(out, R @ R0.T, res, missing)
@@ -627,15 +637,37 @@ def gaze_weights(eyes: np.ndarray, angles: np.ndarray, smooth_points: float = SM
     return out
 
 
-def _l1_fit(X: np.ndarray, y: np.ndarray, rounds: int = 10, floor: float = 1e-3) -> np.ndarray:
+def _l1_fit(X: np.ndarray, y: np.ndarray, rounds: int = 10, floor: float = 1e-3, ridge: float = 0.0) -> np.ndarray:
     """Coefficients c minimising sum |X c - y| (reweighted least squares): the brief gaze shifts
     of a take are outliers to the head's share, which a least-squares fit would lean toward.
-    (Three columns: ten small solves, where scipy's least_squares would only smooth the L1 loss.)"""
-    c = np.linalg.lstsq(X, y, rcond=None)[0]
+    (A few columns: ten small solves, where scipy's least_squares would only smooth the L1 loss.)
+    `ridge` > 0 adds ridge * |c|^2 in units of the frames' weight (from c = 0): where the columns
+    vary little, the plain fit's coefficients can grow to fit brief events with them."""
+    c = np.linalg.lstsq(X, y, rcond=None)[0] if not ridge else np.zeros(X.shape[1])
     for _ in range(rounds):
         sw = 1.0 / np.sqrt(np.maximum(np.abs(X @ c - y), floor))
-        c = np.linalg.lstsq(X * sw[:, None], y * sw, rcond=None)[0]
+        if not ridge:
+            c = np.linalg.lstsq(X * sw[:, None], y * sw, rcond=None)[0]
+            continue
+        A = X * sw[:, None]
+        c = np.linalg.solve(A.T @ A + ridge * (sw ** 2).sum() * np.eye(X.shape[1]), A.T @ (y * sw))
     return c
+
+
+def _turn_share(w: np.ndarray, angles: np.ndarray, ridge: float = TURN_SHARE_RIDGE) -> np.ndarray:
+    """The weights (F, k) less each one's share that follows the head's turn over the take: an L1
+    fit (_l1_fit, a small ridge) on the turn's sines, their squares and product, only a positive
+    share taken out.  MediaPipe's points drift with the turn unlike the surface (through the
+    exact projections the weights stand at 0.001-0.004 at any turn, through its points at
+    0.02-0.07), and the drift reads as weights that rise and fall with the turn; a take's
+    expressions are brief against it, outliers to the fit, as the gaze's shifts are in
+    gaze_weights.  No constant: the rest frame is 0."""
+    sy, sp = np.sin(angles[:, 0]), np.sin(angles[:, 1])
+    X = np.stack([sy, sp, sy * sy, sp * sp, sy * sp], 1)
+    out = w.copy()
+    for j in np.nonzero(w.any(0))[0]:
+        out[:, j] = np.clip(w[:, j] - np.maximum(X @ _l1_fit(X, w[:, j], ridge=ridge), 0.0), 0.0, 1.0)
+    return out
 
 
 def head_angles(rotations: np.ndarray) -> np.ndarray:
