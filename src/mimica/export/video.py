@@ -58,9 +58,9 @@ POINT_WEIGHTS = np.r_[np.full(17, 0.3), 0.3, 0.3, np.ones(6), 0.3, 0.3, np.ones(
 CHECK_EVERY = 5            # frames: the face detector confirms the tracked face this often
 # degrees of yaw or pitch from the rest frame past which a still face's turn reads as expression:
 # neutral takes turning up to 30 degrees (identities 1009, 1010, painted; 300 frames) put a weight
-# over 0.3 in 0-9 % of the frames within 15 degrees and in 45-88 % past it through MediaPipe's
-# points (the depths found from the turns, the brows' ends counting less); through dlib's in
-# 73-100 % at any turn
+# over 0.3 in 0-8 % of the frames within 15 degrees and in 33-42 % past it through MediaPipe's
+# points (the depths found from the turns, the brows' ends counting less, the weights' share
+# that follows the turn taken out); through dlib's in 73-99 % at any turn
 TURN_TRUSTED = 15.0
 # the gaze (gaze_weights): an eyeLook weight of 1 turns the eye GAZE_FULL_DEG -- ARKit's eyeLook
 # shapes are the lids' movement "consistent with" a gaze and state no angle, so this is a
