@@ -296,6 +296,6 @@ def test_the_share_of_a_weight_that_follows_the_turn_is_taken_out():
     np.testing.assert_allclose(out[:, 2], w[:, 2], atol=0.02)
     small = np.stack([np.radians(8) * np.sin(t / 60), np.radians(4) * np.sin(t / 45), 0 * t], 1)
     events = np.zeros((frames, 2))
-    events[[*range(90, 115)], 0] = 0.7                                 # near the turn's peaks
-    events[[*range(280, 300)], 1] = 0.5
+    events[90:115, 0] = 0.7                                            # near the turn's peaks
+    events[280:300, 1] = 0.5
     np.testing.assert_allclose(_turn_share(events, small), events, atol=0.02)
