@@ -23,8 +23,9 @@ corr_median and corr_worst (mimica's per-shape correlation with the truth over t
 still_max (mimica's largest weight on the still take, its first second left out), fps (decode,
 track, fit and the CSV written, frames per second of the whole); mimica's active error tracking
 with dlib's points (the `tracker` option) on a line of its own, and the weights standing where
-none acts (the truth under 0.02) by the head's turn from the rest frame, mimica's and MediaPipe's.  MediaPipe's left and right are
-the image's: its scores are compared with the truth's mirror where that reads better (said).
+none acts (the truth under 0.02) by the head's turn from the rest frame, mimica's and
+MediaPipe's.  MediaPipe's left and right are the image's: its scores are compared with the
+truth's mirror where that reads better (said).
 Picture: docs/figures/video_arkit.png (take 1041 beside the head playing mimica's weights).
 """
 

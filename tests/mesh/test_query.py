@@ -94,15 +94,11 @@ def test_closest_facing_keeps_to_the_wall_facing_the_point():
     """Two walls 0.01 apart facing each other (a shut mouth's bag): a point nearer the upper wall
     but facing up lands on the lower one; facing down, on the upper; where no candidate faces its
     way, on the closest."""
-    g = np.linspace(0, 1, 6)
-    xx, yy = np.meshgrid(g, g)
-    grid = np.c_[xx.ravel(), yy.ravel()]
-    quads = [(i * 6 + j, i * 6 + j + 1, (i + 1) * 6 + j + 1, (i + 1) * 6 + j) for i in range(5) for j in range(5)]
-    tri = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
-    lower = np.c_[grid, np.zeros(36)]                               # normals +z
-    upper = np.c_[grid, np.full(36, 0.01)]
-    v = np.vstack([lower, upper])
-    tris = np.vstack([tri, tri[:, ::-1] + 36])                      # the upper wall faces down
+    from mimica.mesh.core import plane_grid
+    wall = plane_grid(5, 5, 1.0, 1.0)                               # normals +z
+    tri, n = wall.triangles, wall.n_vertices
+    v = np.vstack([wall.vertices, wall.vertices + [0.0, 0.0, 0.01]])
+    tris = np.vstack([tri, tri[:, ::-1] + n])                       # the upper wall faces down
     loc = TriangleLocator(v, tris)
     p = np.array([[0.43, 0.57, 0.006]])
     t, bary = loc.closest_facing(p, np.array([[0.0, 0.0, 1.0]]))

@@ -42,7 +42,8 @@ def cmd_animate(a):
         _say(f"{a.video}: {v['frames']} frames tracked ({v['track_fps']:.0f} frames/s) and fitted "
              f"({v['fit_fps']:.0f} frames/s); frame {a.rest_frame} taken as the performer's rest; "
              f"points misfit median {v['misfit_median'] * 100:.1f} % of the face's width; "
-             + ("the gaze and the tongue stay 0 (unseen)" if "eyeLookUpLeft" in v["unseen"] else "the tongue stays 0 (unseen)"))
+             + ("the gaze and the tongue stay 0 (unseen)" if any(n.startswith("eyeLook") for n in v["unseen"])
+                else "the tongue stays 0 (unseen)"))
         _say(f"{a.video}: what it saw: {_saw(v['saw'])}")
     head_line = _head_line(r)
     _say("".join(f"{a.head}: {note}\n" for note in r.notes)          # what writing the head back did

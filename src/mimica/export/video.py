@@ -29,7 +29,6 @@ weights by fit_take: through dlib's points they stay 0.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -190,17 +189,20 @@ class VideoFit:
     unseen : tuple of str
         The shapes nothing in the take showed: they stay 0 (the tongue; the gaze too where the
         tracker gave no irises).
+    angles : (F, 3) float array
+        The head's yaw, pitch and roll from the rest frame, radians (head_angles of the
+        rotations; computed from them where not given).
     """
     weights: np.ndarray          # (F, 52) in ARKIT_52's order
     rotations: np.ndarray        # (F, 3, 3): the head's rotation relative to the rest frame
     residual: np.ndarray         # (F,) RMS misfit of the 68 points, in face widths
     missing: np.ndarray = None   # (F,) frames without a face
     unseen: tuple = UNSEEN
+    angles: np.ndarray = None    # (F, 3) head_angles(rotations)
 
-    @cached_property
-    def angles(self) -> np.ndarray:
-        """(F, 3) the head's yaw, pitch and roll from the rest frame, radians (head_angles)."""
-        return head_angles(self.rotations)
+    def __post_init__(self):
+        if self.angles is None:
+            self.angles = head_angles(self.rotations)
 
 
 def _fill_missing(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -285,22 +287,22 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
         s0, R0, t0 = _pose(Ls, img[rest_frame])
     pulls = (rest_pull, sparse_pull, smooth_pull)
     depth = np.zeros(len(L))
-    r = 0
-    while r < depth_rounds:                          # the depths from every DEPTH_STRIDE-th frame
-        pick = slice(None, None, DEPTH_STRIDE)
+    pick = slice(None, None, DEPTH_STRIDE)
+    for r in range(depth_rounds):                    # the depths from every DEPTH_STRIDE-th frame
         X0 = Ls + np.outer(depth, R0[2])             # the rest frame's view of them is unchanged
         w, s, R, t, res = _fit_frames(img[pick], X0, Bf, pulls)
         use = ~missing[pick] & (res < 0.05)
         if r == 0 and not (np.abs(head_angles(R[use] @ R0.T)[:, :2]) > np.radians(DEPTH_MIN_TURN)).any():
             break                                    # a take that never turns shows no depth
         depth = depth + _depth_offsets(img[pick], X0, Bf, s, R, t, R0[2], use=use)
-        r += 1
     w, s, R, t, res = _fit_frames(img, Ls + np.outer(depth, R0[2]), Bf, pulls)
+    rel = R @ R0.T
+    angles = head_angles(rel)
     if turn_share:
-        w = _turn_share(w, head_angles(R @ R0.T))
+        w = _turn_share(w, angles)
     out = np.zeros((len(pts), len(basis.names)))
     out[:, free] = w
-    return VideoFit(out, R @ R0.T, res, missing)
+    return VideoFit(out, rel, res, missing, angles=angles)
 
 
 def fit_take(tracked: Tracked, basis: LandmarkBasis, rest_frame: int = 0) -> VideoFit:
@@ -643,14 +645,12 @@ def _l1_fit(X: np.ndarray, y: np.ndarray, rounds: int = 10, floor: float = 1e-3,
     (A few columns: ten small solves, where scipy's least_squares would only smooth the L1 loss.)
     `ridge` > 0 adds ridge * |c|^2 in units of the frames' weight (from c = 0): where the columns
     vary little, the plain fit's coefficients can grow to fit brief events with them."""
-    c = np.linalg.lstsq(X, y, rcond=None)[0] if not ridge else np.zeros(X.shape[1])
+    c = np.zeros(X.shape[1]) if ridge else np.linalg.lstsq(X, y, rcond=None)[0]
     for _ in range(rounds):
         sw = 1.0 / np.sqrt(np.maximum(np.abs(X @ c - y), floor))
-        if not ridge:
-            c = np.linalg.lstsq(X * sw[:, None], y * sw, rcond=None)[0]
-            continue
-        A = X * sw[:, None]
-        c = np.linalg.solve(A.T @ A + ridge * (sw ** 2).sum() * np.eye(X.shape[1]), A.T @ (y * sw))
+        A, b = X * sw[:, None], y * sw
+        c = (np.linalg.solve(A.T @ A + ridge * (sw ** 2).sum() * np.eye(X.shape[1]), A.T @ b) if ridge
+             else np.linalg.lstsq(A, b, rcond=None)[0])        # lstsq: a still take's sine columns are 0
     return c
 
 
