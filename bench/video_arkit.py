@@ -14,7 +14,8 @@ written as H.264; each take plays every ARKit shape but the tongue once (in a sh
 a smooth rise and fall of 0.5-1, overlapping its neighbours), so the truth is known frame by
 frame.  A still take (seed 1043, 150 frames, no expression, the head still).
 mimica fits through ICT's own ARKit GLB (`blendshapes` on ICT's generic mesh), tracking with its
-default tracker (MediaPipe's face mesh with attention); dlib's points on a line of their own.
+default tracker (MediaPipe's face mesh with attention) and refining each frame's weights on its
+pixels (export.photometric); dlib's points on a line of their own.
 
 Figures: active_mae (mean |fit - truth| over the (frame, shape) pairs where the truth is >= 0.1),
 the same for MediaPipe's scores, groups_beaten (the groups -- jaw, mouth, brows, eyes' blinks,

@@ -40,7 +40,7 @@ def cmd_animate(a):
             _say(f"{a.head}: no landmarks stored in it (another tool's head, or written back by one): its 68 "
                  "found on renders of it; give them with --landmarks where they miss")
         _say(f"{a.video}: {v['frames']} frames tracked ({v['track_fps']:.0f} frames/s) and fitted "
-             f"({v['fit_fps']:.0f} frames/s); frame {a.rest_frame} taken as the performer's rest; "
+             f"on its points and pixels ({v['fit_fps']:.0f} frames/s); frame {a.rest_frame} taken as the performer's rest; "
              f"points misfit median {v['misfit_median'] * 100:.1f} % of the face's width; "
              + ("the gaze and the tongue stay 0 (unseen)" if any(n.startswith("eyeLook") for n in v["unseen"])
                 else "the tongue stays 0 (unseen)"))

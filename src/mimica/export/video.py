@@ -19,9 +19,10 @@ The performer is not the head: their rest landmarks are the head's plus the offs
 take's first frame (or the one named) shows, lifted into the head's frame at the head's depth --
 the take must start from a rest face, as Live Link Face's calibration also asks -- and then each
 point's depth as the take's own turns show it (_depth_offsets), the take fitted again through
-them; last, each weight's share that follows the head's turn over the take is taken out
-(_turn_share: the tracker's points drift with the turn).  tongueOut is not
-fitted (the points do not see it): it stays 0.  The gaze shapes (eyeLook*) are read from the
+them; given the video, each frame's weights are then refined on its pixels (photometric: the
+points move less than the face); last, each weight's share that follows the head's turn over
+the take is taken out (_turn_share: the tracker's points drift with the turn).  tongueOut is
+not fitted (the points do not see it): it stays 0.  The gaze shapes (eyeLook*) are read from the
 irises of MediaPipe's attention mesh (gaze_weights), not through the fit, and joined to its
 weights by fit_take: through dlib's points they stay 0.
 """
@@ -34,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MimicaError
+from ._solve import box_qp, cross_matrices
 from .blendshapes import ARKIT_52
 from .extras import LANDMARKS_KEY, stored_landmarks  # noqa: F401  (the key, for readers of this module)
 
@@ -59,7 +61,8 @@ CHECK_EVERY = 5            # frames: the face detector confirms the tracked face
 # neutral takes turning up to 30 degrees (identities 1009, 1010, painted; 300 frames) put a weight
 # over 0.3 in 0-8 % of the frames within 15 degrees and in 33-42 % past it through MediaPipe's
 # points (the depths found from the turns, the brows' ends counting less, the weights' share
-# that follows the turn taken out); through dlib's in 73-99 % at any turn
+# that follows the turn taken out), in 0 % and 0-3 % refined on the pixels (the surface's
+# shading turns with the head, though: docs/benchmarks.md); through dlib's in 73-99 % at any turn
 TURN_TRUSTED = 15.0
 # the gaze (gaze_weights): an eyeLook weight of 1 turns the eye GAZE_FULL_DEG -- ARKit's eyeLook
 # shapes are the lids' movement "consistent with" a gaze and state no angle, so this is a
@@ -99,11 +102,15 @@ class LandmarkBasis:
     landmarks : str
         Where the landmarks came from: "stored" (by `blendshapes`), "given" (a landmark file),
         "ICT-FaceKit's" (built in for its topology) or "found" (on renders of the head).
+    surface : photometric.Surface or None
+        The head's face surface the weights are refined on, on the frames' pixels (None: the
+        landmarks alone).
     """
     rest: np.ndarray
     motion: np.ndarray
     names: list
     landmarks: str = "stored"
+    surface: object = None
 
 
 def landmark_basis(head_glb, landmarks=None, read=None) -> LandmarkBasis:
@@ -155,7 +162,10 @@ def landmark_basis(head_glb, landmarks=None, read=None) -> LandmarkBasis:
         return k * np.einsum("ij,ijk->ik", bary, p[tri])
     rest = at(mesh.vertices)
     motion = np.stack([at(targets[plays[n]]) - rest for n in ARKIT_52])
-    return LandmarkBasis(rest, motion, list(ARKIT_52), how)
+    from .photometric import face_surface
+    surface = face_surface(k * mesh.vertices, mesh.triangles,
+                           np.stack([k * (targets[plays[n]] - mesh.vertices) for n in ARKIT_52]), rest)
+    return LandmarkBasis(rest, motion, list(ARKIT_52), how, surface)
 
 
 def _pose(model: np.ndarray, image: np.ndarray, rows=RIGID):
@@ -163,13 +173,6 @@ def _pose(model: np.ndarray, image: np.ndarray, rows=RIGID):
     fitted on `rows` (image.warp.orthographic_pose)."""
     from ..image.warp import orthographic_pose
     return orthographic_pose(model[rows], image[rows])
-
-
-def _cross_matrices(v: np.ndarray) -> np.ndarray:
-    """(n, 3, 3): [v]x, so that [v]x a = v x a."""
-    z = np.zeros(len(v))
-    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1),
-                     np.stack([-v[:, 1], v[:, 0], z], 1)], 1)
 
 
 @dataclass
@@ -227,7 +230,8 @@ def _fill_missing(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, rest_pull: float = REST_PULL,
                 smooth_pull: float = SMOOTH_PULL, smooth_points: float = SMOOTH_POINTS,
-                sparse_pull: float = SPARSE_PULL, depth_rounds: int = DEPTH_ROUNDS, turn_share: bool = True) -> VideoFit:
+                sparse_pull: float = SPARSE_PULL, depth_rounds: int = DEPTH_ROUNDS, turn_share: bool = True,
+                video=None, progress=None) -> VideoFit:
     """The ARKit weights of each frame of tracked 2D points: the head's pose (scaled orthographic)
     and weights in [0, 1] through its landmark basis, frame by frame (Gauss-Newton on the pose
     joined to a bounded least squares on the weights), pulled toward rest, toward few shapes (a
@@ -256,6 +260,11 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
     turn_share : bool
         Take out of each weight its share that follows the head's turn over the take
         (_turn_share).
+    video : str or Path or None
+        The take the points were tracked on: each frame's weights are refined on its pixels
+        (photometric.refine_frames) where the basis has the head's surface.
+    progress : callable, optional
+        Called with a line of text as frames are refined.
 
     Returns
     -------
@@ -295,7 +304,12 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
         if r == 0 and not (np.abs(head_angles(R[use] @ R0.T)[:, :2]) > np.radians(DEPTH_MIN_TURN)).any():
             break                                    # a take that never turns shows no depth
         depth = depth + _depth_offsets(img[pick], X0, Bf, s, R, t, R0[2], use=use)
-    w, s, R, t, res = _fit_frames(img, Ls + np.outer(depth, R0[2]), Bf, pulls)
+    rest = Ls + np.outer(depth, R0[2])
+    w, s, R, t, res = _fit_frames(img, rest, Bf, pulls)
+    if video is not None and basis.surface is not None:
+        from .photometric import refine_frames
+        w = refine_frames(video, img, L, rest, Bf, basis.surface, free, width, w, s, R, t,
+                          ~missing & (res < 0.05), POINT_WEIGHTS, rest_frame, progress)
     rel = R @ R0.T
     angles = head_angles(rel)
     if turn_share:
@@ -305,7 +319,7 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
     return VideoFit(out, rel, res, missing, angles=angles)
 
 
-def fit_take(tracked: Tracked, basis: LandmarkBasis, rest_frame: int = 0) -> VideoFit:
+def fit_take(tracked: Tracked, basis: LandmarkBasis, rest_frame: int = 0, video=None, progress=None) -> VideoFit:
     """A tracked take's ARKit weights: fit_weights through its points, then the eyeLook weights
     from its irises where the tracker gave them (gaze_weights, which reads the head's turn the fit
     found).
@@ -317,13 +331,17 @@ def fit_take(tracked: Tracked, basis: LandmarkBasis, rest_frame: int = 0) -> Vid
     basis : LandmarkBasis
     rest_frame : int
         The frame showing the performer at rest (fit_weights).
+    video : str or Path or None
+        The take itself: the weights refined on its pixels (fit_weights).
+    progress : callable, optional
+        Called with a line of text as frames are refined.
 
     Returns
     -------
     VideoFit
         Its `unseen` names what stays 0: the tongue, and the gaze where no frame showed the irises.
     """
-    fit = fit_weights(tracked.points, basis, rest_frame=rest_frame)
+    fit = fit_weights(tracked.points, basis, rest_frame=rest_frame, video=video, progress=progress)
     gaze = gaze_weights(tracked.eyes, fit.angles)
     for n, w in gaze.items():
         fit.weights[:, ARKIT_52.index(n)] = w
@@ -334,7 +352,6 @@ def fit_take(tracked: Tracked, basis: LandmarkBasis, rest_frame: int = 0) -> Vid
 def _fit_frames(img, Ls, Bf, pulls):
     """Each frame's pose (s, R, t) and weights (F, k) through the motion Bf (k, 68, 3) from the
     rest Ls (68, 3) (fit_weights; img y up, lengths in face widths), and its RMS misfit."""
-    from scipy.optimize import lsq_linear
     from scipy.spatial.transform import Rotation
     rest_pull, sparse_pull, smooth_pull = pulls
     n = len(img)
@@ -359,7 +376,7 @@ def _fit_frames(img, Ls, Bf, pulls):
             # to a bounded least squares on the weights (linear in them), from the last frame's
             X = Ls + np.einsum("k,knj->nj", w, Bf)          # the current shape (68, 3)
             RX = X @ R.T
-            Jd = -np.einsum("ij,njk->nik", P, _cross_matrices(RX))  # (68, 2, 3): d/dd of P (d x RX)
+            Jd = -np.einsum("ij,njk->nik", P, cross_matrices(RX))  # (68, 2, 3): d/dd of P (d x RX)
             Je = (RX @ P.T)[:, :, None]                      # (68, 2, 1)
             Ju = np.broadcast_to(np.eye(2), (68, 2, 2))
             Jw = np.einsum("ij,knj->nik", P @ R, Bf)          # (68, 2, k)
@@ -380,10 +397,8 @@ def _fit_frames(img, Ls, Bf, pulls):
                 pull = np.full(k, rest_pull)
                 top = np.r_[hi[:6], np.where(kept, 1.0, 1e-12)]
             M = np.vstack([A, np.c_[np.zeros((k, 6)), np.diag(np.sqrt(pull))], smo])
-            # the same bounded least squares on M's triangle (M = QT: |Mz - y| = |Tz - Q'y| + const):
-            # bvls's inner solves on (6 + k) rows instead of M's, 5.6 -> 4.9 ms a frame
-            Q, T = np.linalg.qr(M)
-            z = lsq_linear(T, Q.T @ np.r_[b, np.zeros(k), smo[:, 6:] @ w_prev], bounds=(lo, top), method="bvls").x
+            y = np.r_[b, np.zeros(k), smo[:, 6:] @ w_prev]
+            z = box_qp(M.T @ M, M.T @ y, lo, top)
             R = Rotation.from_rotvec(z[:3]).as_matrix() @ R
             t = t + s_ * z[4:6]
             s_ = s_ * (1.0 + z[3])
@@ -617,7 +632,10 @@ def gaze_weights(eyes: np.ndarray, angles: np.ndarray, smooth_points: float = SM
         return {}
     e, _ = _fill_missing(e)
     e = e.reshape(-1, 2, 3, 2)
-    X = np.c_[np.sin(np.asarray(angles)[:, :2]), np.ones(len(e))]
+    sines = np.sin(np.asarray(angles)[:, :2])
+    # a turn the head never makes shows no share: regressed on a still head's fitted jitter (a
+    # thousandth of a degree), a look was read as 0.39 of its 0.5
+    X = np.c_[sines[:, np.ptp(sines, axis=0) > np.sin(np.radians(1.0))], np.ones(len(e))]
     out = {}
     for k, side in enumerate(("Right", "Left")):
         outer, inner, iris = e[:, k, 0], e[:, k, 1], e[:, k, 2]

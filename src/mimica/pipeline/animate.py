@@ -124,7 +124,7 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
                        landmarks=None, read=None):
     """A video fitted through the head's blendshapes (export.video): the face's 68 points tracked
     (export.video.track_video: dlib's, or MediaPipe's face mesh), the ARKit weights and the
-    head's angles fitted a frame.
+    head's angles fitted a frame, the weights refined on the frames' pixels (export.photometric).
 
     Parameters
     ----------
@@ -136,7 +136,7 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
     rest_frame : int
         The frame showing the performer at rest.
     progress : callable, optional
-        Called with a line of text as frames are tracked.
+        Called with a line of text as frames are tracked and refined.
     tracker : str or None
         "dlib" or "mediapipe" (None: the default, export.video.trackers()).
     landmarks : str or Path or None
@@ -162,7 +162,7 @@ def weights_from_video(head, video, rest_frame: int = 0, progress=None, tracker:
     tracked = track_video(video, progress=progress, tracker=tracker)
     fps, n = tracked.fps, len(tracked.points)
     t1 = time.perf_counter()
-    fit = fit_take(tracked, basis, rest_frame=rest_frame)
+    fit = fit_take(tracked, basis, rest_frame=rest_frame, video=video, progress=progress)
     t2 = time.perf_counter()
     weights = {name: fit.weights[:, j] for j, name in enumerate(ARKIT_52)}
     weights.update(zip(HEAD_ANGLES, fit.angles.T))

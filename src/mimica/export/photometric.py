@@ -1,0 +1,294 @@
+"""A take's ARKit weights refined on its frames' pixels: model-based tracking.
+
+The 68 points a tracker gives move less than the face does (MediaPipe's about 0.5-0.6 of the
+true motion on ICT's renders: its model's prior) and tell apart poorly the shapes that move them
+alike; the pixels do not.  The head's face surface (face_surface: about SURFACE_POINTS of its
+vertices inside the face's outline, facing the view, not hidden) takes its grey levels from the
+performer's rest frame, placed there by the landmark fit's pose and the performer's rest
+landmarks (the offsets between the head's landmarks and the performer's carried to the surface
+by a thin-plate spline).  Each frame's pose and weights are then moved from the landmark fit's
+so that the surface, shaped by the blendshapes, finds those grey levels again in the frame:
+Gauss-Newton on the grey-level misfit (Lucas and Kanade's image alignment, the warp here a
+deformable model's projection), from a blurred frame to a sharper one,
+with the light's change from the rest frame modelled (a gain varying linearly across the face,
+the shading's change as the surface turns -- Lambert's law to first order in its normals' turn
+-- and an offset), the landmarks' misfit kept beside it and the weights bounded
+(0 <= w <= 1), pulled toward rest and toward the last frame's -- no L1 pull as the landmark
+fit's: on the dev takes it took the gain away.  What it does not model: the shading's change
+as the expression bends the surface, and a face the rest frame does not show (the teeth, the
+mouth's inside: its lips' own grey levels are followed).  Measured on rendered takes
+(bench/video_arkit.py, bench/export.py): docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._solve import box_qp, cross_matrices
+
+SURFACE_POINTS = 2000      # the face's surface vertices sampled
+FACING = 0.3               # a vertex counts where its normal's cosine to the view exceeds this
+INSET = 0.9                # the face's region scaled by this about its centre (at its edge the blur sees beyond it)
+BROW_MARGIN = 0.1          # face widths above the brows' landmarks the face's region reaches
+BLURS = (1 / 80, 1 / 160)  # the frame's Gaussian in face widths: coarse steps, then fine ones
+STEPS = (1, 2)             # Gauss-Newton steps at each blur
+PIXEL_PULL = 1.0           # weight of the grey levels' mean squared misfit ...
+LANDMARK_PULL = 1.0        # ... and of the landmarks' (face widths), weighted as the fit weights them
+RIDGE = 1e-4               # weight of sum w^2
+SMOOTH = 1e-3              # weight of the change from the last frame's weights
+ROBUST = 0.05              # grey levels: a misfit past this counts less (Huber's weights)
+LIGHT_COLUMNS = [0, 1, 2, 3, 4, 5, 6]   # gain, its slopes across the face, the turned normals' three, offset
+LIGHTS = len(LIGHT_COLUMNS)
+
+
+@dataclass
+class Surface:
+    """The head's face surface sampled for the pixels' fit (face_surface).
+
+    Attributes
+    ----------
+    rest : (m, 3) float array
+        Its vertices at rest, metres in the GLB's frame.
+    motion : (52, m, 3) float array
+        Their motion in each ARKit shape (ARKIT_52's order).
+    normals : (m, 3) float array
+        Unit normals at rest.
+    index : (m,) int array
+        Which of the head's vertices they are.
+    """
+    rest: np.ndarray
+    motion: np.ndarray
+    normals: np.ndarray
+    index: np.ndarray
+
+
+def _face_frame(lm: np.ndarray) -> np.ndarray:
+    """(3, 3) rows: the face's right-to-left, up and forward axes from its 68 landmarks (the
+    forward one toward the nose's tip), whatever way the file faces."""
+    x = lm[16] - lm[0]
+    up = lm[19:25].mean(0) - lm[8]
+    fwd = np.cross(x, up)
+    if fwd @ (lm[30] - lm[:17].mean(0)) < 0:
+        fwd = -fwd
+    x = x / np.linalg.norm(x)
+    fwd = fwd / np.linalg.norm(fwd)
+    return np.stack([x, np.cross(fwd, x), fwd])
+
+
+def face_surface(vertices: np.ndarray, triangles: np.ndarray, motion: np.ndarray, landmarks: np.ndarray,
+                 count: int | None = None) -> Surface:
+    """The vertices of the head's face that a camera before it sees: on the part of the mesh its
+    landmarks lie on (not the eyeballs, teeth or lashes), inside the face's outline and up to
+    BROW_MARGIN above the brows, facing forward and in front of the rest of that part; about
+    `count` of them, as dense as the mesh (where a head's mesh is densest, at the eyes and the
+    lips, its motion shows most).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float array
+        The head at rest.
+    triangles : (T, 3) int array
+    motion : (52, n, 3) float array
+        Each ARKit shape's displacement of every vertex.
+    landmarks : (68, 3) float array
+        Its landmarks at rest.
+    count : int or None
+        At most this many (None: SURFACE_POINTS).
+
+    Returns
+    -------
+    Surface
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import Delaunay, cKDTree
+    from ..image.raster import rasterize_pixels
+    from ..mesh.core import vertex_normals
+    n = len(vertices)
+    frame = _face_frame(landmarks)
+    v = vertices @ frame.T                                        # x right-to-left, y up, z toward the view
+    lm = landmarks @ frame.T
+    width = float(np.linalg.norm(lm[16] - lm[0]))
+    # the part the landmarks lie on: the connected component nearest to them
+    e = np.r_[triangles[:, :2], triangles[:, 1:], triangles[:, ::2]]
+    _, comp = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)), directed=False)
+    near = cKDTree(v).query(lm[17:])[1]
+    skin = comp == np.bincount(comp[near]).argmax()
+    region = np.r_[lm[:17, :2], lm[17:27, :2] + [0.0, BROW_MARGIN * width]]
+    centre = region.mean(0)
+    inside = Delaunay(centre + INSET * (region - centre)).find_simplex(v[:, :2]) >= 0
+    nrm = vertex_normals(vertices, triangles) @ frame.T
+    # in front of the rest of that part (the mouth's and the eyes' sockets behind the lips and the
+    # lids; not of the lashes, which move with the lids): a z-buffer of the front view, 400 pixels
+    # across the face
+    px = 400.0 / width
+    xy = (v[:, :2] - v[:, :2].min(0)) * px
+    size = np.ceil(xy.max(0)).astype(int) + 2
+    own = triangles[skin[triangles].all(1)]
+    pix, tri, l0, l1 = rasterize_pixels(xy * [1, -1] + [0, size[1] - 1], v[:, 2], own, int(size[0]), int(size[1]))
+    zbuf = np.full(int(size[0] * size[1]), -np.inf)
+    tz = v[:, 2][own[tri]]
+    zbuf[pix] = l0 * tz[:, 0] + l1 * tz[:, 1] + (1 - l0 - l1) * tz[:, 2]
+    q = np.clip(np.round(xy * [1, -1] + [0, size[1] - 1]).astype(int), 0, size - 1)
+    front = v[:, 2] >= zbuf[q[:, 1] * size[0] + q[:, 0]] - 0.01 * width
+    count = SURFACE_POINTS if count is None else count
+    idx = np.nonzero(skin & inside & (nrm[:, 2] > FACING) & front)[0]
+    if len(idx) > count:      # a random `count` of them (fixed seed): as dense as the mesh is (at the eyes, the lips)
+        idx = np.sort(np.random.default_rng(0).choice(idx, count, replace=False))
+    return Surface(vertices[idx], motion[:, idx], nrm[idx] @ frame, idx)
+
+
+def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarray, motion: np.ndarray,
+                  surface: Surface, free: np.ndarray, width: float, weights: np.ndarray, s: np.ndarray,
+                  R: np.ndarray, t: np.ndarray, use: np.ndarray, point_weights: np.ndarray, rest_frame: int = 0,
+                  progress=None) -> np.ndarray:
+    """Each frame's weights refined on its pixels (the module's docstring), from the landmark fit's
+    pose and weights (export.video.fit_weights; lengths in face widths, image y up).
+
+    Parameters
+    ----------
+    video : str or Path
+        The take the points were tracked on.
+    img : (F, 68, 2) float array
+        The points the landmark fit fitted (y up).
+    head_rest, rest : (68, 3) float arrays
+        The head's landmarks and the performer's (face widths).
+    motion : (k, 68, 3) float array
+        The landmarks' motion in the fitted shapes.
+    surface : Surface
+        face_surface's, in metres.
+    free : (52,) bool array
+        The fitted shapes among ARKIT_52.
+    width : float
+        The face's width, metres.
+    weights : (F, k) float array
+    s, R, t : (F,), (F, 3, 3), (F, 2) float arrays
+        The landmark fit's poses.
+    use : (F,) bool array
+        The frames to refine (the others keep their weights).
+    point_weights : (68,) float array
+        How much each landmark counts (the landmark fit's POINT_WEIGHTS).
+    rest_frame : int
+    progress : callable, optional
+        Called with a line of text every 300 frames.
+
+    Returns
+    -------
+    (F, k) float array
+    """
+    from itertools import islice
+    from scipy.interpolate import RBFInterpolator
+    from ..image.video import frame_source
+    # the performer's surface: the head's plus its landmarks' offsets carried by a thin-plate spline
+    sv = surface.rest / width
+    V = sv + RBFInterpolator(head_rest, rest - head_rest, kernel="thin_plate_spline", smoothing=1e-3)(sv)
+    D = surface.motion[free] / width
+    rows = np.repeat(point_weights, 2)
+    rest_img = next(islice(frame_source(video)[2], rest_frame, None))
+    fit = _Frame(V, D, surface.normals, rest, motion, rows, R[rest_frame])
+    refs = fit.references(rest_img, s[rest_frame], R[rest_frame], t[rest_frame], weights[rest_frame])
+    out = weights.copy()
+    last = weights[0]
+    for f, frame in enumerate(islice(frame_source(video)[2], len(weights))):
+        if progress and f and f % 300 == 0:
+            progress(f"refined {f} of {len(weights)} frames on their pixels")
+        if use[f]:
+            out[f] = fit.refine(frame, refs, img[f], s[f], R[f], t[f], weights[f], last)
+        last = out[f]
+    return out
+
+
+class _Frame:
+    """A frame's Gauss-Newton on its grey levels and the landmarks (refine_frames): the surface V
+    (m, 3) and its motion D (k, m, 3), the performer's landmarks `rest` (68, 3) and their motion
+    (k, 68, 3), in face widths; `rows` the landmarks' coordinates' weights; R0 the rest frame's
+    rotation."""
+
+    def __init__(self, V, D, normals, rest, motion, rows, R0):
+        self.V, self.N, self.R0 = V, normals, R0
+        self.Dflat = np.ascontiguousarray(D.reshape(len(D), -1))           # (k, m * 3): the shape's motion, one matmul
+        self.Dm = np.ascontiguousarray(D.transpose(1, 0, 2))                # (m, k, 3): each vertex's, a batched one
+        self.rest, self.motion, self.rows = rest, motion, rows
+        self.k = len(D)
+
+    def _shape(self, w):
+        return self.V + (w @ self.Dflat).reshape(-1, 3)
+
+    def _crop(self, image, x, s):
+        """The frame about the surface's points x (y up), a tenth of the face's width around them,
+        and the crop's corner (column, row)."""
+        pad = 0.1 * s
+        h, wd = image.shape[:2]
+        r0, r1 = int(max(0, -x[:, 1].max() - pad)), int(min(h, -x[:, 1].min() + pad + 1))
+        c0, c1 = int(max(0, x[:, 0].min() - pad)), int(min(wd, x[:, 0].max() + pad + 1))
+        return image[r0:r1, c0:c1], np.array([c0, r0])
+
+    @staticmethod
+    def _at(image, x, corner):
+        from scipy.ndimage import map_coordinates
+        return map_coordinates(image, [-x[:, 1] - corner[1], x[:, 0] - corner[0]], order=1, mode="nearest")
+
+    def references(self, frame, s, R, t, w) -> list:
+        """The surface's grey levels in the rest frame (RGB), at each blur."""
+        from scipy.ndimage import gaussian_filter
+        x = s * (self._shape(w) @ R.T)[:, :2] + t
+        crop, corner = self._crop(frame, x, s)
+        return [self._at(gaussian_filter(crop.mean(2), b * s), x, corner) for b in BLURS]
+
+    def refine(self, frame, refs, pts, s, R, t, w, last) -> np.ndarray:
+        """The frame's (RGB) weights, from the landmark fit's pose (s, R, t) and weights w; `pts` the
+        landmarks (68, 2, y up), `last` the last frame's weights."""
+        from scipy.ndimage import gaussian_filter
+        from scipy.spatial.transform import Rotation
+        k, m = self.k, len(self.V)
+        P = np.eye(3)[:2]
+        x = s * (self._shape(w) @ R.T)[:, :2] + t
+        crop, corner = self._crop(frame, x, s)
+        crop = crop.mean(2)                                             # grey, about the face only
+        light = np.r_[1.0, np.zeros(LIGHTS - 1)]
+        lo = np.r_[np.full(6, -np.inf), np.zeros(k), np.full(LIGHTS, -np.inf)]
+        hi = np.r_[np.full(6, np.inf), np.ones(k), np.full(LIGHTS, np.inf)]
+        sl = np.sqrt(LANDMARK_PULL / 136) * self.rows
+        for blur, steps, c in zip(BLURS, STEPS, refs):
+            image = gaussian_filter(crop, blur * s)
+            gy, gx = np.gradient(image)
+            for _ in range(steps):
+                RX = self._shape(w) @ R.T
+                x = s * RX[:, :2] + t
+                grey = self._at(image, x, corner)
+                a = np.stack([self._at(gx, x, corner), -self._at(gy, x, corner), np.zeros(m)], 1)  # the gradient (y up)
+                # the grey levels' Jacobian in (a small rotation d, scale 1 + e, shift s u, the weights), as the
+                # landmark fit's: x = s (1 + e) P (I + [d]x) R X + t + s u, so g.dx/dd = s RX x a
+                JI = s * np.c_[np.cross(RX, a), (a * RX).sum(1), a[:, :2], (self.Dm @ (a @ R)[:, :, None])[:, :, 0]]
+                uv = (x - x.mean(0)) / s                                # across the face, face widths
+                # the light: a gain varying across the face, the shading's change as the surface turns
+                # from the rest frame (Lambert's, to first order: its normals' change), an offset
+                turned = self.N @ R.T - self.N @ self.R0.T
+                lit = np.c_[c, c * uv[:, 0], c * uv[:, 1], c[:, None] * turned, np.ones(m)][:, LIGHT_COLUMNS]
+                r = grey - lit @ light
+                seen = (self.N @ R.T)[:, 2] > FACING
+                huber = seen / np.maximum(1.0, np.abs(r) / ROBUST)
+                sw = np.sqrt(huber * PIXEL_PULL / max(seen.sum(), 1))
+                Aph = np.c_[JI, -lit] * sw[:, None]
+                XL = self.rest + np.einsum("k,knj->nj", w, self.motion)
+                RXL = XL @ R.T
+                AL = np.concatenate([-np.einsum("ij,njk->nik", P, cross_matrices(RXL)), RXL[:, :2, None],
+                                     np.broadcast_to(np.eye(2), (68, 2, 2)), np.einsum("ij,knj->nik", P @ R, self.motion),
+                                     np.zeros((68, 2, LIGHTS))], 2).reshape(136, -1) * sl[:, None]
+                bL = ((pts - t) / s - RXL[:, :2]).reshape(-1) * sl
+                Z = np.zeros((k, 6))
+                M = np.vstack([Aph, AL, np.c_[Z, np.sqrt(RIDGE) * np.eye(k), np.zeros((k, LIGHTS))],
+                               np.c_[Z, np.sqrt(SMOOTH) * np.eye(k), np.zeros((k, LIGHTS))],
+                               np.c_[np.zeros((LIGHTS, 6 + k)), 1e-3 * np.eye(LIGHTS)]])
+                b = np.r_[-r * sw, bL, -np.sqrt(RIDGE) * w, np.sqrt(SMOOTH) * (last - w), np.zeros(LIGHTS)]
+                lo[6:6 + k], hi[6:6 + k] = -w, 1.0 - w           # z holds the weights' step
+                z = box_qp(M.T @ M, M.T @ b, lo, hi)
+                R = Rotation.from_rotvec(z[:3]).as_matrix() @ R
+                t = t + s * z[4:6]
+                s = s * (1.0 + z[3])
+                w = np.clip(w + z[6:6 + k], 0.0, 1.0)
+                light = light + z[-LIGHTS:]
+        return w
+
