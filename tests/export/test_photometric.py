@@ -20,7 +20,7 @@ def test_the_face_surface_is_the_skin_a_camera_before_the_head_sees(full_model):
     from mimica.export.photometric import FACING, _face_frame, face_surface
     v = full_model.neutral
     lm = v[ICT_LANDMARKS_68]
-    surf = face_surface(v, full_model.mesh.triangles, np.zeros((52, len(v), 3)), lm, count=10**6)
+    surf = face_surface(v, full_model.mesh.triangles, lm, count=10**6)
     part = {name: (a, b) for name, a, b in ICT_PARTS}
     chosen = {name: int(((surf.index >= a) & (surf.index < b)).sum()) for name, (a, b) in part.items()}
     assert chosen["skin"] > 2000 and chosen["eye socket"] < 0.02 * chosen["skin"], chosen
@@ -48,8 +48,9 @@ def _painted_take(model, folder, w, yaw):
     deltas = np.stack([model.delta({n: 1.0 for n in ict_sources(a)}) if ict_sources(a) else np.zeros_like(v0)
                        for a in ARKIT_52])
     lm = v0[ICT_LANDMARKS_68]
-    basis = LandmarkBasis(lm, deltas[:, ICT_LANDMARKS_68], list(ARKIT_52), "ICT-FaceKit's",
-                          face_surface(v0, mesh.triangles, deltas, lm))
+    surface = face_surface(v0, mesh.triangles, lm)
+    surface.motion = deltas[:, surface.index]
+    basis = LandmarkBasis(lm, deltas[:, ICT_LANDMARKS_68], list(ARKIT_52), "ICT-FaceKit's", surface)
     # a smooth pattern over the face (a vertex's own random colour would put every vertex on an
     # extremum of the picture, where its gradient vanishes)
     p = (v0 - lm.mean(0)) / np.linalg.norm(lm[16] - lm[0]) * 2 * np.pi / 0.25

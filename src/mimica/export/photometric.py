@@ -39,8 +39,7 @@ LANDMARK_PULL = 1.0        # ... and of the landmarks' (face widths), weighted a
 RIDGE = 1e-4               # weight of sum w^2
 SMOOTH = 1e-3              # weight of the change from the last frame's weights
 ROBUST = 0.05              # grey levels: a misfit past this counts less (Huber's weights)
-LIGHT_COLUMNS = [0, 1, 2, 3, 4, 5, 6]   # gain, its slopes across the face, the turned normals' three, offset
-LIGHTS = len(LIGHT_COLUMNS)
+LIGHTS = 7                 # the light's terms: a gain, its slopes across the face, the turned normals' three, an offset
 
 
 @dataclass
@@ -51,17 +50,18 @@ class Surface:
     ----------
     rest : (m, 3) float array
         Its vertices at rest, metres in the GLB's frame.
-    motion : (52, m, 3) float array
-        Their motion in each ARKit shape (ARKIT_52's order).
     normals : (m, 3) float array
         Unit normals at rest.
     index : (m,) int array
         Which of the head's vertices they are.
+    motion : (52, m, 3) float array or None
+        Their motion in each ARKit shape (ARKIT_52's order): export.video.landmark_basis sets it
+        from the head's targets at these vertices only.
     """
     rest: np.ndarray
-    motion: np.ndarray
     normals: np.ndarray
     index: np.ndarray
+    motion: np.ndarray = None
 
 
 def _face_frame(lm: np.ndarray) -> np.ndarray:
@@ -77,8 +77,7 @@ def _face_frame(lm: np.ndarray) -> np.ndarray:
     return np.stack([x, np.cross(fwd, x), fwd])
 
 
-def face_surface(vertices: np.ndarray, triangles: np.ndarray, motion: np.ndarray, landmarks: np.ndarray,
-                 count: int | None = None) -> Surface:
+def face_surface(vertices: np.ndarray, triangles: np.ndarray, landmarks: np.ndarray, count: int | None = None) -> Surface:
     """The vertices of the head's face that a camera before it sees: on the part of the mesh its
     landmarks lie on (not the eyeballs, teeth or lashes), inside the face's outline and up to
     BROW_MARGIN above the brows, facing forward and in front of the rest of that part; about
@@ -90,8 +89,6 @@ def face_surface(vertices: np.ndarray, triangles: np.ndarray, motion: np.ndarray
     vertices : (n, 3) float array
         The head at rest.
     triangles : (T, 3) int array
-    motion : (52, n, 3) float array
-        Each ARKit shape's displacement of every vertex.
     landmarks : (68, 3) float array
         Its landmarks at rest.
     count : int or None
@@ -100,6 +97,7 @@ def face_surface(vertices: np.ndarray, triangles: np.ndarray, motion: np.ndarray
     Returns
     -------
     Surface
+        Without its motion.
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -137,7 +135,7 @@ def face_surface(vertices: np.ndarray, triangles: np.ndarray, motion: np.ndarray
     idx = np.nonzero(skin & inside & (nrm[:, 2] > FACING) & front)[0]
     if len(idx) > count:      # a random `count` of them (fixed seed): as dense as the mesh is (at the eyes, the lips)
         idx = np.sort(np.random.default_rng(0).choice(idx, count, replace=False))
-    return Surface(vertices[idx], motion[:, idx], nrm[idx] @ frame, idx)
+    return Surface(vertices[idx], nrm[idx] @ frame, idx)
 
 
 def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarray, motion: np.ndarray,
@@ -238,8 +236,8 @@ class _Frame:
         return [self._at(gaussian_filter(crop.mean(2), b * s), x, corner) for b in BLURS]
 
     def refine(self, frame, refs, pts, s, R, t, w, last) -> np.ndarray:
-        """The frame's (RGB) weights, from the landmark fit's pose (s, R, t) and weights w; `pts` the
-        landmarks (68, 2, y up), `last` the last frame's weights."""
+        """A frame's weights (the frame RGB, (h, w, 3)), from the landmark fit's pose (s, R, t) and
+        weights w; `pts` its landmarks (68, 2, y up), `last` the last frame's weights."""
         from scipy.ndimage import gaussian_filter
         from scipy.spatial.transform import Rotation
         k, m = self.k, len(self.V)
@@ -266,7 +264,7 @@ class _Frame:
                 # the light: a gain varying across the face, the shading's change as the surface turns
                 # from the rest frame (Lambert's, to first order: its normals' change), an offset
                 turned = self.N @ R.T - self.N @ self.R0.T
-                lit = np.c_[c, c * uv[:, 0], c * uv[:, 1], c[:, None] * turned, np.ones(m)][:, LIGHT_COLUMNS]
+                lit = np.c_[c, c * uv[:, 0], c * uv[:, 1], c[:, None] * turned, np.ones(m)]     # (m, LIGHTS)
                 r = grey - lit @ light
                 seen = (self.N @ R.T)[:, 2] > FACING
                 huber = seen / np.maximum(1.0, np.abs(r) / ROBUST)

@@ -61,8 +61,9 @@ CHECK_EVERY = 5            # frames: the face detector confirms the tracked face
 # neutral takes turning up to 30 degrees (identities 1009, 1010, painted; 300 frames) put a weight
 # over 0.3 in 0-8 % of the frames within 15 degrees and in 33-42 % past it through MediaPipe's
 # points (the depths found from the turns, the brows' ends counting less, the weights' share
-# that follows the turn taken out), in 0 % and 0-3 % refined on the pixels (the surface's
-# shading turns with the head, though: docs/benchmarks.md); through dlib's in 73-99 % at any turn
+# that follows the turn taken out), in none refined on the pixels (a light fixed in the room
+# still shades a turned face otherwise: docs/benchmarks.md); through dlib's in 73-99 % at any
+# turn, refined on the pixels 45-76 % within 15 degrees and 39-65 % past it
 TURN_TRUSTED = 15.0
 # the gaze (gaze_weights): an eyeLook weight of 1 turns the eye GAZE_FULL_DEG -- ARKit's eyeLook
 # shapes are the lids' movement "consistent with" a gaze and state no angle, so this is a
@@ -163,8 +164,9 @@ def landmark_basis(head_glb, landmarks=None, read=None) -> LandmarkBasis:
     rest = at(mesh.vertices)
     motion = np.stack([at(targets[plays[n]]) - rest for n in ARKIT_52])
     from .photometric import face_surface
-    surface = face_surface(k * mesh.vertices, mesh.triangles,
-                           np.stack([k * (targets[plays[n]] - mesh.vertices) for n in ARKIT_52]), rest)
+    surface = face_surface(k * mesh.vertices, mesh.triangles, rest)
+    i = surface.index
+    surface.motion = np.stack([k * (targets[plays[n]][i] - mesh.vertices[i]) for n in ARKIT_52])
     return LandmarkBasis(rest, motion, list(ARKIT_52), how, surface)
 
 
