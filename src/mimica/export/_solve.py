@@ -1,5 +1,5 @@
-"""Small solvers the video fit and its refinement on the pixels share (export.video,
-export.photometric)."""
+"""What the video fit and its refinement on the pixels share (export.video, export.photometric):
+the projected points' Jacobian and the bounded least squares."""
 
 from __future__ import annotations
 
@@ -11,6 +11,16 @@ def cross_matrices(v: np.ndarray) -> np.ndarray:
     z = np.zeros(len(v))
     return np.stack([np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1),
                      np.stack([-v[:, 1], v[:, 0], z], 1)], 1)
+
+
+def projection_jacobian(RX: np.ndarray, R: np.ndarray, motion: np.ndarray) -> np.ndarray:
+    """(n, 2, 6 + k): the derivative of P (1 + e) (I + [d]x) RX + u -- points RX (n, 3), already
+    rotated by R, moved by k weights through `motion` (k, n, 3) in the head's frame -- in (a small
+    rotation d, the scale's change e, the shift u, the weights) at d = e = u = 0; P the first two
+    rows (a scaled orthographic camera, lengths as RX's)."""
+    P = np.eye(3)[:2]
+    return np.concatenate([-np.einsum("ij,njk->nik", P, cross_matrices(RX)), RX[:, :2, None],
+                           np.broadcast_to(np.eye(2), (len(RX), 2, 2)), np.einsum("ij,knj->nik", P @ R, motion)], 2)
 
 
 def box_qp(H: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, rounds: int = 30) -> np.ndarray:

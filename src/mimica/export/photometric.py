@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._solve import box_qp, cross_matrices
+from ._solve import box_qp, projection_jacobian
 
 SURFACE_POINTS = 2000      # the face's surface vertices sampled
 FACING = 0.3               # a vertex counts where its normal's cosine to the view exceeds this
@@ -205,7 +205,8 @@ class _Frame:
     rotation."""
 
     def __init__(self, V, D, normals, rest, motion, rows, R0):
-        self.V, self.N, self.R0 = V, normals, R0
+        self.V, self.N = V, normals
+        self.N0 = normals @ R0.T                                            # the normals as the rest frame sees them
         self.Dflat = np.ascontiguousarray(D.reshape(len(D), -1))           # (k, m * 3): the shape's motion, one matmul
         self.Dm = np.ascontiguousarray(D.transpose(1, 0, 2))                # (m, k, 3): each vertex's, a batched one
         self.rest, self.motion, self.rows = rest, motion, rows
@@ -241,7 +242,6 @@ class _Frame:
         from scipy.ndimage import gaussian_filter
         from scipy.spatial.transform import Rotation
         k, m = self.k, len(self.V)
-        P = np.eye(3)[:2]
         x = s * (self._shape(w) @ R.T)[:, :2] + t
         crop, corner = self._crop(frame, x, s)
         crop = crop.mean(2)                                             # grey, about the face only
@@ -263,18 +263,17 @@ class _Frame:
                 uv = (x - x.mean(0)) / s                                # across the face, face widths
                 # the light: a gain varying across the face, the shading's change as the surface turns
                 # from the rest frame (Lambert's, to first order: its normals' change), an offset
-                turned = self.N @ R.T - self.N @ self.R0.T
+                NR = self.N @ R.T
+                turned = NR - self.N0
                 lit = np.c_[c, c * uv[:, 0], c * uv[:, 1], c[:, None] * turned, np.ones(m)]     # (m, LIGHTS)
                 r = grey - lit @ light
-                seen = (self.N @ R.T)[:, 2] > FACING
+                seen = NR[:, 2] > FACING
                 huber = seen / np.maximum(1.0, np.abs(r) / ROBUST)
                 sw = np.sqrt(huber * PIXEL_PULL / max(seen.sum(), 1))
                 Aph = np.c_[JI, -lit] * sw[:, None]
                 XL = self.rest + np.einsum("k,knj->nj", w, self.motion)
                 RXL = XL @ R.T
-                AL = np.concatenate([-np.einsum("ij,njk->nik", P, cross_matrices(RXL)), RXL[:, :2, None],
-                                     np.broadcast_to(np.eye(2), (68, 2, 2)), np.einsum("ij,knj->nik", P @ R, self.motion),
-                                     np.zeros((68, 2, LIGHTS))], 2).reshape(136, -1) * sl[:, None]
+                AL = np.c_[projection_jacobian(RXL, R, self.motion).reshape(136, -1), np.zeros((136, LIGHTS))] * sl[:, None]
                 bL = ((pts - t) / s - RXL[:, :2]).reshape(-1) * sl
                 Z = np.zeros((k, 6))
                 M = np.vstack([Aph, AL, np.c_[Z, np.sqrt(RIDGE) * np.eye(k), np.zeros((k, LIGHTS))],

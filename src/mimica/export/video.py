@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MimicaError
-from ._solve import box_qp, cross_matrices
+from ._solve import box_qp, projection_jacobian
 from .blendshapes import ARKIT_52
 from .extras import LANDMARKS_KEY, stored_landmarks  # noqa: F401  (the key, for readers of this module)
 
@@ -378,11 +378,7 @@ def _fit_frames(img, Ls, Bf, pulls):
             # to a bounded least squares on the weights (linear in them), from the last frame's
             X = Ls + np.einsum("k,knj->nj", w, Bf)          # the current shape (68, 3)
             RX = X @ R.T
-            Jd = -np.einsum("ij,njk->nik", P, cross_matrices(RX))  # (68, 2, 3): d/dd of P (d x RX)
-            Je = (RX @ P.T)[:, :, None]                      # (68, 2, 1)
-            Ju = np.broadcast_to(np.eye(2), (68, 2, 2))
-            Jw = np.einsum("ij,knj->nik", P @ R, Bf)          # (68, 2, k)
-            A = np.concatenate([Jd, Je, Ju, Jw], 2).reshape(136, 6 + k) * rows[:, None]
+            A = projection_jacobian(RX, R, Bf).reshape(136, 6 + k) * rows[:, None]
             b = ((img[f] - t) / s_ - Ls @ (P @ R).T).reshape(-1) * rows
             top = hi
             if it == 0:                                      # a plain ridge to start from
