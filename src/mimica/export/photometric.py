@@ -16,8 +16,14 @@ the shading's change as the surface turns -- Lambert's law to first order in its
 (0 <= w <= 1), pulled toward rest and toward the last frame's -- no L1 pull as the landmark
 fit's: on the dev takes it took the gain away.  What it does not model: the shading's change
 as the expression bends the surface, and a face the rest frame does not show (the teeth, the
-mouth's inside: its lips' own grey levels are followed).  Measured on rendered takes
-(bench/video_arkit.py, bench/export.py): docs/benchmarks.md.
+mouth's inside: its lips' own grey levels are followed).
+
+The gaze: where the head has eyes of its own (eye_samples: the eyeballs' fronts between the
+lids), the eyeLook weights are fitted with the others, each turning its eye rigidly about the
+eyeball's centre (GAZE_FULL_DEG at 1) besides moving the lids as its shape does; an eye's
+samples count where they lie between the frame's lids (the model's lid landmarks, so that a
+closing lid hides them), face the camera and are on the eye's side of the nose.  Measured on
+rendered takes (bench/video_arkit.py, bench/export.py): docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._solve import box_qp, projection_jacobian
+from .blendshapes import ARKIT_52
 
 SURFACE_POINTS = 2000      # the face's surface vertices sampled
 FACING = 0.3               # a vertex counts where its normal's cosine to the view exceeds this
@@ -40,6 +47,15 @@ RIDGE = 1e-4               # weight of sum w^2
 SMOOTH = 1e-3              # weight of the change from the last frame's weights
 ROBUST = 0.05              # grey levels: a misfit past this counts less (Huber's weights)
 LIGHTS = 7                 # the light's terms: a gain, its slopes across the face, the turned normals' three, an offset
+EYE_INSET = 0.9            # the lids' opening scaled by this about its centre: where an eye's samples count
+EYE_POINTS = 150           # the eyeball's front vertices sampled, each eye
+EYE_FACING = 0.6           # an eye's sample counts where its direction from the eye's centre has this cosine to the view
+# an eyeLook weight of 1 turns the eye this far -- ARKit's eyeLook shapes are the lids' movement
+# "consistent with" a gaze and state no angle, so this is a convention (export.video's reading of
+# the irises and bench/video_arkit.py's takes share it)
+GAZE_FULL_DEG = 30.0
+EYE_SMOOTH = 3e-4          # weight of a gaze weight's change from the last frame's (SMOOTH the others')
+LIDS = (np.arange(36, 42), np.arange(42, 48))    # the subject's right eye's lid landmarks, the left's
 
 
 @dataclass
@@ -62,6 +78,28 @@ class Surface:
     normals: np.ndarray
     index: np.ndarray
     motion: np.ndarray = None
+    eyes: "Eyes" = None
+
+
+@dataclass
+class Eyes:
+    """The eyeballs' fronts sampled for the gaze's fit on the pixels (eye_samples).
+
+    Attributes
+    ----------
+    rest : (m, 3) float array
+        Vertices of the eyeballs' fronts seen between the lids at rest, metres in the GLB's frame.
+    side : (m,) int array
+        0 for the subject's right eye, 1 for the left.
+    centres : (2, 3) float array
+        The eyeballs' centres of turning (a sphere fitted to each).
+    axes : (3, 3) float array
+        Rows: the face's right-to-left, up and forward axes (_face_frame).
+    """
+    rest: np.ndarray
+    side: np.ndarray
+    centres: np.ndarray
+    axes: np.ndarray
 
 
 def _face_frame(lm: np.ndarray) -> np.ndarray:
@@ -138,12 +176,59 @@ def face_surface(vertices: np.ndarray, triangles: np.ndarray, landmarks: np.ndar
     return Surface(vertices[idx], nrm[idx] @ frame, idx)
 
 
+def eye_samples(mesh, landmarks: np.ndarray, count: int = EYE_POINTS) -> Eyes | None:
+    """The eyeballs' fronts a camera before the head sees between its lids: each eye's vertices
+    (correspond.parts.split_parts: the rigid eyes) inside its six lid landmarks' polygon scaled by
+    EYE_INSET and on the eyeball's front half; about `count` an eye; the eye's centre of turning
+    a sphere fitted to its vertices.  None where the head has no eyes of its own (eyes one surface
+    with the lids, or none).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The head at rest.
+    landmarks : (68, 3) float array
+    count : int
+
+    Returns
+    -------
+    Eyes or None
+    """
+    from ..correspond.eyes import inside_polygon
+    from ..correspond.parts import EYE_LEFT, EYE_RIGHT, ROLES, fit_sphere, split_parts
+    role = split_parts(mesh, landmarks).role
+    frame = _face_frame(landmarks)
+    v = mesh.vertices @ frame.T
+    lm = landmarks @ frame.T
+    rest, side, centres = [], [], []
+    rng = np.random.default_rng(0)
+    for k, name in enumerate((EYE_RIGHT, EYE_LEFT)):
+        own = np.nonzero(role == ROLES.index(name))[0]
+        if len(own) < 20:
+            return None
+        centre = fit_sphere(mesh.vertices[own])[0]
+        c = centre @ frame.T
+        poly = lm[LIDS[k], :2]
+        mid = poly.mean(0)
+        pick = own[inside_polygon(v[own, :2], mid + EYE_INSET * (poly - mid)) & (v[own, 2] > c[2])]
+        if len(pick) < 10:
+            return None
+        if len(pick) > count:
+            pick = np.sort(rng.choice(pick, count, replace=False))
+        rest.append(mesh.vertices[pick])
+        side.append(np.full(len(pick), k))
+        centres.append(centre)
+    return Eyes(np.concatenate(rest), np.concatenate(side), np.array(centres), frame)
+
+
 def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarray, motion: np.ndarray,
                   surface: Surface, free: np.ndarray, width: float, weights: np.ndarray, s: np.ndarray,
                   R: np.ndarray, t: np.ndarray, use: np.ndarray, point_weights: np.ndarray, rest_frame: int = 0,
                   progress=None) -> np.ndarray:
     """Each frame's weights refined on its pixels (the module's docstring), from the landmark fit's
-    pose and weights (export.video.fit_weights; lengths in face widths, image y up).
+    pose and weights (export.video.fit_weights; lengths in face widths, image y up); where the
+    surface has the eyes (Surface.eyes), the gaze's weights (eyeLook*) too, from 0: each turns its
+    eye GAZE_FULL_DEG at 1 and moves the lids as the head's shape does.
 
     Parameters
     ----------
@@ -153,15 +238,16 @@ def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarra
         The points the landmark fit fitted (y up).
     head_rest, rest : (68, 3) float arrays
         The head's landmarks and the performer's (face widths).
-    motion : (k, 68, 3) float array
-        The landmarks' motion in the fitted shapes.
+    motion : (52, 68, 3) float array
+        The landmarks' motion in every shape (ARKIT_52's order).
     surface : Surface
         face_surface's, in metres.
     free : (52,) bool array
-        The fitted shapes among ARKIT_52.
+        The shapes the landmark fit fitted.
     width : float
         The face's width, metres.
     weights : (F, k) float array
+        The landmark fit's weights of the `free` shapes.
     s, R, t : (F,), (F, 3, 3), (F, 2) float arrays
         The landmark fit's poses.
     use : (F,) bool array
@@ -174,43 +260,96 @@ def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarra
 
     Returns
     -------
-    (F, k) float array
+    (F, 52) float array
+        The refined weights: the `free` shapes', and the gaze's where the surface has the eyes
+        (else 0).
     """
     from itertools import islice
     from scipy.interpolate import RBFInterpolator
     from ..image.video import frame_source
     # the performer's surface: the head's plus its landmarks' offsets carried by a thin-plate spline
+    offset = RBFInterpolator(head_rest, rest - head_rest, kernel="thin_plate_spline", smoothing=1e-3)
     sv = surface.rest / width
-    V = sv + RBFInterpolator(head_rest, rest - head_rest, kernel="thin_plate_spline", smoothing=1e-3)(sv)
-    D = surface.motion[free] / width
+    V = sv + offset(sv)
+    gaze = np.array([n.startswith("eyeLook") for n in ARKIT_52]) & ~free
+    eyes = None
+    if surface.eyes is not None and gaze.any():
+        e = surface.eyes
+        ev, ec = e.rest / width, e.centres / width
+        # how each gaze weight turns the eyes: (right out, right up, left out, left up) per unit
+        turns = np.zeros((52, 4))
+        for j in np.nonzero(gaze)[0]:
+            n = ARKIT_52[j]
+            k = 0 if n.endswith("Right") else 1
+            turns[j, 2 * k + ("Up" in n or "Down" in n)] = -1.0 if ("In" in n or "Down" in n) else 1.0
+        cols = free | gaze
+        eyes = (ev + offset(ev), e.side, ec + offset(ec), e.axes, turns[cols])
+    else:
+        cols = free.copy()
+    D = surface.motion[cols] / width
     rows = np.repeat(point_weights, 2)
+    w0 = np.zeros((len(weights), int(cols.sum())))
+    w0[:, free[cols]] = weights
     rest_img = next(islice(frame_source(video)[2], rest_frame, None))
-    fit = _Frame(V, D, surface.normals, rest, motion, rows, R[rest_frame])
-    refs = fit.references(rest_img, s[rest_frame], R[rest_frame], t[rest_frame], weights[rest_frame])
-    out = weights.copy()
-    last = weights[0]
-    for f, frame in enumerate(islice(frame_source(video)[2], len(weights))):
+    fit = _Frame(V, D, surface.normals, rest, motion[cols], rows, R[rest_frame], eyes,
+                 smooth=np.where(gaze[cols], EYE_SMOOTH, SMOOTH))
+    refs = fit.references(rest_img, s[rest_frame], R[rest_frame], t[rest_frame], w0[rest_frame])
+    out = w0.copy()
+    last = w0[0]
+    for f, frame in enumerate(islice(frame_source(video)[2], len(w0))):
         if progress and f and f % 300 == 0:
-            progress(f"refined {f} of {len(weights)} frames on their pixels")
+            progress(f"refined {f} of {len(w0)} frames on their pixels")
         if use[f]:
-            out[f] = fit.refine(frame, refs, img[f], s[f], R[f], t[f], weights[f], last)
+            start = w0[f].copy()
+            start[~free[cols]] = last[~free[cols]]               # the gaze from the last frame's
+            out[f] = fit.refine(frame, refs, img[f], s[f], R[f], t[f], start, last)
+        else:
+            out[f, ~free[cols]] = last[~free[cols]]
         last = out[f]
-    return out
+    full = np.zeros((len(w0), 52))
+    full[:, cols] = out
+    return full
 
 
 class _Frame:
     """A frame's Gauss-Newton on its grey levels and the landmarks (refine_frames): the surface V
     (m, 3) and its motion D (k, m, 3), the performer's landmarks `rest` (68, 3) and their motion
     (k, 68, 3), in face widths; `rows` the landmarks' coordinates' weights; R0 the rest frame's
-    rotation."""
+    rotation; `eyes` None or (their samples (me, 3), each one's side (me,), the eyes' centres
+    (2, 3), the face's axes (3, 3), how each weight turns the eyes (k, 4)), the eyes turning
+    rigidly about their centres; `smooth` (k,) each weight's pull toward the last frame's."""
 
-    def __init__(self, V, D, normals, rest, motion, rows, R0):
+    def __init__(self, V, D, normals, rest, motion, rows, R0, eyes=None, smooth=None):
         self.V, self.N = V, normals
         self.N0 = normals @ R0.T                                            # the normals as the rest frame sees them
         self.Dflat = np.ascontiguousarray(D.reshape(len(D), -1))           # (k, m * 3): the shape's motion, one matmul
         self.Dm = np.ascontiguousarray(D.transpose(1, 0, 2))                # (m, k, 3): each vertex's, a batched one
         self.rest, self.motion, self.rows = rest, motion, rows
         self.k = len(D)
+        self.eyes = eyes
+        self.smooth = np.full(self.k, SMOOTH) if smooth is None else np.asarray(smooth, float)
+
+    def _eye_points(self, look):
+        """The eyes' samples turned by `look` (2, 2: each eye's out and up, in GAZE_FULL_DEG), and
+        their derivatives (me, 4, 3) in (right out, right up, left out, left up).  The subject's
+        left is the face's +x: out turns the left eye about the up axis toward +x, the right toward
+        -x; up about the x axis, the front toward +y."""
+        from scipy.spatial.transform import Rotation
+        Ve, side, centres, axes = self.eyes[:4]
+        x, up = axes[0], axes[1]
+        g = np.radians(GAZE_FULL_DEG)
+        out = np.empty_like(Ve)
+        J = np.zeros((len(Ve), 4, 3))
+        for k, away in ((0, -1.0), (1, 1.0)):
+            on = side == k
+            Ry = Rotation.from_rotvec(away * look[k, 0] * g * up).as_matrix()
+            Rx = Rotation.from_rotvec(-look[k, 1] * g * x).as_matrix()
+            q = (Ve[on] - centres[k]) @ Rx.T                                 # pitched, then turned
+            p = q @ Ry.T
+            out[on] = centres[k] + p
+            J[on, 2 * k] = away * g * np.cross(up, p)
+            J[on, 2 * k + 1] = -g * np.cross(x, q) @ Ry.T
+        return out, J
 
     def _shape(self, w):
         return self.V + (w @ self.Dflat).reshape(-1, 3)
@@ -230,13 +369,37 @@ class _Frame:
         return map_coordinates(image, [-x[:, 1] - corner[1], x[:, 0] - corner[0]], order=1, mode="nearest")
 
     def references(self, frame, s, R, t, w) -> list:
-        """The surface's grey levels in the rest frame (RGB), at each blur."""
+        """The surface's grey levels in the rest frame (RGB), at each blur (the eyes' samples after
+        the face's, looking ahead)."""
         from scipy.ndimage import gaussian_filter
         x = s * (self._shape(w) @ R.T)[:, :2] + t
         crop, corner = self._crop(frame, x, s)
+        if self.eyes is not None:
+            x = np.r_[x, s * (self.eyes[0] @ R.T)[:, :2] + t]
         return [self._at(gaussian_filter(crop.mean(2), b * s), x, corner) for b in BLURS]
 
-    def refine(self, frame, refs, pts, s, R, t, w, last) -> np.ndarray:
+    def _between_lids(self, xe, xl):
+        """Whether each eye sample's projection xe (me, 2) lies between its lids -- inside the
+        polygon of its eye's six landmarks (xl: the 68 model landmarks projected, (68, 2)) scaled
+        by EYE_INSET about its centre (a closing lid hides the samples it passes) -- and on its
+        eye's side of the nose's line (from the bridge to the tip, 27 to 30: a turned head's nose
+        hides the far eye's inner part)."""
+        from ..correspond.eyes import inside_polygon
+        side = self.eyes[1]
+        inside = np.zeros(len(side), bool)
+        a, d = xl[27], xl[30] - xl[27]
+
+        def across(q):                                  # which side of the nose's line: the 2D cross product
+            return d[0] * (q[..., 1] - a[1]) - d[1] * (q[..., 0] - a[0])
+        for k, outer in ((0, 36), (1, 45)):
+            poly = xl[LIDS[k]]
+            mid = poly.mean(0)
+            on = side == k
+            own_side = across(xe[on]) * np.sign(across(xl[outer])) > 0
+            inside[on] = inside_polygon(xe[on], mid + EYE_INSET * (poly - mid)) & own_side
+        return inside
+
+    def refine(self, frame, refs, pts, s, R, t, w, last):
         """A frame's weights (the frame RGB, (h, w, 3)), from the landmark fit's pose (s, R, t) and
         weights w; `pts` its landmarks (68, 2, y up), `last` the last frame's weights."""
         from scipy.ndimage import gaussian_filter
@@ -254,32 +417,47 @@ class _Frame:
             gy, gx = np.gradient(image)
             for _ in range(steps):
                 RX = self._shape(w) @ R.T
+                if self.eyes is not None:
+                    Xe, Je = self._eye_points((w @ self.eyes[4]).reshape(2, 2))
+                    RX = np.r_[RX, Xe @ R.T]
+                mm = len(RX)
                 x = s * RX[:, :2] + t
                 grey = self._at(image, x, corner)
-                a = np.stack([self._at(gx, x, corner), -self._at(gy, x, corner), np.zeros(m)], 1)  # the gradient (y up)
+                a = np.stack([self._at(gx, x, corner), -self._at(gy, x, corner), np.zeros(mm)], 1)  # the gradient (y up)
+                aR = a @ R                                              # ... in the head's frame
                 # the grey levels' Jacobian in (a small rotation d, scale 1 + e, shift s u, the weights), as the
-                # landmark fit's: x = s (1 + e) P (I + [d]x) R X + t + s u, so g.dx/dd = s RX x a
-                JI = s * np.c_[np.cross(RX, a), (a * RX).sum(1), a[:, :2], (self.Dm @ (a @ R)[:, :, None])[:, :, 0]]
-                uv = (x - x.mean(0)) / s                                # across the face, face widths
+                # landmark fit's: x = s (1 + e) P (I + [d]x) R X + t + s u, so g.dx/dd = s RX x a; the eyes'
+                # samples move with the gaze's weights only, turning the eyes
+                Jw = (self.Dm @ aR[:m, :, None])[:, :, 0]
+                if self.eyes is not None:
+                    Jw = np.r_[Jw, (Je @ aR[m:, :, None])[:, :, 0] @ self.eyes[4].T]
+                JI = s * np.c_[np.cross(RX, a), (a * RX).sum(1), a[:, :2], Jw]
+                uv = (x - x[:m].mean(0)) / s                            # across the face, face widths
                 # the light: a gain varying across the face, the shading's change as the surface turns
-                # from the rest frame (Lambert's, to first order: its normals' change), an offset
+                # from the rest frame (Lambert's, to first order: its normals' change), an offset; the
+                # eyes' samples take all but the normals' terms
                 NR = self.N @ R.T
-                turned = NR - self.N0
-                lit = np.c_[c, c * uv[:, 0], c * uv[:, 1], c[:, None] * turned, np.ones(m)]     # (m, LIGHTS)
+                turned = np.r_[NR - self.N0, np.zeros((mm - m, 3))]
+                lit = np.c_[c, c * uv[:, 0], c * uv[:, 1], c[:, None] * turned, np.ones(mm)]     # (mm, LIGHTS)
                 r = grey - lit @ light
-                seen = NR[:, 2] > FACING
+                XL = self.rest + np.einsum("k,knj->nj", w, self.motion)
+                RXL = XL @ R.T
+                seen = np.r_[NR[:, 2] > FACING, np.zeros(mm - m, bool)]
+                if self.eyes is not None:                               # between the lids, facing the camera
+                    out = Xe - self.eyes[2][self.eyes[1]]
+                    facing = (out @ R[2]) > EYE_FACING * np.linalg.norm(out, axis=1)
+                    seen[m:] = self._between_lids(x[m:], s * RXL[:, :2] + t) & facing
                 huber = seen / np.maximum(1.0, np.abs(r) / ROBUST)
                 sw = np.sqrt(huber * PIXEL_PULL / max(seen.sum(), 1))
                 Aph = np.c_[JI, -lit] * sw[:, None]
-                XL = self.rest + np.einsum("k,knj->nj", w, self.motion)
-                RXL = XL @ R.T
                 AL = np.c_[projection_jacobian(RXL, R, self.motion).reshape(136, -1), np.zeros((136, LIGHTS))] * sl[:, None]
                 bL = ((pts - t) / s - RXL[:, :2]).reshape(-1) * sl
                 Z = np.zeros((k, 6))
+                sm = np.sqrt(self.smooth)
                 M = np.vstack([Aph, AL, np.c_[Z, np.sqrt(RIDGE) * np.eye(k), np.zeros((k, LIGHTS))],
-                               np.c_[Z, np.sqrt(SMOOTH) * np.eye(k), np.zeros((k, LIGHTS))],
+                               np.c_[Z, np.diag(sm), np.zeros((k, LIGHTS))],
                                np.c_[np.zeros((LIGHTS, 6 + k)), 1e-3 * np.eye(LIGHTS)]])
-                b = np.r_[-r * sw, bL, -np.sqrt(RIDGE) * w, np.sqrt(SMOOTH) * (last - w), np.zeros(LIGHTS)]
+                b = np.r_[-r * sw, bL, -np.sqrt(RIDGE) * w, sm * (last - w), np.zeros(LIGHTS)]
                 lo[6:6 + k], hi[6:6 + k] = -w, 1.0 - w           # z holds the weights' step
                 z = box_qp(M.T @ M, M.T @ b, lo, hi)
                 R = Rotation.from_rotvec(z[:3]).as_matrix() @ R
@@ -288,4 +466,3 @@ class _Frame:
                 w = np.clip(w + z[6:6 + k], 0.0, 1.0)
                 light = light + z[-LIGHTS:]
         return w
-

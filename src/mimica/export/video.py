@@ -22,9 +22,12 @@ point's depth as the take's own turns show it (_depth_offsets), the take fitted 
 them; given the video, each frame's weights are then refined on its pixels (photometric: the
 points move less than the face); last, each weight's share that follows the head's turn over
 the take is taken out (_turn_share: the tracker's points drift with the turn).  tongueOut is
-not fitted (the points do not see it): it stays 0.  The gaze shapes (eyeLook*) are read from the
-irises of MediaPipe's attention mesh (gaze_weights), not through the fit, and joined to its
-weights by fit_take: through dlib's points they stay 0.
+not fitted (the points do not see it): it stays 0.  The gaze shapes (eyeLook*) are not fitted to
+the points; given the video and a head with eyes of its own (photometric.eye_samples), they are
+found on the pixels with the other weights, each turning its eye GAZE_FULL_DEG at 1 and moving
+the lids as its shape does.  Else they are read from the irises of MediaPipe's attention mesh
+(gaze_weights) and joined to the fit's weights by fit_take; through dlib's points without the
+video they stay 0.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ import numpy as np
 
 from ..errors import MimicaError
 from ._solve import box_qp, projection_jacobian
+from .photometric import GAZE_FULL_DEG
 from .blendshapes import ARKIT_52
 from .extras import LANDMARKS_KEY, stored_landmarks  # noqa: F401  (the key, for readers of this module)
 
@@ -65,10 +69,8 @@ CHECK_EVERY = 5            # frames: the face detector confirms the tracked face
 # still shades a turned face otherwise: docs/benchmarks.md); through dlib's in 73-99 % at any
 # turn, refined on the pixels 45-76 % within 15 degrees and 39-65 % past it
 TURN_TRUSTED = 15.0
-# the gaze (gaze_weights): an eyeLook weight of 1 turns the eye GAZE_FULL_DEG -- ARKit's eyeLook
-# shapes are the lids' movement "consistent with" a gaze and state no angle, so this is a
-# convention (bench/video_arkit.py's takes turn their eyes by it)
-GAZE_FULL_DEG = 30.0
+# the gaze (gaze_weights, and on the pixels photometric's): an eyeLook weight of 1 turns the eye
+# GAZE_FULL_DEG, defined there
 EYE_RADIUS = 0.4           # the iris's distance before the eye's centre of turning over the eye's width: ~11 of 28 mm (anatomy)
 # MediaPipe's attention mesh: each eye's outer corner, inner corner and iris centre (the subject's right eye, left eye)
 EYE_POINTS = ((33, 133, 468), (263, 362, 473))
@@ -105,7 +107,8 @@ class LandmarkBasis:
         "ICT-FaceKit's" (built in for its topology) or "found" (on renders of the head).
     surface : photometric.Surface or None
         The head's face surface the weights are refined on, on the frames' pixels (None: the
-        landmarks alone).
+        landmarks alone); its `eyes` the eyeballs' fronts the gaze is found on (None for a head
+        whose eyes are one surface with the lids).
     """
     rest: np.ndarray
     motion: np.ndarray
@@ -163,10 +166,14 @@ def landmark_basis(head_glb, landmarks=None, read=None) -> LandmarkBasis:
         return k * np.einsum("ij,ijk->ik", bary, p[tri])
     rest = at(mesh.vertices)
     motion = np.stack([at(targets[plays[n]]) - rest for n in ARKIT_52])
-    from .photometric import face_surface
+    from .photometric import eye_samples, face_surface
     surface = face_surface(k * mesh.vertices, mesh.triangles, rest)
     i = surface.index
     surface.motion = np.stack([k * (targets[plays[n]][i] - mesh.vertices[i]) for n in ARKIT_52])
+    eyes = eye_samples(mesh, rest / k)
+    if eyes is not None:                                  # metres, as the surface
+        eyes.rest, eyes.centres = k * eyes.rest, k * eyes.centres
+    surface.eyes = eyes
     return LandmarkBasis(rest, motion, list(ARKIT_52), how, surface)
 
 
@@ -192,8 +199,8 @@ class VideoFit:
     missing : (F,) bool array
         Frames that showed no face: fitted to points interpolated from their neighbours.
     unseen : tuple of str
-        The shapes nothing in the take showed: they stay 0 (the tongue; the gaze too where the
-        tracker gave no irises).
+        The shapes nothing in the take showed: they stay 0 (the tongue; the gaze too where neither
+        the pixels (a head with eyes, the video given) nor the tracker's irises showed it).
     angles : (F, 3) float array
         The head's yaw, pitch and roll from the rest frame, radians (head_angles of the
         rotations; computed from them where not given).
@@ -264,7 +271,8 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
         (_turn_share).
     video : str or Path or None
         The take the points were tracked on: each frame's weights are refined on its pixels
-        (photometric.refine_frames) where the basis has the head's surface.
+        (photometric.refine_frames) where the basis has the head's surface, and the gaze's found
+        there where it has the head's eyes.
     progress : callable, optional
         Called with a line of text as frames are refined.
 
@@ -308,23 +316,28 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
         depth = depth + _depth_offsets(img[pick], X0, Bf, s, R, t, R0[2], use=use)
     rest = Ls + np.outer(depth, R0[2])
     w, s, R, t, res = _fit_frames(img, rest, Bf, pulls)
+    out = np.zeros((len(pts), len(basis.names)))
+    unseen = UNSEEN
     if video is not None and basis.surface is not None:
         from .photometric import refine_frames
-        w = refine_frames(video, img, L, rest, Bf, basis.surface, free, width, w, s, R, t,
-                          ~missing & (res < 0.05), POINT_WEIGHTS, rest_frame, progress)
+        out = refine_frames(video, img, L, rest, B, basis.surface, free, width, w, s, R, t,
+                            ~missing & (res < 0.05), POINT_WEIGHTS, rest_frame, progress)
+        if basis.surface.eyes is not None:           # the gaze found on the pixels, the eyes turning
+            unseen = tuple(n for n in UNSEEN if not n.startswith("eyeLook"))
+    else:
+        out[:, free] = w
+    fitted = np.array([n not in unseen for n in basis.names])
     rel = R @ R0.T
     angles = head_angles(rel)
     if turn_share:
-        w = _turn_share(w, angles)
-    out = np.zeros((len(pts), len(basis.names)))
-    out[:, free] = w
-    return VideoFit(out, rel, res, missing, angles=angles)
+        out[:, fitted] = _turn_share(out[:, fitted], angles)
+    return VideoFit(out, rel, res, missing, unseen, angles=angles)
 
 
 def fit_take(tracked: Tracked, basis: LandmarkBasis, rest_frame: int = 0, video=None, progress=None) -> VideoFit:
-    """A tracked take's ARKit weights: fit_weights through its points, then the eyeLook weights
-    from its irises where the tracker gave them (gaze_weights, which reads the head's turn the fit
-    found).
+    """A tracked take's ARKit weights: fit_weights through its points (and its pixels, given the
+    video), then, where the pixels did not find the gaze, the eyeLook weights from its irises
+    where the tracker gave them (gaze_weights, which reads the head's turn the fit found).
 
     Parameters
     ----------
@@ -341,9 +354,12 @@ def fit_take(tracked: Tracked, basis: LandmarkBasis, rest_frame: int = 0, video=
     Returns
     -------
     VideoFit
-        Its `unseen` names what stays 0: the tongue, and the gaze where no frame showed the irises.
+        Its `unseen` names what stays 0: the tongue, and the gaze where neither the pixels nor
+        the irises showed it.
     """
     fit = fit_weights(tracked.points, basis, rest_frame=rest_frame, video=video, progress=progress)
+    if not any(n.startswith("eyeLook") for n in fit.unseen):
+        return fit                                   # the gaze found on the pixels
     gaze = gaze_weights(tracked.eyes, fit.angles)
     for n, w in gaze.items():
         fit.weights[:, ARKIT_52.index(n)] = w
