@@ -44,7 +44,7 @@ STEPS = (1, 2)             # Gauss-Newton steps at each blur
 PIXEL_PULL = 1.0           # weight of the grey levels' mean squared misfit ...
 LANDMARK_PULL = 1.0        # ... and of the landmarks' (face widths), weighted as the fit weights them
 RIDGE = 1e-4               # weight of sum w^2
-SMOOTH = 1e-3              # weight of the change from the last frame's weights
+SMOOTH = 3e-4              # weight of the change from the last frame's weights
 ROBUST = 0.05              # grey levels: a misfit past this counts less (Huber's weights)
 LIGHTS = 7                 # the light's terms: a gain, its slopes across the face, the turned normals' three, an offset
 EYE_INSET = 0.9            # the lids' opening scaled by this about its centre: where an eye's samples count
@@ -54,7 +54,6 @@ EYE_FACING = 0.6           # an eye's sample counts where its direction from the
 # "consistent with" a gaze and state no angle, so this is a convention (export.video's reading of
 # the irises and bench/video_arkit.py's takes share it)
 GAZE_FULL_DEG = 30.0
-EYE_SMOOTH = 3e-4          # weight of a gaze weight's change from the last frame's (SMOOTH the others')
 LIDS = (np.arange(36, 42), np.arange(42, 48))    # the subject's right eye's lid landmarks, the left's
 
 
@@ -291,8 +290,7 @@ def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarra
     w0 = np.zeros((len(weights), int(cols.sum())))
     w0[:, free[cols]] = weights
     rest_img = next(islice(frame_source(video)[2], rest_frame, None))
-    fit = _Frame(V, D, surface.normals, rest, motion[cols], rows, R[rest_frame], eyes,
-                 smooth=np.where(gaze[cols], EYE_SMOOTH, SMOOTH))
+    fit = _Frame(V, D, surface.normals, rest, motion[cols], rows, R[rest_frame], eyes)
     refs = fit.references(rest_img, s[rest_frame], R[rest_frame], t[rest_frame], w0[rest_frame])
     out = w0.copy()
     last = w0[0]
@@ -317,9 +315,9 @@ class _Frame:
     (k, 68, 3), in face widths; `rows` the landmarks' coordinates' weights; R0 the rest frame's
     rotation; `eyes` None or (their samples (me, 3), each one's side (me,), the eyes' centres
     (2, 3), the face's axes (3, 3), how each weight turns the eyes (k, 4)), the eyes turning
-    rigidly about their centres; `smooth` (k,) each weight's pull toward the last frame's."""
+    rigidly about their centres."""
 
-    def __init__(self, V, D, normals, rest, motion, rows, R0, eyes=None, smooth=None):
+    def __init__(self, V, D, normals, rest, motion, rows, R0, eyes=None):
         self.V, self.N = V, normals
         self.N0 = normals @ R0.T                                            # the normals as the rest frame sees them
         self.Dflat = np.ascontiguousarray(D.reshape(len(D), -1))           # (k, m * 3): the shape's motion, one matmul
@@ -327,7 +325,6 @@ class _Frame:
         self.rest, self.motion, self.rows = rest, motion, rows
         self.k = len(D)
         self.eyes = eyes
-        self.smooth = np.full(self.k, SMOOTH) if smooth is None else np.asarray(smooth, float)
 
     def _eye_points(self, look):
         """The eyes' samples turned by `look` (2, 2: each eye's out and up, in GAZE_FULL_DEG), and
@@ -453,11 +450,10 @@ class _Frame:
                 AL = np.c_[projection_jacobian(RXL, R, self.motion).reshape(136, -1), np.zeros((136, LIGHTS))] * sl[:, None]
                 bL = ((pts - t) / s - RXL[:, :2]).reshape(-1) * sl
                 Z = np.zeros((k, 6))
-                sm = np.sqrt(self.smooth)
                 M = np.vstack([Aph, AL, np.c_[Z, np.sqrt(RIDGE) * np.eye(k), np.zeros((k, LIGHTS))],
-                               np.c_[Z, np.diag(sm), np.zeros((k, LIGHTS))],
+                               np.c_[Z, np.sqrt(SMOOTH) * np.eye(k), np.zeros((k, LIGHTS))],
                                np.c_[np.zeros((LIGHTS, 6 + k)), 1e-3 * np.eye(LIGHTS)]])
-                b = np.r_[-r * sw, bL, -np.sqrt(RIDGE) * w, sm * (last - w), np.zeros(LIGHTS)]
+                b = np.r_[-r * sw, bL, -np.sqrt(RIDGE) * w, np.sqrt(SMOOTH) * (last - w), np.zeros(LIGHTS)]
                 lo[6:6 + k], hi[6:6 + k] = -w, 1.0 - w           # z holds the weights' step
                 z = box_qp(M.T @ M, M.T @ b, lo, hi)
                 R = Rotation.from_rotvec(z[:3]).as_matrix() @ R
