@@ -39,9 +39,9 @@ import numpy as np
 
 from ..errors import MimicaError
 from ._solve import box_qp, projection_jacobian
-from .photometric import GAZE_FULL_DEG
 from .blendshapes import ARKIT_52
 from .extras import LANDMARKS_KEY, stored_landmarks  # noqa: F401  (the key, for readers of this module)
+from .photometric import GAZE_FULL_DEG, eye_samples, face_surface, refine_frames
 
 UNSEEN = tuple(n for n in ARKIT_52 if n.startswith("eyeLook") or n == "tongueOut")
 # the points a face's expressions move least: the nose bridge and its base, the eyes' corners
@@ -166,7 +166,6 @@ def landmark_basis(head_glb, landmarks=None, read=None) -> LandmarkBasis:
         return k * np.einsum("ij,ijk->ik", bary, p[tri])
     rest = at(mesh.vertices)
     motion = np.stack([at(targets[plays[n]]) - rest for n in ARKIT_52])
-    from .photometric import eye_samples, face_surface
     surface = face_surface(k * mesh.vertices, mesh.triangles, rest)
     i = surface.index
     surface.motion = np.stack([k * (targets[plays[n]][i] - mesh.vertices[i]) for n in ARKIT_52])
@@ -319,7 +318,6 @@ def fit_weights(points: np.ndarray, basis: LandmarkBasis, rest_frame: int = 0, r
     out = np.zeros((len(pts), len(basis.names)))
     unseen = UNSEEN
     if video is not None and basis.surface is not None:
-        from .photometric import refine_frames
         out = refine_frames(video, img, L, rest, B, basis.surface, free, width, w, s, R, t,
                             ~missing & (res < 0.05), POINT_WEIGHTS, rest_frame, progress)
         if basis.surface.eyes is not None:           # the gaze found on the pixels, the eyes turning
