@@ -152,7 +152,8 @@ def test_the_eyes_samples_are_the_eyeballs_fronts_between_the_lids(full_model, h
     for k, key in enumerate(("eyeball.right", "eyeball.left")):
         on = eyes.side == k
         a, b = part[key]
-        idx = np.nonzero((v[:, None, :] == eyes.rest[on][None]).all(2))[0]
+        idx = eyes.index[on]
+        np.testing.assert_array_equal(eyes.rest[on], v[idx])
         assert 30 <= on.sum() <= 150 and ((idx >= a) & (idx < b)).all(), (on.sum(), idx.min(), idx.max())
         assert inside_polygon(eyes.rest[on, :2], lm[LIDS[k], :2]).all()
         assert (eyes.rest[on, 2] > eyes.centres[k, 2]).all()

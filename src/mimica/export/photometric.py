@@ -94,11 +94,14 @@ class Eyes:
         The eyeballs' centres of turning (a sphere fitted to each).
     axes : (3, 3) float array
         Rows: the face's right-to-left, up and forward axes (_face_frame).
+    index : (m,) int array
+        Which of the head's vertices they are.
     """
     rest: np.ndarray
     side: np.ndarray
     centres: np.ndarray
     axes: np.ndarray
+    index: np.ndarray
 
 
 def _face_frame(lm: np.ndarray) -> np.ndarray:
@@ -199,7 +202,7 @@ def eye_samples(mesh, landmarks: np.ndarray, count: int = EYE_POINTS) -> Eyes | 
     frame = _face_frame(landmarks)
     v = mesh.vertices @ frame.T
     lm = landmarks @ frame.T
-    rest, side, centres = [], [], []
+    index, side, centres = [], [], []
     rng = np.random.default_rng(0)
     for k, name in enumerate((EYE_RIGHT, EYE_LEFT)):
         own = np.nonzero(role == ROLES.index(name))[0]
@@ -214,10 +217,11 @@ def eye_samples(mesh, landmarks: np.ndarray, count: int = EYE_POINTS) -> Eyes | 
             return None
         if len(pick) > count:
             pick = np.sort(rng.choice(pick, count, replace=False))
-        rest.append(mesh.vertices[pick])
+        index.append(pick)
         side.append(np.full(len(pick), k))
         centres.append(centre)
-    return Eyes(np.concatenate(rest), np.concatenate(side), np.array(centres), frame)
+    index = np.concatenate(index)
+    return Eyes(mesh.vertices[index], np.concatenate(side), np.array(centres), frame, index)
 
 
 def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarray, motion: np.ndarray,
@@ -324,7 +328,9 @@ class _Frame:
         self.Dm = np.ascontiguousarray(D.transpose(1, 0, 2))                # (m, k, 3): each vertex's, a batched one
         self.rest, self.motion, self.rows = rest, motion, rows
         self.k = len(D)
-        self.eyes = eyes
+        self.eyes = eyes is not None
+        if self.eyes:                                                       # named once, not by position
+            self.Ve, self.eye_side, self.eye_centres, self.eye_axes, self.turns = eyes
 
     def _eye_points(self, look):
         """The eyes' samples turned by `look` (2, 2: each eye's out and up, in GAZE_FULL_DEG), and
@@ -332,8 +338,8 @@ class _Frame:
         left is the face's +x: out turns the left eye about the up axis toward +x, the right toward
         -x; up about the x axis, the front toward +y."""
         from scipy.spatial.transform import Rotation
-        Ve, side, centres, axes = self.eyes[:4]
-        x, up = axes[0], axes[1]
+        Ve, side, centres = self.Ve, self.eye_side, self.eye_centres
+        x, up = self.eye_axes[0], self.eye_axes[1]
         g = np.radians(GAZE_FULL_DEG)
         out = np.empty_like(Ve)
         J = np.zeros((len(Ve), 4, 3))
@@ -371,8 +377,8 @@ class _Frame:
         from scipy.ndimage import gaussian_filter
         x = s * (self._shape(w) @ R.T)[:, :2] + t
         crop, corner = self._crop(frame, x, s)
-        if self.eyes is not None:
-            x = np.r_[x, s * (self.eyes[0] @ R.T)[:, :2] + t]
+        if self.eyes:
+            x = np.r_[x, s * (self.Ve @ R.T)[:, :2] + t]
         return [self._at(gaussian_filter(crop.mean(2), b * s), x, corner) for b in BLURS]
 
     def _between_lids(self, xe, xl):
@@ -382,7 +388,7 @@ class _Frame:
         eye's side of the nose's line (from the bridge to the tip, 27 to 30: a turned head's nose
         hides the far eye's inner part)."""
         from ..correspond.eyes import inside_polygon
-        side = self.eyes[1]
+        side = self.eye_side
         inside = np.zeros(len(side), bool)
         a, d = xl[27], xl[30] - xl[27]
 
@@ -414,8 +420,8 @@ class _Frame:
             gy, gx = np.gradient(image)
             for _ in range(steps):
                 RX = self._shape(w) @ R.T
-                if self.eyes is not None:
-                    Xe, Je = self._eye_points((w @ self.eyes[4]).reshape(2, 2))
+                if self.eyes:
+                    Xe, Je = self._eye_points((w @ self.turns).reshape(2, 2))
                     RX = np.r_[RX, Xe @ R.T]
                 mm = len(RX)
                 x = s * RX[:, :2] + t
@@ -426,8 +432,8 @@ class _Frame:
                 # landmark fit's: x = s (1 + e) P (I + [d]x) R X + t + s u, so g.dx/dd = s RX x a; the eyes'
                 # samples move with the gaze's weights only, turning the eyes
                 Jw = (self.Dm @ aR[:m, :, None])[:, :, 0]
-                if self.eyes is not None:
-                    Jw = np.r_[Jw, (Je @ aR[m:, :, None])[:, :, 0] @ self.eyes[4].T]
+                if self.eyes:
+                    Jw = np.r_[Jw, (Je @ aR[m:, :, None])[:, :, 0] @ self.turns.T]
                 JI = s * np.c_[np.cross(RX, a), (a * RX).sum(1), a[:, :2], Jw]
                 uv = (x - x[:m].mean(0)) / s                            # across the face, face widths
                 # the light: a gain varying across the face, the shading's change as the surface turns
@@ -440,9 +446,9 @@ class _Frame:
                 XL = self.rest + np.einsum("k,knj->nj", w, self.motion)
                 RXL = XL @ R.T
                 seen = np.r_[NR[:, 2] > FACING, np.zeros(mm - m, bool)]
-                if self.eyes is not None:                               # between the lids, facing the camera
-                    out = Xe - self.eyes[2][self.eyes[1]]
-                    facing = (out @ R[2]) > EYE_FACING * np.linalg.norm(out, axis=1)
+                if self.eyes:                                           # between the lids, facing the camera
+                    outward = Xe - self.eye_centres[self.eye_side]
+                    facing = (outward @ R[2]) > EYE_FACING * np.linalg.norm(outward, axis=1)
                     seen[m:] = self._between_lids(x[m:], s * RXL[:, :2] + t) & facing
                 huber = seen / np.maximum(1.0, np.abs(r) / ROBUST)
                 sw = np.sqrt(huber * PIXEL_PULL / max(seen.sum(), 1))
