@@ -11,12 +11,13 @@ so that the surface, shaped by the blendshapes, finds those grey levels again in
 Gauss-Newton on the grey-level misfit (Lucas and Kanade's image alignment, the warp here a
 deformable model's projection), from a blurred frame to a sharper one,
 with the light's change from the rest frame modelled (a gain varying linearly across the face,
-the shading's change as the surface turns -- Lambert's law to first order in its normals' turn
--- and an offset), the landmarks' misfit kept beside it and the weights bounded
+the shading's change as the surface turns and as the expression bends it -- Lambert's law to
+first order in its normals' change, each shape's at weight 1 -- and an offset; the light
+carried from frame to frame), the landmarks' misfit kept beside it and the weights bounded
 (0 <= w <= 1), pulled toward rest and toward the last frame's -- no L1 pull as the landmark
-fit's: on the dev takes it took the gain away.  What it does not model: the shading's change
-as the expression bends the surface, and a face the rest frame does not show (the teeth, the
-mouth's inside: its lips' own grey levels are followed).
+fit's: on the dev takes it took the gain away.  What it does not model: a face the rest frame
+does not show (the teeth, the mouth's inside: its lips' own grey levels are followed) and
+shadows.
 
 The gaze: where the head has eyes of its own (eye_samples: the eyeballs' fronts between the
 lids), the eyeLook weights are fitted with the others, each turning its eye rigidly about the
@@ -70,13 +71,17 @@ class Surface:
     index : (m,) int array
         Which of the head's vertices they are.
     motion : (52, m, 3) float array or None
-        Their motion in each ARKit shape (ARKIT_52's order): export.video.landmark_basis sets it
-        from the head's targets at these vertices only.
+        Their motion in each ARKit shape (ARKIT_52's order) ...
+    normal_motion : (52, m, 3) float array or None
+        ... and their normals' (at weight 1): set_motion sets both.
+    eyes : Eyes or None
+        The eyeballs' fronts (eye_samples), where the head has eyes of its own.
     """
     rest: np.ndarray
     normals: np.ndarray
     index: np.ndarray
     motion: np.ndarray = None
+    normal_motion: np.ndarray = None
     eyes: "Eyes" = None
 
 
@@ -178,6 +183,29 @@ def face_surface(vertices: np.ndarray, triangles: np.ndarray, landmarks: np.ndar
     return Surface(vertices[idx], nrm[idx] @ frame, idx)
 
 
+def set_motion(surface: Surface, vertices: np.ndarray, triangles: np.ndarray, targets) -> None:
+    """Set the surface's motion in each ARKit shape and its normals' change (surface.motion,
+    surface.normal_motion; the normals' change at weight 1, the shading's first order in the
+    weights: the secant read better than the tangent at 0 on the dev takes, 0.236 against 0.241
+    where weights act).
+
+    Parameters
+    ----------
+    surface : Surface
+        face_surface's, of the head `vertices` (n, 3), `triangles` (T, 3).
+    targets : iterable of (n, 3) float arrays
+        The head's vertices in each shape at weight 1, ARKIT_52's order (the surface's units).
+    """
+    from ..mesh.core import vertex_normals
+    i = surface.index
+    near = triangles[np.isin(triangles, i).any(1)]          # every triangle a sample's normal is made of
+    motion, normals = [], []
+    for t in targets:
+        motion.append(t[i] - vertices[i])
+        normals.append(vertex_normals(t, near)[i] - surface.normals)
+    surface.motion, surface.normal_motion = np.stack(motion), np.stack(normals)
+
+
 def eye_samples(mesh, landmarks: np.ndarray, count: int = EYE_POINTS) -> Eyes | None:
     """The eyeballs' fronts a camera before the head sees between its lids: each eye's vertices
     (correspond.parts.split_parts: the rigid eyes) inside its six lid landmarks' polygon scaled by
@@ -244,7 +272,7 @@ def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarra
     motion : (52, 68, 3) float array
         The landmarks' motion in every shape (ARKIT_52's order).
     surface : Surface
-        face_surface's, in metres.
+        face_surface's, its motion set (set_motion), in metres.
     free : (52,) bool array
         The shapes the landmark fit fitted.
     width : float
@@ -294,7 +322,7 @@ def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarra
     w0 = np.zeros((len(weights), int(cols.sum())))
     w0[:, free[cols]] = weights
     rest_img = next(islice(frame_source(video)[2], rest_frame, None))
-    fit = _Frame(V, D, surface.normals, rest, motion[cols], rows, R[rest_frame], eyes)
+    fit = _Frame(V, D, surface.normals, surface.normal_motion[cols], rest, motion[cols], rows, R[rest_frame], eyes)
     refs = fit.references(rest_img, s[rest_frame], R[rest_frame], t[rest_frame], w0[rest_frame])
     out = w0.copy()
     last = w0[0]
@@ -315,14 +343,15 @@ def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarra
 
 class _Frame:
     """A frame's Gauss-Newton on its grey levels and the landmarks (refine_frames): the surface V
-    (m, 3) and its motion D (k, m, 3), the performer's landmarks `rest` (68, 3) and their motion
-    (k, 68, 3), in face widths; `rows` the landmarks' coordinates' weights; R0 the rest frame's
-    rotation; `eyes` None or (their samples (me, 3), each one's side (me,), the eyes' centres
-    (2, 3), the face's axes (3, 3), how each weight turns the eyes (k, 4)), the eyes turning
-    rigidly about their centres."""
+    (m, 3), its motion D (k, m, 3), its normals (m, 3) and their change dN (k, m, 3), the
+    performer's landmarks `rest` (68, 3) and their motion (k, 68, 3), in face widths; `rows` the
+    landmarks' coordinates' weights; R0 the rest frame's rotation; `eyes` None or (their samples
+    (me, 3), each one's side (me,), the eyes' centres (2, 3), the face's axes (3, 3), how each
+    weight turns the eyes (k, 4)), the eyes turning rigidly about their centres."""
 
-    def __init__(self, V, D, normals, rest, motion, rows, R0, eyes=None):
-        self.V, self.N = V, normals
+    def __init__(self, V, D, normals, dN, rest, motion, rows, R0, eyes=None):
+        self.V, self.N, self.dN = V, normals, dN
+        self.light = np.r_[1.0, np.zeros(LIGHTS - 1)]                      # the last frame's light: the room's stays
         self.N0 = normals @ R0.T                                            # the normals as the rest frame sees them
         self.Dflat = np.ascontiguousarray(D.reshape(len(D), -1))           # (k, m * 3): the shape's motion, one matmul
         self.Dm = np.ascontiguousarray(D.transpose(1, 0, 2))                # (m, k, 3): each vertex's, a batched one
@@ -411,7 +440,7 @@ class _Frame:
         x = s * (self._shape(w) @ R.T)[:, :2] + t
         crop, corner = self._crop(frame, x, s)
         crop = crop.mean(2)                                             # grey, about the face only
-        light = np.r_[1.0, np.zeros(LIGHTS - 1)]
+        light = self.light.copy()
         lo = np.r_[np.full(6, -np.inf), np.zeros(k), np.full(LIGHTS, -np.inf)]
         hi = np.r_[np.full(6, np.inf), np.ones(k), np.full(LIGHTS, np.inf)]
         sl = np.sqrt(LANDMARK_PULL / 136) * self.rows
@@ -437,9 +466,9 @@ class _Frame:
                 JI = s * np.c_[np.cross(RX, a), (a * RX).sum(1), a[:, :2], Jw]
                 uv = (x - x[:m].mean(0)) / s                            # across the face, face widths
                 # the light: a gain varying across the face, the shading's change as the surface turns
-                # from the rest frame (Lambert's, to first order: its normals' change), an offset; the
-                # eyes' samples take all but the normals' terms
-                NR = self.N @ R.T
+                # from the rest frame and bends (Lambert's, to first order: its normals' change), an
+                # offset; the eyes' samples take all but the normals' terms
+                NR = (self.N + np.einsum("k,kmj->mj", w, self.dN)) @ R.T          # the normals, bent by the weights
                 turned = np.r_[NR - self.N0, np.zeros((mm - m, 3))]
                 lit = np.c_[c, c * uv[:, 0], c * uv[:, 1], c[:, None] * turned, np.ones(mm)]     # (mm, LIGHTS)
                 r = grey - lit @ light
@@ -450,6 +479,8 @@ class _Frame:
                     outward = Xe - self.eye_centres[self.eye_side]
                     facing = (outward @ R[2]) > EYE_FACING * np.linalg.norm(outward, axis=1)
                     seen[m:] = self._between_lids(x[m:], s * RXL[:, :2] + t) & facing
+                # ... the weights shade the face too: the turned normals' term is c (n R^T - n0).l, so d/dw_k = c dn_k.(R^T l)
+                JI[:m, 6:] -= c[:m, None] * np.einsum("kmj,j->mk", self.dN, R.T @ light[3:6])
                 huber = seen / np.maximum(1.0, np.abs(r) / ROBUST)
                 sw = np.sqrt(huber * PIXEL_PULL / max(seen.sum(), 1))
                 Aph = np.c_[JI, -lit] * sw[:, None]
@@ -467,4 +498,5 @@ class _Frame:
                 s = s * (1.0 + z[3])
                 w = np.clip(w + z[6:6 + k], 0.0, 1.0)
                 light = light + z[-LIGHTS:]
+        self.light = light
         return w

@@ -41,7 +41,7 @@ from ..errors import MimicaError
 from ._solve import box_qp, projection_jacobian
 from .blendshapes import ARKIT_52
 from .extras import LANDMARKS_KEY, stored_landmarks  # noqa: F401  (the key, for readers of this module)
-from .photometric import GAZE_FULL_DEG, eye_samples, face_surface, refine_frames
+from .photometric import GAZE_FULL_DEG, eye_samples, face_surface, refine_frames, set_motion
 
 UNSEEN = tuple(n for n in ARKIT_52 if n.startswith("eyeLook") or n == "tongueOut")
 # the points a face's expressions move least: the nose bridge and its base, the eyes' corners
@@ -167,8 +167,7 @@ def landmark_basis(head_glb, landmarks=None, read=None) -> LandmarkBasis:
     rest = at(mesh.vertices)
     motion = np.stack([at(targets[plays[n]]) - rest for n in ARKIT_52])
     surface = face_surface(k * mesh.vertices, mesh.triangles, rest)
-    i = surface.index
-    surface.motion = np.stack([k * (targets[plays[n]][i] - mesh.vertices[i]) for n in ARKIT_52])
+    set_motion(surface, k * mesh.vertices, mesh.triangles, (k * targets[plays[n]] for n in ARKIT_52))
     eyes = eye_samples(mesh, rest / k)
     if eyes is not None:                                  # metres, as the surface
         eyes.rest, eyes.centres = k * eyes.rest, k * eyes.centres
