@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._solve import box_qp, projection_jacobian
+from ._solve import box_qp, gram, projection_jacobian
 from .blendshapes import ARKIT_52
 
 SURFACE_POINTS = 2000      # the face's surface vertices sampled
@@ -55,6 +55,9 @@ EYE_FACING = 0.6           # an eye's sample counts where its direction from the
 # "consistent with" a gaze and state no angle, so this is a convention (export.video's reading of
 # the irises and bench/video_arkit.py's takes share it)
 GAZE_FULL_DEG = 30.0
+# a uint8 frame's channels' mean in [0, 1], in single precision (a product: 0.06 ms a frame against
+# ndarray.mean's 1.3; the blurs on it take half the time they take in double)
+_GREY = np.full(3, 1 / 765, np.float32)
 LIDS = (np.arange(36, 42), np.arange(42, 48))    # the subject's right eye's lid landmarks, the left's
 
 
@@ -321,12 +324,12 @@ def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarra
     rows = np.repeat(point_weights, 2)
     w0 = np.zeros((len(weights), int(cols.sum())))
     w0[:, free[cols]] = weights
-    rest_img = next(islice(frame_source(video)[2], rest_frame, None))
+    rest_img = next(islice(frame_source(video, raw=True)[2], rest_frame, None))
     fit = _Frame(V, D, surface.normals, surface.normal_motion[cols], rest, motion[cols], rows, R[rest_frame], eyes)
     refs = fit.references(rest_img, s[rest_frame], R[rest_frame], t[rest_frame], w0[rest_frame])
     out = w0.copy()
     last = w0[0]
-    for f, frame in enumerate(islice(frame_source(video)[2], len(w0))):
+    for f, frame in enumerate(islice(frame_source(video, raw=True)[2], len(w0))):
         if progress and f and f % 300 == 0:
             progress(f"refined {f} of {len(w0)} frames on their pixels")
         if use[f]:
@@ -341,6 +344,17 @@ def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarra
     return full
 
 
+def _skew(u: np.ndarray) -> np.ndarray:
+    """The matrix of cross(u, .)."""
+    return np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+
+
+def _turn(K: np.ndarray, angle: float) -> np.ndarray:
+    """The rotation by `angle` about the unit axis whose cross product's matrix is K (Rodrigues':
+    scipy's Rotation costs 30 us a call, four calls a Gauss-Newton step)."""
+    return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
+
+
 class _Frame:
     """A frame's Gauss-Newton on its grey levels and the landmarks (refine_frames): the surface V
     (m, 3), its motion D (k, m, 3), its normals (m, 3) and their change dN (k, m, 3), the
@@ -350,37 +364,39 @@ class _Frame:
     weight turns the eyes (k, 4)), the eyes turning rigidly about their centres."""
 
     def __init__(self, V, D, normals, dN, rest, motion, rows, R0, eyes=None):
-        self.V, self.N, self.dN = V, normals, dN
+        self.V, self.N = V, normals
+        self.dN = np.ascontiguousarray(dN.reshape(len(dN), -1))            # (k, m * 3): the normals' change, one matmul
+        self.dNj = np.ascontiguousarray(dN.transpose(2, 1, 0).reshape(3, -1))   # (3, m * k): each's along a light, another
         self.light = np.r_[1.0, np.zeros(LIGHTS - 1)]                      # the last frame's light: the room's stays
         self.N0 = normals @ R0.T                                            # the normals as the rest frame sees them
         self.Dflat = np.ascontiguousarray(D.reshape(len(D), -1))           # (k, m * 3): the shape's motion, one matmul
-        self.Dm = np.ascontiguousarray(D.transpose(1, 0, 2))                # (m, k, 3): each vertex's, a batched one
+        self.Dj = np.ascontiguousarray(D.transpose(2, 1, 0))                # (3, m, k): each axis's, along the gradient
         self.rest, self.motion, self.rows = rest, motion, rows
         self.k = len(D)
         self.eyes = eyes is not None
         if self.eyes:                                                       # named once, not by position
             self.Ve, self.eye_side, self.eye_centres, self.eye_axes, self.turns = eyes
+            self.eye_on = [self.eye_side == 0, self.eye_side == 1]
+            self.eye_skews = [_skew(self.eye_axes[0]), _skew(self.eye_axes[1])]
 
     def _eye_points(self, look):
         """The eyes' samples turned by `look` (2, 2: each eye's out and up, in GAZE_FULL_DEG), and
         their derivatives (me, 4, 3) in (right out, right up, left out, left up).  The subject's
         left is the face's +x: out turns the left eye about the up axis toward +x, the right toward
         -x; up about the x axis, the front toward +y."""
-        from scipy.spatial.transform import Rotation
-        Ve, side, centres = self.Ve, self.eye_side, self.eye_centres
-        x, up = self.eye_axes[0], self.eye_axes[1]
+        Ve, centres = self.Ve, self.eye_centres
+        Kx, Kup = self.eye_skews                                            # cross(x, .) and cross(up, .) as matrices
         g = np.radians(GAZE_FULL_DEG)
         out = np.empty_like(Ve)
         J = np.zeros((len(Ve), 4, 3))
         for k, away in ((0, -1.0), (1, 1.0)):
-            on = side == k
-            Ry = Rotation.from_rotvec(away * look[k, 0] * g * up).as_matrix()
-            Rx = Rotation.from_rotvec(-look[k, 1] * g * x).as_matrix()
+            on = self.eye_on[k]
+            Ry, Rx = _turn(Kup, away * look[k, 0] * g), _turn(Kx, -look[k, 1] * g)
             q = (Ve[on] - centres[k]) @ Rx.T                                 # pitched, then turned
             p = q @ Ry.T
             out[on] = centres[k] + p
-            J[on, 2 * k] = away * g * np.cross(up, p)
-            J[on, 2 * k + 1] = -g * np.cross(x, q) @ Ry.T
+            J[on, 2 * k] = away * g * (p @ Kup.T)
+            J[on, 2 * k + 1] = -g * (q @ Kx.T) @ Ry.T
         return out, J
 
     def _shape(self, w):
@@ -408,7 +424,7 @@ class _Frame:
         crop, corner = self._crop(frame, x, s)
         if self.eyes:
             x = np.r_[x, s * (self.Ve @ R.T)[:, :2] + t]
-        return [self._at(gaussian_filter(crop.mean(2), b * s), x, corner) for b in BLURS]
+        return [self._at(gaussian_filter(crop @ _GREY, b * s), x, corner) for b in BLURS]
 
     def _between_lids(self, xe, xl):
         """Whether each eye sample's projection xe (me, 2) lies between its lids -- inside the
@@ -432,14 +448,14 @@ class _Frame:
         return inside
 
     def refine(self, frame, refs, pts, s, R, t, w, last):
-        """A frame's weights (the frame RGB, (h, w, 3)), from the landmark fit's pose (s, R, t) and
+        """A frame's weights (the frame RGB, (h, w, 3) uint8), from the landmark fit's pose (s, R, t) and
         weights w; `pts` its landmarks (68, 2, y up), `last` the last frame's weights."""
         from scipy.ndimage import gaussian_filter
         from scipy.spatial.transform import Rotation
         k, m = self.k, len(self.V)
         x = s * (self._shape(w) @ R.T)[:, :2] + t
         crop, corner = self._crop(frame, x, s)
-        crop = crop.mean(2)                                             # grey, about the face only
+        crop = crop @ _GREY                                             # grey, about the face only
         light = self.light.copy()
         lo = np.r_[np.full(6, -np.inf), np.zeros(k), np.full(LIGHTS, -np.inf)]
         hi = np.r_[np.full(6, np.inf), np.ones(k), np.full(LIGHTS, np.inf)]
@@ -460,7 +476,10 @@ class _Frame:
                 # the grey levels' Jacobian in (a small rotation d, scale 1 + e, shift s u, the weights), as the
                 # landmark fit's: x = s (1 + e) P (I + [d]x) R X + t + s u, so g.dx/dd = s RX x a; the eyes'
                 # samples move with the gaze's weights only, turning the eyes
-                Jw = (self.Dm @ aR[:m, :, None])[:, :, 0]
+                Jw = aR[:m, 0:1] * self.Dj[0] + aR[:m, 1:2] * self.Dj[1] + aR[:m, 2:3] * self.Dj[2]
+                # the weights shade the face too: the turned normals' term below is c (n R' - n0).l, so
+                # d/dw_k = c dn_k.(R' l) (JI scales these columns by s)
+                Jw -= (c[:m, None] / s) * ((R.T @ light[3:6]) @ self.dNj).reshape(m, k)
                 if self.eyes:
                     Jw = np.r_[Jw, (Je @ aR[m:, :, None])[:, :, 0] @ self.turns.T]
                 JI = s * np.c_[np.cross(RX, a), (a * RX).sum(1), a[:, :2], Jw]
@@ -468,7 +487,7 @@ class _Frame:
                 # the light: a gain varying across the face, the shading's change as the surface turns
                 # from the rest frame and bends (Lambert's, to first order: its normals' change), an
                 # offset; the eyes' samples take all but the normals' terms
-                NR = (self.N + np.einsum("k,kmj->mj", w, self.dN)) @ R.T          # the normals, bent by the weights
+                NR = (self.N + (w @ self.dN).reshape(-1, 3)) @ R.T                # the normals, bent by the weights
                 turned = np.r_[NR - self.N0, np.zeros((mm - m, 3))]
                 lit = np.c_[c, c * uv[:, 0], c * uv[:, 1], c[:, None] * turned, np.ones(mm)]     # (mm, LIGHTS)
                 r = grey - lit @ light
@@ -479,20 +498,20 @@ class _Frame:
                     outward = Xe - self.eye_centres[self.eye_side]
                     facing = (outward @ R[2]) > EYE_FACING * np.linalg.norm(outward, axis=1)
                     seen[m:] = self._between_lids(x[m:], s * RXL[:, :2] + t) & facing
-                # ... the weights shade the face too: the turned normals' term is c (n R^T - n0).l, so d/dw_k = c dn_k.(R^T l)
-                JI[:m, 6:] -= c[:m, None] * np.einsum("kmj,j->mk", self.dN, R.T @ light[3:6])
                 huber = seen / np.maximum(1.0, np.abs(r) / ROBUST)
                 sw = np.sqrt(huber * PIXEL_PULL / max(seen.sum(), 1))
                 Aph = np.c_[JI, -lit] * sw[:, None]
                 AL = np.c_[projection_jacobian(RXL, R, self.motion).reshape(136, -1), np.zeros((136, LIGHTS))] * sl[:, None]
                 bL = ((pts - t) / s - RXL[:, :2]).reshape(-1) * sl
-                Z = np.zeros((k, 6))
-                M = np.vstack([Aph, AL, np.c_[Z, np.sqrt(RIDGE) * np.eye(k), np.zeros((k, LIGHTS))],
-                               np.c_[Z, np.sqrt(SMOOTH) * np.eye(k), np.zeros((k, LIGHTS))],
-                               np.c_[np.zeros((LIGHTS, 6 + k)), 1e-3 * np.eye(LIGHTS)]])
-                b = np.r_[-r * sw, bL, -np.sqrt(RIDGE) * w, np.sqrt(SMOOTH) * (last - w), np.zeros(LIGHTS)]
+                # the normal equations: the pixels' and the landmarks' rows, the pulls on the weights
+                # (toward rest, toward the last frame's) and on the light's step on the diagonal
+                H = gram(Aph) + AL.T @ AL
+                g = Aph.T @ (-r * sw) + AL.T @ bL
+                H[6:6 + k, 6:6 + k] += (RIDGE + SMOOTH) * np.eye(k)
+                H[-LIGHTS:, -LIGHTS:] += 1e-6 * np.eye(LIGHTS)
+                g[6:6 + k] += SMOOTH * (last - w) - RIDGE * w
                 lo[6:6 + k], hi[6:6 + k] = -w, 1.0 - w           # z holds the weights' step
-                z = box_qp(M.T @ M, M.T @ b, lo, hi)
+                z = box_qp(H, g, lo, hi)
                 R = Rotation.from_rotvec(z[:3]).as_matrix() @ R
                 t = t + s * z[4:6]
                 s = s * (1.0 + z[3])

@@ -514,7 +514,7 @@ def track_video(path, progress=None, max_frames: int | None = None, tracker: str
     tracker = tracker or trackers()[0]
     if tracker not in ("mediapipe", "dlib"):
         raise MimicaError(f"unknown face tracker {tracker!r}; use one of mediapipe, dlib")
-    n, fps, frames = frame_source(path)
+    n, fps, frames = frame_source(path, raw=True)              # both trackers read uint8
     none = np.full((68, 2), np.nan)
     if tracker == "mediapipe":
         tracked = _tracked_mediapipe(frames, n, progress, max_frames, path)
