@@ -14,8 +14,8 @@ with the light's change from the rest frame modelled (a gain varying linearly ac
 the shading's change as the surface turns and as the expression bends it -- Lambert's law to
 first order in its normals' change, each shape's at weight 1 -- and an offset; the light
 carried from frame to frame), the landmarks' misfit kept beside it and the weights bounded
-(0 <= w <= 1), pulled toward rest and toward the last frame's -- no L1 pull as the landmark
-fit's: on the dev takes it took the gain away.  What it does not model: a face the rest frame
+(0 <= w <= 1), pulled toward the last frame's and, those the landmark fit left at 0, toward
+rest -- no L1 pull as the landmark fit's: on the dev takes it took the gain away.  What it does not model: a face the rest frame
 does not show (the teeth, the mouth's inside: its lips' own grey levels are followed) and
 shadows.
 
@@ -44,7 +44,7 @@ BLURS = (1 / 80, 1 / 160)  # the frame's Gaussian in face widths: coarse steps, 
 STEPS = (1, 2)             # Gauss-Newton steps at each blur
 PIXEL_PULL = 1.0           # weight of the grey levels' mean squared misfit ...
 LANDMARK_PULL = 1.0        # ... and of the landmarks' (face widths), weighted as the fit weights them
-RIDGE = 1e-4               # weight of sum w^2
+RIDGE = 1e-4               # weight of sum w^2 over the weights the landmark fit left at 0 (the gaze's too)
 SMOOTH = 3e-4              # weight of the change from the last frame's weights
 ROBUST = 0.05              # grey levels: a misfit past this counts less (Huber's weights)
 LIGHTS = 7                 # the light's terms: a gain, its slopes across the face, the turned normals' three, an offset
@@ -335,7 +335,10 @@ def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarra
         if use[f]:
             start = w0[f].copy()
             start[~free[cols]] = last[~free[cols]]               # the gaze from the last frame's
-            out[f] = fit.refine(frame, refs, img[f], s[f], R[f], t[f], start, last)
+            # the pull toward rest holds only the shapes the points did not find: those they found passed
+            # the landmark fit's own L1 pull, and pulled again they read short
+            ridge = RIDGE * ~(free[cols] & (start > 0))
+            out[f] = fit.refine(frame, refs, img[f], s[f], R[f], t[f], start, last, ridge)
         else:
             out[f, ~free[cols]] = last[~free[cols]]
         last = out[f]
@@ -447,9 +450,10 @@ class _Frame:
             inside[on] = inside_polygon(xe[on], mid + EYE_INSET * (poly - mid)) & own_side
         return inside
 
-    def refine(self, frame, refs, pts, s, R, t, w, last):
+    def refine(self, frame, refs, pts, s, R, t, w, last, ridge):
         """A frame's weights (the frame RGB, (h, w, 3) uint8), from the landmark fit's pose (s, R, t) and
-        weights w; `pts` its landmarks (68, 2, y up), `last` the last frame's weights."""
+        weights w; `pts` its landmarks (68, 2, y up), `last` the last frame's weights, `ridge` (k,)
+        each weight's pull toward rest."""
         from scipy.ndimage import gaussian_filter
         from scipy.spatial.transform import Rotation
         k, m = self.k, len(self.V)
@@ -507,9 +511,9 @@ class _Frame:
                 # (toward rest, toward the last frame's) and on the light's step on the diagonal
                 H = gram(Aph) + AL.T @ AL
                 g = Aph.T @ (-r * sw) + AL.T @ bL
-                H[6:6 + k, 6:6 + k] += (RIDGE + SMOOTH) * np.eye(k)
+                H[6:6 + k, 6:6 + k] += np.diag(ridge + SMOOTH)
                 H[-LIGHTS:, -LIGHTS:] += 1e-6 * np.eye(LIGHTS)
-                g[6:6 + k] += SMOOTH * (last - w) - RIDGE * w
+                g[6:6 + k] += SMOOTH * (last - w) - ridge * w
                 lo[6:6 + k], hi[6:6 + k] = -w, 1.0 - w           # z holds the weights' step
                 z = box_qp(H, g, lo, hi)
                 R = Rotation.from_rotvec(z[:3]).as_matrix() @ R
