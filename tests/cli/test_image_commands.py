@@ -60,10 +60,17 @@ def test_cli_landmarks_and_driving_frames(tmp_path):
     r = run_mimica("transfer-image", YALE / "subject02.normal.gif", "--driving", frames,
              "--target", YALE / "subject05.normal.gif", "--out", clip)
     assert r.returncode == 0, r.stderr
+    from mimica.image.io import to_uint8
     from mimica.image.video import frame_source
     n, fps, it = frame_source(clip)
     got = list(it)
     assert len(got) == 3 and got[0].shape[:2] == (242, 320)
+    # read raw (as the trackers and the refinement on the pixels read a take): the same pixels, uint8
+    for source in (clip, frames):
+        raw = list(frame_source(source, raw=True)[2])
+        plain = list(frame_source(source)[2])
+        assert len(raw) == 3 and all(r.dtype == np.uint8 and r.shape == p.shape for r, p in zip(raw, plain))
+        assert all(np.array_equal(r, to_uint8(p)) for r, p in zip(raw, plain))
 
 
 def test_a_faceless_target_writes_nothing(tmp_path):
