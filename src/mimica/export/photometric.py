@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._solve import box_qp, gram, projection_jacobian
+from ._solve import box_qp, cross_matrices, gram, projection_jacobian
 from .blendshapes import ARKIT_52
 
 SURFACE_POINTS = 2000      # the face's surface vertices sampled
@@ -347,11 +347,6 @@ def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarra
     return full
 
 
-def _skew(u: np.ndarray) -> np.ndarray:
-    """The matrix of cross(u, .)."""
-    return np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
-
-
 def _turn(K: np.ndarray, angle: float) -> np.ndarray:
     """The rotation by `angle` about the unit axis whose cross product's matrix is K (Rodrigues':
     scipy's Rotation costs 23 us a call, four calls a Gauss-Newton step)."""
@@ -380,7 +375,7 @@ class _Frame:
         if self.eyes:                                                       # named once, not by position
             self.Ve, self.eye_side, self.eye_centres, self.eye_axes, self.turns = eyes
             self.eye_on = [self.eye_side == 0, self.eye_side == 1]
-            self.eye_skews = [_skew(self.eye_axes[0]), _skew(self.eye_axes[1])]
+            self.eye_skews = cross_matrices(self.eye_axes[:2])                # cross(x, .), cross(up, .)
 
     def _eye_points(self, look):
         """The eyes' samples turned by `look` (2, 2: each eye's out and up, in GAZE_FULL_DEG), and
