@@ -3,8 +3,9 @@
 The 68 points a tracker gives move less than the face does (MediaPipe's about 0.5-0.6 of the
 true motion on ICT's renders: its model's prior) and tell apart poorly the shapes that move them
 alike; the pixels do not.  The head's face surface (face_surface: about SURFACE_POINTS of its
-vertices inside the face's outline, facing the view, not hidden) takes its grey levels from the
-performer's rest frame, placed there by the landmark fit's pose and the performer's rest
+vertices inside the face's outline, facing the view, not hidden) takes its grey levels -- and its
+red-green differences, where they change across it: the lips, the brows -- from the performer's
+rest frame, placed there by the landmark fit's pose and the performer's rest
 landmarks (the offsets between the head's landmarks and the performer's carried to the surface
 by a thin-plate spline).  Each frame's pose and weights are then moved from the landmark fit's
 so that the surface, shaped by the blendshapes, finds those grey levels again in the frame:
@@ -12,8 +13,8 @@ Gauss-Newton on the grey-level misfit (Lucas and Kanade's image alignment, the w
 deformable model's projection), from a blurred frame to a sharper one,
 with the light's change from the rest frame modelled (a gain varying linearly across the face,
 the shading's change as the surface turns and as the expression bends it -- Lambert's law to
-first order in its normals' change, each shape's at weight 1 -- and an offset; the light
-carried from frame to frame), the landmarks' misfit kept beside it and the weights bounded
+first order in its normals' change, each shape's at weight 1 -- and an offset, each channel its
+own offset and the rest shared: white light scales both alike; the light carried from frame to frame), the landmarks' misfit kept beside it and the weights bounded
 (0 <= w <= 1), pulled toward the last frame's and, those the landmark fit left at 0, toward
 rest -- no L1 pull as the landmark fit's: on the dev takes it took the gain away.  What it
 does not model: a face the rest frame does not show (the teeth, the mouth's inside: its lips'
@@ -42,12 +43,13 @@ INSET = 0.9                # the face's region scaled by this about its centre (
 BROW_MARGIN = 0.1          # face widths above the brows' landmarks the face's region reaches
 BLURS = (1 / 80, 1 / 160)  # the frame's Gaussian in face widths: coarse steps, then fine ones
 STEPS = (1, 2)             # Gauss-Newton steps at each blur
+TRUNCATE = 3.0             # the Gaussians cut at this many standard deviations (4, scipy's default: the same figures)
 PIXEL_PULL = 1.0           # weight of the grey levels' mean squared misfit ...
 LANDMARK_PULL = 1.0        # ... and of the landmarks' (face widths), weighted as the fit weights them
 RIDGE = 1e-4               # weight of sum w^2 over the weights the landmark fit left at 0 (the gaze's too)
 SMOOTH = 3e-4              # weight of the change from the last frame's weights
 ROBUST = 0.05              # grey levels: a misfit past this counts less (Huber's weights)
-LIGHTS = 7                 # the light's terms: a gain, its slopes across the face, the turned normals' three, an offset
+LIGHTS = 8                 # the light's terms: a gain, its slopes across the face, the turned normals' three, two offsets
 EYE_INSET = 0.9            # the lids' opening scaled by this about its centre: where an eye's samples count
 EYE_POINTS = 150           # the eyeball's front vertices sampled, each eye
 EYE_FACING = 0.6           # an eye's sample counts where its direction from the eye's centre has this cosine to the view
@@ -58,6 +60,13 @@ GAZE_FULL_DEG = 30.0
 # a uint8 frame's channels' mean in [0, 1], in single precision (a product: 0.06 ms a frame against
 # ndarray.mean's 1.3; the blurs on it take half the time they take in double)
 _GREY = np.full(3, 1 / 765, np.float32)
+# the red-green difference in [-1, 1]: a real face's lips (and a painted take's brows and irises)
+# differ from its skin more in hue than in grey level
+_CHROMA = np.array([1 / 255, -1 / 255, 0.0], np.float32)
+# the share of the samples the red-green difference counts at: those where it changes most across
+# them in the rest frame (on even skin it shows no motion; all of them: the same figures, 1.3 times
+# the time -- dev takes 0.214 against 0.215 at a half, 0.217 at 0.3)
+CHROMA_SHARE = 0.5
 LIDS = (np.arange(36, 42), np.arange(42, 48))    # the subject's right eye's lid landmarks, the left's
 
 
@@ -298,9 +307,10 @@ def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarra
         The refined weights: the `free` shapes', and the gaze's where the surface has the eyes
         (else 0).
     """
-    from itertools import islice
+    from itertools import chain, islice
     from scipy.interpolate import RBFInterpolator
     from ..image.video import frame_source
+    from ..parallel import one_blas_thread
     # the performer's surface: the head's plus its landmarks' offsets carried by a thin-plate spline
     offset = RBFInterpolator(head_rest, rest - head_rest, kernel="thin_plate_spline", smoothing=1e-3)
     sv = surface.rest / width
@@ -324,32 +334,57 @@ def refine_frames(video, img: np.ndarray, head_rest: np.ndarray, rest: np.ndarra
     rows = np.repeat(point_weights, 2)
     w0 = np.zeros((len(weights), int(cols.sum())))
     w0[:, free[cols]] = weights
-    rest_img = next(islice(frame_source(video, raw=True)[2], rest_frame, None))
+    frames = islice(frame_source(video, raw=True)[2], len(w0))
+    if rest_frame == 0:                                          # the take decoded once
+        rest_img = next(frames)
+        frames = chain([rest_img], frames)
+    else:
+        rest_img = next(islice(frame_source(video, raw=True)[2], rest_frame, None))
     fit = _Frame(V, D, surface.normals, surface.normal_motion[cols], rest, motion[cols], rows, R[rest_frame], eyes)
     refs = fit.references(rest_img, s[rest_frame], R[rest_frame], t[rest_frame], w0[rest_frame])
     out = w0.copy()
     last = w0[0]
-    for f, frame in enumerate(islice(frame_source(video, raw=True)[2], len(w0))):
-        if progress and f and f % 300 == 0:
-            progress(f"refined {f} of {len(w0)} frames on their pixels")
-        if use[f]:
-            start = w0[f].copy()
-            start[~free[cols]] = last[~free[cols]]               # the gaze from the last frame's
-            # the pull toward rest holds only the shapes the points did not find: those they found passed
-            # the landmark fit's own L1 pull, and pulled again they read short
-            ridge = RIDGE * ~(free[cols] & (start > 0))
-            out[f] = fit.refine(frame, refs, img[f], s[f], R[f], t[f], start, last, ridge)
-        else:
-            out[f, ~free[cols]] = last[~free[cols]]
-        last = out[f]
+    # one BLAS thread: the frames' products are small, and a second thread cost more than it gave
+    # (paired end to end on a 600-frame take: 0.95 of the time, 0.6 of the processor time)
+    with one_blas_thread():
+        for f, frame in enumerate(frames):
+            if progress and f and f % 300 == 0:
+                progress(f"refined {f} of {len(w0)} frames on their pixels")
+            if use[f]:
+                start = w0[f].copy()
+                start[~free[cols]] = last[~free[cols]]               # the gaze from the last frame's
+                # the pull toward rest holds only the shapes the points did not find: those they found passed
+                # the landmark fit's own L1 pull, and pulled again they read short
+                ridge = RIDGE * ~(free[cols] & (start > 0))
+                out[f] = fit.refine(frame, refs, img[f], s[f], R[f], t[f], start, last, ridge)
+            else:
+                out[f, ~free[cols]] = last[~free[cols]]
+            last = out[f]
     full = np.zeros((len(w0), 52))
     full[:, cols] = out
     return full
 
 
+def _bilinear(stack: np.ndarray, x: np.ndarray, corner: np.ndarray) -> np.ndarray:
+    """The images of `stack` (c, h, w) at the points x (n, 2; column, row up from the corner), each
+    bilinearly interpolated, the edge's value past it (map_coordinates' order 1, "nearest", for all
+    the images at once: the corners' indices and weights found once)."""
+    c, h, w = stack.shape
+    row = np.clip(-x[:, 1] - corner[1], 0, h - 1)
+    col = np.clip(x[:, 0] - corner[0], 0, w - 1)
+    r0 = np.minimum(row.astype(np.intp), h - 2)
+    c0 = np.minimum(col.astype(np.intp), w - 2)
+    fr, fc = (row - r0)[None], (col - c0)[None]
+    flat = stack.reshape(c, -1)
+    i = r0 * w + c0
+    top = flat[:, i] * (1 - fc) + flat[:, i + 1] * fc
+    bottom = flat[:, i + w] * (1 - fc) + flat[:, i + w + 1] * fc
+    return top * (1 - fr) + bottom * fr
+
+
 def _turn(K: np.ndarray, angle: float) -> np.ndarray:
     """The rotation by `angle` about the unit axis whose cross product's matrix is K (Rodrigues':
-    scipy's Rotation costs 23 us a call, four calls a Gauss-Newton step)."""
+    scipy's Rotation costs 23 us a call, five calls a Gauss-Newton step)."""
     return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
 
 
@@ -364,11 +399,12 @@ class _Frame:
     def __init__(self, V, D, normals, dN, rest, motion, rows, R0, eyes=None):
         self.V, self.N = V, normals
         self.dN = np.ascontiguousarray(dN.reshape(len(dN), -1))            # (k, m * 3): the normals' change, one matmul
-        self.dNj = np.ascontiguousarray(dN.transpose(2, 1, 0).reshape(3, -1))   # (3, m * k): each's along a light, another
         self.light = np.r_[1.0, np.zeros(LIGHTS - 1)]                      # the last frame's light: the room's stays
         self.N0 = normals @ R0.T                                            # the normals as the rest frame sees them
         self.Dflat = np.ascontiguousarray(D.reshape(len(D), -1))           # (k, m * 3): the shape's motion, one matmul
-        self.Dj = np.ascontiguousarray(D.transpose(2, 1, 0))                # (3, m, k): each axis's, along the gradient
+        # (m, 6, k): each sample's motion and normals' change in every shape, a small matrix each, so that
+        # the grey level's change with the weights is one batched product
+        self.B = np.ascontiguousarray(np.concatenate([D, dN], axis=2).transpose(1, 2, 0))
         self.rest, self.motion, self.rows = rest, motion, rows
         self.k = len(D)
         self.eyes = eyes is not None
@@ -409,20 +445,27 @@ class _Frame:
         c0, c1 = int(max(0, x[:, 0].min() - pad)), int(min(wd, x[:, 0].max() + pad + 1))
         return image[r0:r1, c0:c1], np.array([c0, r0])
 
-    @staticmethod
-    def _at(image, x, corner):
-        from scipy.ndimage import map_coordinates
-        return map_coordinates(image, [-x[:, 1] - corner[1], x[:, 0] - corner[0]], order=1, mode="nearest")
-
     def references(self, frame, s, R, t, w) -> list:
-        """The surface's grey levels in the rest frame (RGB), at each blur (the eyes' samples after
-        the face's, looking ahead)."""
+        """The surface's grey levels and red-green differences in the rest frame (RGB), at each blur
+        (the eyes' samples after the face's, looking ahead); sets which samples each channel counts
+        (the red-green difference's where it changes most across them: on the lips, the brows, the
+        irises -- on even skin it shows no motion) and their shapes' motion and normals' change."""
         from scipy.ndimage import gaussian_filter
+        m = len(self.V)
         x = s * (self._shape(w) @ R.T)[:, :2] + t
         crop, corner = self._crop(frame, x, s)
         if self.eyes:
             x = np.r_[x, s * (self.Ve @ R.T)[:, :2] + t]
-        return [self._at(gaussian_filter(crop @ _GREY, b * s), x, corner) for b in BLURS]
+        chroma = crop @ _CHROMA
+        gy, gx = np.gradient(gaussian_filter(chroma, BLURS[-1] * s, truncate=TRUNCATE))
+        change = np.hypot(*_bilinear(np.stack([gx, gy]), x, corner))
+        self.channels = []
+        for sel in (np.arange(len(x)), np.sort(np.argsort(-change)[:int(CHROMA_SHARE * len(x))])):
+            face = sel[sel < m]
+            self.channels.append((sel, face, sel[sel >= m] - m, self.B[face]))
+        self.rows_total = sum(len(ch[0]) for ch in self.channels)
+        return [[_bilinear(gaussian_filter(img, b * s, truncate=TRUNCATE)[None], x[ch[0]], corner)[0]
+                 for img, ch in zip((crop @ _GREY, chroma), self.channels)] for b in BLURS]
 
     def _between_lids(self, xe, xl):
         """Whether each eye sample's projection xe (me, 2) lies between its lids -- inside the
@@ -450,18 +493,21 @@ class _Frame:
         weights w; `pts` its landmarks (68, 2, y up), `last` the last frame's weights, `ridge` (k,)
         each weight's pull toward rest."""
         from scipy.ndimage import gaussian_filter
-        from scipy.spatial.transform import Rotation
         k, m = self.k, len(self.V)
         x = s * (self._shape(w) @ R.T)[:, :2] + t
         crop, corner = self._crop(frame, x, s)
-        crop = crop @ _GREY                                             # grey, about the face only
+        crops = (crop @ _GREY, crop @ _CHROMA)                           # about the face only
         light = self.light.copy()
         lo = np.r_[np.full(6, -np.inf), np.zeros(k), np.full(LIGHTS, -np.inf)]
         hi = np.r_[np.full(6, np.inf), np.ones(k), np.full(LIGHTS, np.inf)]
         sl = np.sqrt(LANDMARK_PULL / 136) * self.rows
-        for blur, steps, c in zip(BLURS, STEPS, refs):
-            image = gaussian_filter(crop, blur * s)
-            gy, gx = np.gradient(image)
+        for blur, steps, cs in zip(BLURS, STEPS, refs):
+            # each channel's blurred image and its derivatives down and across, sampled together
+            stack = []
+            for img in crops:
+                img = gaussian_filter(img, blur * s, truncate=TRUNCATE)
+                stack += [img, *np.gradient(img)]
+            stack = np.stack(stack)
             for _ in range(steps):
                 RX = self._shape(w) @ R.T
                 if self.eyes:
@@ -469,27 +515,10 @@ class _Frame:
                     RX = np.r_[RX, Xe @ R.T]
                 mm = len(RX)
                 x = s * RX[:, :2] + t
-                grey = self._at(image, x, corner)
-                a = np.stack([self._at(gx, x, corner), -self._at(gy, x, corner), np.zeros(mm)], 1)  # the gradient (y up)
-                aR = a @ R                                              # ... in the head's frame
-                # the grey levels' Jacobian in (a small rotation d, scale 1 + e, shift s u, the weights), as the
-                # landmark fit's: x = s (1 + e) P (I + [d]x) R X + t + s u, so g.dx/dd = s RX x a; the eyes'
-                # samples move with the gaze's weights only, turning the eyes
-                Jw = aR[:m, 0:1] * self.Dj[0] + aR[:m, 1:2] * self.Dj[1] + aR[:m, 2:3] * self.Dj[2]
-                # the weights shade the face too: the turned normals' term below is c (n R' - n0).l, so
-                # d/dw_k = c dn_k.(R' l) (JI scales these columns by s)
-                Jw -= (c[:m, None] / s) * ((R.T @ light[3:6]) @ self.dNj).reshape(m, k)
-                if self.eyes:
-                    Jw = np.r_[Jw, (Je @ aR[m:, :, None])[:, :, 0] @ self.turns.T]
-                JI = s * np.c_[np.cross(RX, a), (a * RX).sum(1), a[:, :2], Jw]
+                got = _bilinear(stack, x, corner)
                 uv = (x - x[:m].mean(0)) / s                            # across the face, face widths
-                # the light: a gain varying across the face, the shading's change as the surface turns
-                # from the rest frame and bends (Lambert's, to first order: its normals' change), an
-                # offset; the eyes' samples take all but the normals' terms
                 NR = (self.N + (w @ self.dN).reshape(-1, 3)) @ R.T                # the normals, bent by the weights
                 turned = np.r_[NR - self.N0, np.zeros((mm - m, 3))]
-                lit = np.c_[c, c * uv[:, 0], c * uv[:, 1], c[:, None] * turned, np.ones(mm)]     # (mm, LIGHTS)
-                r = grey - lit @ light
                 XL = self.rest + np.einsum("k,knj->nj", w, self.motion)
                 RXL = XL @ R.T
                 seen = np.r_[NR[:, 2] > FACING, np.zeros(mm - m, bool)]
@@ -497,21 +526,58 @@ class _Frame:
                     outward = Xe - self.eye_centres[self.eye_side]
                     facing = (outward @ R[2]) > EYE_FACING * np.linalg.norm(outward, axis=1)
                     seen[m:] = self._between_lids(x[m:], s * RXL[:, :2] + t) & facing
-                huber = seen / np.maximum(1.0, np.abs(r) / ROBUST)
-                sw = np.sqrt(huber * PIXEL_PULL / max(seen.sum(), 1))
-                Aph = np.c_[JI, -lit] * sw[:, None]
+                # the pixels' rows, each channel's in turn, weighted: the Jacobian in (a small rotation d,
+                # scale 1 + e, shift s u, the weights, the light) and the misfit
+                Aph = np.empty((self.rows_total, 6 + k + LIGHTS))
+                rph = np.empty(self.rows_total)
+                at = 0
+                for ch, ((sel, face, eye, B), c) in enumerate(zip(self.channels, cs)):
+                    A, nf = Aph[at:at + len(sel)], len(face)
+                    grey, gy, gx = got[3 * ch:3 * ch + 3, sel]
+                    a = np.stack([gx, -gy, np.zeros(len(sel))], 1)     # the gradient (y up)
+                    aR = a @ R                                          # ... in the head's frame
+                    # as the landmark fit's: x = s (1 + e) P (I + [d]x) R X + t + s u, so g.dx/dd = s RX x a;
+                    # the weights move the samples (B's first three rows) and shade them: the turned
+                    # normals' term below is c (n R' - n0).l, so d/dw_k = c dn_k.(R' l) (B's last three);
+                    # the eyes' samples move with the gaze's weights only, turning the eyes
+                    A[:, :3] = np.cross(RX[sel], a)
+                    A[:, 3] = (a * RX[sel]).sum(1)
+                    A[:, 4:6] = a[:, :2]
+                    q = np.c_[aR[:nf], (-c[:nf] / s)[:, None] * (R.T @ light[3:6])]
+                    A[:nf, 6:6 + k] = np.matmul(q[:, None, :], B)[:, 0]
+                    if self.eyes:
+                        A[nf:, 6:6 + k] = (Je[eye] @ aR[nf:, :, None])[:, :, 0] @ self.turns.T
+                    A[:, :6 + k] *= s
+                    # the light: a gain varying across the face, the shading's change as the surface turns
+                    # from the rest frame and bends (Lambert's, to first order: its normals' change), an
+                    # offset each channel; the eyes' samples take all but the normals' terms.  White light
+                    # scales the red-green difference as it scales the grey level: the gain's terms shared
+                    lit = A[:, 6 + k:]
+                    lit[:, 0], lit[:, 1], lit[:, 2] = c, c * uv[sel, 0], c * uv[sel, 1]
+                    lit[:, 3:6] = c[:, None] * turned[sel]
+                    lit[:, 6:] = 0.0
+                    lit[:, 6 + ch] = 1.0
+                    r = grey - lit @ light
+                    huber = seen[sel] / np.maximum(1.0, np.abs(r) / ROBUST)
+                    sw = np.sqrt(huber * PIXEL_PULL / max(seen.sum(), 1))
+                    lit *= -1.0
+                    A *= sw[:, None]
+                    rph[at:at + len(sel)] = r * sw
+                    at += len(sel)
                 AL = np.c_[projection_jacobian(RXL, R, self.motion).reshape(136, -1), np.zeros((136, LIGHTS))] * sl[:, None]
                 bL = ((pts - t) / s - RXL[:, :2]).reshape(-1) * sl
                 # the normal equations: the pixels' and the landmarks' rows, the pulls on the weights
                 # (toward rest, toward the last frame's) and on the light's step on the diagonal
                 H = gram(Aph) + AL.T @ AL
-                g = Aph.T @ (-r * sw) + AL.T @ bL
+                g = Aph.T @ (-rph) + AL.T @ bL
                 H[6:6 + k, 6:6 + k] += np.diag(ridge + SMOOTH)
                 H[-LIGHTS:, -LIGHTS:] += 1e-6 * np.eye(LIGHTS)
                 g[6:6 + k] += SMOOTH * (last - w) - ridge * w
                 lo[6:6 + k], hi[6:6 + k] = -w, 1.0 - w           # z holds the weights' step
                 z = box_qp(H, g, lo, hi)
-                R = Rotation.from_rotvec(z[:3]).as_matrix() @ R
+                angle = np.linalg.norm(z[:3])
+                if angle > 0.0:
+                    R = _turn(cross_matrices(z[None, :3] / angle)[0], angle) @ R
                 t = t + s * z[4:6]
                 s = s * (1.0 + z[3])
                 w = np.clip(w + z[6:6 + k], 0.0, 1.0)
