@@ -285,3 +285,19 @@ def test_the_bounded_solve_finds_the_minimum_bvls_finds():
         assert (z >= lo - 1e-12).all() and (z <= hi + 1e-12).all()
         cost = np.sum((M @ z - b) ** 2)
         assert cost <= np.sum((M @ ref - b) ** 2) * (1 + 1e-9), cost
+
+
+def test_the_images_are_sampled_as_map_coordinates_samples_them():
+    """photometric._bilinear (several images sampled at once) against scipy's map_coordinates
+    (order 1, the edge's value past it), inside the images and past every edge."""
+    from scipy.ndimage import map_coordinates
+    from mimica.export.photometric import _bilinear
+    rng = np.random.default_rng(0)
+    stack = rng.normal(size=(3, 40, 50)).astype(np.float32)
+    corner = np.array([7, 11])
+    # points as the refinement passes them: x the column, y up (the row is -y), from the crop's corner
+    rows, cols = rng.uniform(-5, 45, 500), rng.uniform(-5, 55, 500)
+    x = np.c_[cols + corner[0], -(rows + corner[1])]
+    got = _bilinear(stack, x, corner)
+    for img, g in zip(stack, got):
+        np.testing.assert_allclose(g, map_coordinates(img, [rows, cols], order=1, mode="nearest"), atol=1e-5)

@@ -13,9 +13,10 @@ Gauss-Newton on the grey-level misfit (Lucas and Kanade's image alignment, the w
 deformable model's projection), from a blurred frame to a sharper one,
 with the light's change from the rest frame modelled (a gain varying linearly across the face,
 the shading's change as the surface turns and as the expression bends it -- Lambert's law to
-first order in its normals' change, each shape's at weight 1 -- and an offset, each channel its
-own offset and the rest shared: white light scales both alike; the light carried from frame to frame), the landmarks' misfit kept beside it and the weights bounded
-(0 <= w <= 1), pulled toward the last frame's and, those the landmark fit left at 0, toward
+first order in its normals' change, each shape's at weight 1 -- and an offset; white light
+scales the red-green difference as it scales the grey level, so all but the offset are shared;
+the light carried from frame to frame), the landmarks' misfit kept beside it and the weights
+bounded (0 <= w <= 1), pulled toward the last frame's and, those the landmark fit left at 0, toward
 rest -- no L1 pull as the landmark fit's: on the dev takes it took the gain away.  What it
 does not model: a face the rest frame does not show (the teeth, the mouth's inside: its lips'
 own grey levels are followed) and shadows.
