@@ -1,5 +1,5 @@
 """mesh.graph: the edge graph and the harmonic fill the lid contacts, the low-confidence fill,
-the pockets and the jaw's share solve with."""
+the pockets and the jaw's share solve with; mesh.core's cross-product matrices."""
 
 from __future__ import annotations
 
@@ -31,3 +31,14 @@ def test_a_screened_fill_fades_from_the_ring():
     fill = HarmonicFill(g, np.arange(1, 41), np.array([0]), screen=0.05)
     got = fill(np.array([1.0]))
     assert got[0] > 0.7 and got[-1] < 1e-3 and np.all(np.diff(got) < 0)
+
+
+def test_the_cross_product_s_matrices_are_the_cross_product():
+    """mesh.core.cross_matrices (the video fit's Jacobians, the eyes' and the modal warp's
+    rotations): [v]x a equals v x a, and [v]x is antisymmetric."""
+    from mimica.mesh.core import cross_matrices
+    rng = np.random.default_rng(0)
+    v, a = rng.normal(size=(20, 3)), rng.normal(size=(20, 3))
+    K = cross_matrices(v)
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", K, a), np.cross(v, a), atol=1e-14)
+    np.testing.assert_array_equal(K, -K.transpose(0, 2, 1))

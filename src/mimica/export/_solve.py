@@ -5,12 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def cross_matrices(v: np.ndarray) -> np.ndarray:
-    """(n, 3, 3): [v]x, so that [v]x a = v x a."""
-    z = np.zeros(len(v))
-    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], 1), np.stack([v[:, 2], z, -v[:, 0]], 1),
-                     np.stack([-v[:, 1], v[:, 0], z], 1)], 1)
+from ..mesh.core import cross_matrices
 
 
 def projection_jacobian(RX: np.ndarray, R: np.ndarray, motion: np.ndarray) -> np.ndarray:

@@ -35,7 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._solve import box_qp, cross_matrices, gram, projection_jacobian
+from ..mesh.core import cross_matrices
+from ._solve import box_qp, gram, projection_jacobian
 from .blendshapes import ARKIT_52
 
 SURFACE_POINTS = 2000      # the face's surface vertices sampled

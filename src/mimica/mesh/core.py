@@ -379,6 +379,23 @@ def unique_rows(key: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return order[starts], inverse, np.diff(np.r_[starts, len(key)])
 
 
+def cross_matrices(v: np.ndarray) -> np.ndarray:
+    """The cross product's matrices of vectors: [v]x, so that [v]x a = v x a.
+
+    Parameters
+    ----------
+    v : (n, 3) float array
+
+    Returns
+    -------
+    (n, 3, 3) float array
+    """
+    K = np.zeros((len(v), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return K
+
+
 def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Unit area-weighted vertex normals.
 

@@ -20,6 +20,7 @@ import scipy.linalg
 import scipy.sparse as sp
 
 from ..errors import MimicaError
+from ..mesh.core import cross_matrices
 from ..solver import SPDSolver
 from .shell import ShellEnergy
 
@@ -151,13 +152,6 @@ class SmoothedRotation:
         return y if self.P is None else self.P @ y
 
 
-def _skew(w: np.ndarray) -> np.ndarray:
-    K = np.zeros((len(w), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = w[:, 2], -w[:, 1], w[:, 0]
-    return K
-
-
 def rotations(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotation matrices of rotation vectors, and Choi and Ko's warp.
 
@@ -184,7 +178,7 @@ def rotations(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     a = np.where(small, 1.0 - t2 / 6, sin_t / t)                   # sin t / t
     b = np.where(small, 0.5 - t2 / 24, (1 - cos_t) / (t * t))       # (1 - cos t) / t^2
     c = np.where(small, 1.0 / 6 - t2 / 120, (t - sin_t) / (t * t * t))
-    K = _skew(w)
+    K = cross_matrices(w)
     K2 = K @ K
     eye = np.eye(3)
     R = eye + a[:, None, None] * K + b[:, None, None] * K2
